@@ -1,0 +1,120 @@
+// SPDX-License-Identifier: MIT
+//! The one error type of `webfusion-core`.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in `webfusion-core`.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// No GPU adapter matched the request.
+    #[error("no GPU adapter found for backends {backends}{}; natively install a Vulkan driver (e.g. Mesa lavapipe: apt-get install mesa-vulkan-drivers), in a browser enable WebGPU", wanted.as_ref().map(|w| format!(" with a name containing {w:?}")).unwrap_or_default())]
+    NoAdapter {
+        /// The backends that were searched.
+        backends: String,
+        /// The adapter-name filter, if any.
+        wanted: Option<String>,
+    },
+    /// The adapter offers less of a limit than the kernels need.
+    #[error("GPU adapter {adapter:?} offers {name} = {available}, but webfusion needs at least {required}")]
+    MissingLimit {
+        /// Adapter name.
+        adapter: String,
+        /// `wgpu::Limits` field name.
+        name: &'static str,
+        /// What the kernels need.
+        required: u64,
+        /// What the adapter offers.
+        available: u64,
+    },
+    /// The device could not be created.
+    #[error("GPU device request failed: {0}")]
+    RequestDevice(#[from] wgpu::RequestDeviceError),
+    /// Reading a GPU buffer back failed.
+    #[error("mapping GPU buffer {label:?} for reading failed: {message}")]
+    BufferMap {
+        /// Buffer label.
+        label: String,
+        /// What wgpu said.
+        message: String,
+    },
+    /// Waiting for the GPU failed or timed out.
+    #[error("waiting for the GPU failed: {0}")]
+    Poll(String),
+    /// An image does not have the size the pipeline was built for.
+    #[error("{what} is {got_width}x{got_height} px but the pipeline expects {want_width}x{want_height} px")]
+    FrameSize {
+        /// Which image.
+        what: &'static str,
+        /// Width received.
+        got_width: u32,
+        /// Height received.
+        got_height: u32,
+        /// Width expected.
+        want_width: u32,
+        /// Height expected.
+        want_height: u32,
+    },
+    /// A configuration value is out of its valid range.
+    #[error("invalid configuration: {0}")]
+    InvalidConfig(String),
+    /// A file could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// An image file could not be decoded or has the wrong pixel format.
+    #[error("{}: cannot decode image: {message}", path.display())]
+    ImageDecode {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A text file of a dataset (TUM lists, ground truth) is malformed.
+    #[error("{}:{line}: {message}", path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A dataset directory has no usable frames.
+    #[error("{}: {message}", path.display())]
+    Dataset {
+        /// The dataset directory or file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The calibration of a source is unknown and was not given.
+    #[error("no calibration for {source_name}: pass --intrinsics fx,fy,cx,cy (and --depth-scale units-per-metre if not 5000)")]
+    UnknownCalibration {
+        /// The source that lacks calibration.
+        source_name: String,
+    },
+    /// A recording file is corrupt, truncated or of an unsupported version.
+    #[error("recording {}: {message}", path.display())]
+    Recording {
+        /// The recording file (or `<memory>`).
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A compressed depth or colour payload is malformed.
+    #[error("cannot decode {codec} payload: {message}")]
+    Codec {
+        /// Codec name (`rvl`, `jpeg`, `png`).
+        codec: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// `Result` with [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,344 @@
+// SPDX-License-Identifier: MIT
+//! Depth and colour preprocessing on the GPU (KinectFusion's surface measurement, 000-digest
+//! §1.3 step 2; Boots' filtering and normal estimation, 003-digest §4.2).
+//!
+//! Per frame: raw depth -> metres -> bilateral filter (optional) -> pyramid of depth levels
+//! (edge-aware 2x2 block average) -> per level a vertex map, central-difference gradients,
+//! optional separable gradient smoothing, and camera-facing unit normals. Colour becomes
+//! float RGB and a BT.601 intensity image. Invalid samples are NaN throughout.
+
+use crate::kernels::{
+    GpuIntrinsics, KernelPipeline, Kernels, bilateral_filter::BilateralFilterParams, color_to_float::ColorToFloatParams,
+    depth_pyramid_down::DepthPyramidDownParams, depth_to_metres::DepthToMetresParams, gradient_smooth::GradientSmoothParams,
+    normal_map::NormalMapParams, vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams,
+};
+use crate::{Error, Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Result};
+
+/// Nearest depth kept, metres (Kinect v1 reads nothing reliable closer than about 0.4 m).
+pub const DEFAULT_MIN_DEPTH_M: f32 = 0.3;
+/// Farthest depth kept, metres (Boots' `maxDepth`; Kinect v1 noise grows with z^2 beyond).
+pub const DEFAULT_MAX_DEPTH_M: f32 = 5.0;
+/// Bilateral window radius, pixels: a 7x7 window.
+pub const DEFAULT_BILATERAL_RADIUS_PX: u32 = 3;
+/// Bilateral spatial sigma, pixels.
+pub const DEFAULT_BILATERAL_SIGMA_SPACE_PX: f32 = 3.0;
+/// Bilateral range sigma, metres (KinectFusion's PCL implementation uses 30 mm).
+pub const DEFAULT_BILATERAL_SIGMA_RANGE_M: f32 = 0.03;
+/// Pyramid levels, full resolution included (KinectFusion uses 3).
+pub const DEFAULT_PYRAMID_LEVELS: usize = 3;
+/// A block sample this far behind the block's nearest sample is left out of the coarse
+/// average, metres (3 x the bilateral range sigma, as KinectFusion's pyrDown).
+pub const DEFAULT_PYRAMID_MAX_DEPTH_DIFF_M: f32 = 0.09;
+/// Gradient smoothing radius, pixels (taps each side).
+pub const DEFAULT_GRADIENT_SMOOTH_RADIUS_PX: u32 = 2;
+/// Gradient smoothing sigma, pixels.
+pub const DEFAULT_GRADIENT_SMOOTH_SIGMA_PX: f32 = 1.5;
+/// Squared norm of the gradient cross product (m^4) at or below which no normal is emitted:
+/// well under any real surface patch (1 mm x 1 mm gradients give 1e-12).
+pub const DEFAULT_MIN_CROSS_NORM_SQ: f32 = 1e-20;
+
+/// Bilateral filter settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BilateralConfig {
+    /// Window radius, pixels.
+    pub radius_px: u32,
+    /// Spatial sigma, pixels.
+    pub sigma_space_px: f32,
+    /// Range sigma, metres.
+    pub sigma_range_m: f32,
+}
+
+impl Default for BilateralConfig {
+    fn default() -> Self {
+        Self { radius_px: DEFAULT_BILATERAL_RADIUS_PX, sigma_space_px: DEFAULT_BILATERAL_SIGMA_SPACE_PX, sigma_range_m: DEFAULT_BILATERAL_SIGMA_RANGE_M }
+    }
+}
+
+/// Gradient smoothing settings (Boots).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GradientSmoothingConfig {
+    /// Taps on each side.
+    pub radius_px: u32,
+    /// Gaussian sigma, pixels.
+    pub sigma_px: f32,
+}
+
+impl Default for GradientSmoothingConfig {
+    fn default() -> Self {
+        Self { radius_px: DEFAULT_GRADIENT_SMOOTH_RADIUS_PX, sigma_px: DEFAULT_GRADIENT_SMOOTH_SIGMA_PX }
+    }
+}
+
+/// Creation-time preprocessing settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PreprocessConfig {
+    /// Nearest valid depth, metres.
+    pub min_depth_m: f32,
+    /// Farthest valid depth, metres.
+    pub max_depth_m: f32,
+    /// Bilateral filter, or `None` for no filter.
+    pub bilateral: Option<BilateralConfig>,
+    /// Gradient smoothing before the normal cross product, or `None`.
+    pub gradient_smoothing: Option<GradientSmoothingConfig>,
+    /// Pyramid levels including full resolution (1..=4).
+    pub pyramid_levels: usize,
+    /// See [`DEFAULT_PYRAMID_MAX_DEPTH_DIFF_M`].
+    pub pyramid_max_depth_diff_m: f32,
+    /// See [`DEFAULT_MIN_CROSS_NORM_SQ`].
+    pub min_cross_norm_sq: f32,
+}
+
+impl Default for PreprocessConfig {
+    fn default() -> Self {
+        Self {
+            min_depth_m: DEFAULT_MIN_DEPTH_M,
+            max_depth_m: DEFAULT_MAX_DEPTH_M,
+            bilateral: Some(BilateralConfig::default()),
+            gradient_smoothing: Some(GradientSmoothingConfig::default()),
+            pyramid_levels: DEFAULT_PYRAMID_LEVELS,
+            pyramid_max_depth_diff_m: DEFAULT_PYRAMID_MAX_DEPTH_DIFF_M,
+            min_cross_norm_sq: DEFAULT_MIN_CROSS_NORM_SQ,
+        }
+    }
+}
+
+impl PreprocessConfig {
+    /// Rejects settings the kernels cannot honour.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::InvalidConfig(m));
+        if !(self.min_depth_m >= 0.0 && self.max_depth_m > self.min_depth_m) {
+            return bad(format!("depth range [{}, {}] m is empty", self.min_depth_m, self.max_depth_m));
+        }
+        if !(1..=4).contains(&self.pyramid_levels) {
+            return bad(format!("pyramid_levels = {} (must be 1..=4)", self.pyramid_levels));
+        }
+        if let Some(b) = self.bilateral
+            && !(b.sigma_space_px > 0.0 && b.sigma_range_m > 0.0 && b.radius_px <= 16)
+        {
+            return bad(format!("bilateral sigmas must be > 0 and radius <= 16, got {b:?}"));
+        }
+        if let Some(g) = self.gradient_smoothing
+            && !(g.sigma_px > 0.0 && g.radius_px <= 16)
+        {
+            return bad(format!("gradient smoothing sigma must be > 0 and radius <= 16, got {g:?}"));
+        }
+        if !(self.pyramid_max_depth_diff_m > 0.0) {
+            return bad("pyramid_max_depth_diff_m must be > 0".into());
+        }
+        Ok(())
+    }
+}
+
+/// One level of the depth/vertex/normal pyramid.
+#[derive(Debug)]
+pub struct PyramidLevel {
+    /// Intrinsics of this level.
+    pub intrinsics: PinholeIntrinsics,
+    /// Depth, metres, f32 per pixel (filtered at level 0 when the filter is on).
+    pub depth_m: wgpu::Buffer,
+    /// Vertices (x, y, z, 1), camera frame, metres.
+    pub vertex_in_camera: wgpu::Buffer,
+    /// Unit normals (nx, ny, nz, 0), camera frame.
+    pub normal_in_camera: wgpu::Buffer,
+    /// Vertex gradient along x (smoothed when smoothing is on).
+    pub grad_x: wgpu::Buffer,
+    /// Vertex gradient along y (smoothed when smoothing is on).
+    pub grad_y: wgpu::Buffer,
+}
+
+/// One recorded dispatch of the preprocessing chain.
+#[derive(Debug)]
+pub struct Stage {
+    /// Kernel name plus level, e.g. `vertex_map[1]`.
+    pub name: String,
+    pipeline: fn(&Kernels) -> &KernelPipeline,
+    bind_group: wgpu::BindGroup,
+    invocations: [u32; 3],
+    _params: wgpu::Buffer,
+}
+
+/// GPU buffers and the recorded kernel chain for one camera resolution.
+#[derive(Debug)]
+pub struct DepthPreprocessor {
+    calibration: RgbdCalibration,
+    config: PreprocessConfig,
+    /// Raw depth, two u16 per u32 word.
+    pub depth_raw: wgpu::Buffer,
+    /// RGB8 bytes, four per u32 word.
+    pub rgb8: wgpu::Buffer,
+    /// Depth in metres before the bilateral filter (aliases level 0 when the filter is off).
+    pub depth_unfiltered_m: Option<wgpu::Buffer>,
+    /// Colour (r, g, b, 1) in [0, 1].
+    pub color: wgpu::Buffer,
+    /// BT.601 intensity in [0, 1].
+    pub intensity: wgpu::Buffer,
+    /// Pyramid, level 0 = full resolution.
+    pub levels: Vec<PyramidLevel>,
+    stages: Vec<Stage>,
+}
+
+impl DepthPreprocessor {
+    /// Allocates buffers and records the chain for `calibration`'s resolution.
+    pub fn new(gpu: &Gpu, calibration: RgbdCalibration, config: PreprocessConfig) -> Result<Self> {
+        config.validate()?;
+        let k0 = calibration.intrinsics;
+        if k0.width_px < 2 << config.pyramid_levels || k0.height_px < 2 << config.pyramid_levels {
+            return Err(Error::InvalidConfig(format!("{}x{} px is too small for {} pyramid levels", k0.width_px, k0.height_px, config.pyramid_levels)));
+        }
+        let n0 = k0.pixel_count();
+        let depth_raw = gpu.storage_buffer::<u16>("core.preprocess.depth_raw", n0);
+        let rgb8 = gpu.storage_buffer::<u8>("core.preprocess.rgb8", 3 * n0);
+        let color = gpu.storage_buffer::<[f32; 4]>("core.preprocess.color", n0);
+        let intensity = gpu.storage_buffer::<f32>("core.preprocess.intensity", n0);
+        let levels: Vec<PyramidLevel> = (0..config.pyramid_levels)
+            .map(|l| {
+                let k = k0.pyramid_level(l);
+                let n = k.pixel_count();
+                let name = |what: &str| format!("core.preprocess.{what}[{l}]");
+                PyramidLevel {
+                    intrinsics: k,
+                    depth_m: gpu.storage_buffer::<f32>(&name("depth_m"), n),
+                    vertex_in_camera: gpu.storage_buffer::<[f32; 4]>(&name("vertex_in_camera"), n),
+                    normal_in_camera: gpu.storage_buffer::<[f32; 4]>(&name("normal_in_camera"), n),
+                    grad_x: gpu.storage_buffer::<[f32; 4]>(&name("grad_x"), n),
+                    grad_y: gpu.storage_buffer::<[f32; 4]>(&name("grad_y"), n),
+                }
+            })
+            .collect();
+        let depth_unfiltered_m = config.bilateral.map(|_| gpu.storage_buffer::<f32>("core.preprocess.depth_unfiltered_m", n0));
+        let grad_tmp = config.gradient_smoothing.map(|_| {
+            (gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_x_tmp", n0), gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_y_tmp", n0))
+        });
+
+        let mut stages = Vec::new();
+        let mut push = |name: String, pipeline: fn(&Kernels) -> &KernelPipeline, params: wgpu::Buffer, buffers: &[&wgpu::Buffer], invocations: [u32; 3]| {
+            let mut all = vec![&params];
+            all.extend_from_slice(buffers);
+            let bind_group = pipeline(&gpu.kernels).bind_group(&gpu.device, &all);
+            stages.push(Stage { name, pipeline, bind_group, invocations, _params: params });
+        };
+        let (w0, h0) = (k0.width_px, k0.height_px);
+        let to_metres_out = depth_unfiltered_m.as_ref().unwrap_or(&levels[0].depth_m);
+        let p = DepthToMetresParams {
+            width_px: w0,
+            height_px: h0,
+            metres_per_unit: calibration.metres_per_depth_unit(),
+            min_depth_m: config.min_depth_m,
+            max_depth_m: config.max_depth_m,
+            ..Default::default()
+        };
+        push("depth_to_metres".into(), |k| &k.depth_to_metres, gpu.uniform_buffer("core.depth_to_metres.params", &p), &[&depth_raw, to_metres_out], [w0, h0, 1]);
+        if let (Some(b), Some(unfiltered)) = (config.bilateral, &depth_unfiltered_m) {
+            let p = BilateralFilterParams {
+                width_px: w0,
+                height_px: h0,
+                radius_px: b.radius_px,
+                sigma_space_px: b.sigma_space_px,
+                sigma_range_m: b.sigma_range_m,
+                ..Default::default()
+            };
+            push("bilateral_filter".into(), |k| &k.bilateral_filter, gpu.uniform_buffer("core.bilateral_filter.params", &p), &[unfiltered, &levels[0].depth_m], [w0, h0, 1]);
+        }
+        for l in 1..levels.len() {
+            let (fine, coarse) = (&levels[l - 1], &levels[l]);
+            let p = DepthPyramidDownParams {
+                src_width_px: fine.intrinsics.width_px,
+                src_height_px: fine.intrinsics.height_px,
+                dst_width_px: coarse.intrinsics.width_px,
+                dst_height_px: coarse.intrinsics.height_px,
+                max_depth_diff_m: config.pyramid_max_depth_diff_m,
+                ..Default::default()
+            };
+            let inv = [p.dst_width_px, p.dst_height_px, 1];
+            push(format!("depth_pyramid_down[{l}]"), |k| &k.depth_pyramid_down, gpu.uniform_buffer("core.depth_pyramid_down.params", &p), &[&fine.depth_m, &coarse.depth_m], inv);
+        }
+        for (l, level) in levels.iter().enumerate() {
+            let k = level.intrinsics;
+            let inv = [k.width_px, k.height_px, 1];
+            let p = VertexMapParams { intrinsics: GpuIntrinsics::from(k) };
+            push(format!("vertex_map[{l}]"), |k| &k.vertex_map, gpu.uniform_buffer("core.vertex_map.params", &p), &[&level.depth_m, &level.vertex_in_camera], inv);
+            let p = VertexGradientsParams { width_px: k.width_px, height_px: k.height_px, ..Default::default() };
+            push(
+                format!("vertex_gradients[{l}]"),
+                |k| &k.vertex_gradients,
+                gpu.uniform_buffer("core.vertex_gradients.params", &p),
+                &[&level.vertex_in_camera, &level.grad_x, &level.grad_y],
+                inv,
+            );
+            if let (Some(g), Some((tmp_x, tmp_y))) = (config.gradient_smoothing, &grad_tmp) {
+                for axis in 0..2u32 {
+                    let p = GradientSmoothParams { width_px: k.width_px, height_px: k.height_px, radius_px: g.radius_px, axis, sigma_px: g.sigma_px, ..Default::default() };
+                    let io: [&wgpu::Buffer; 4] =
+                        if axis == 0 { [&level.grad_x, &level.grad_y, tmp_x, tmp_y] } else { [tmp_x, tmp_y, &level.grad_x, &level.grad_y] };
+                    push(format!("gradient_smooth[{l}].{}", ["x", "y"][axis as usize]), |k| &k.gradient_smooth, gpu.uniform_buffer("core.gradient_smooth.params", &p), &io, inv);
+                }
+            }
+            let p = NormalMapParams { width_px: k.width_px, height_px: k.height_px, min_cross_norm_sq: config.min_cross_norm_sq, ..Default::default() };
+            push(
+                format!("normal_map[{l}]"),
+                |k| &k.normal_map,
+                gpu.uniform_buffer("core.normal_map.params", &p),
+                &[&level.vertex_in_camera, &level.grad_x, &level.grad_y, &level.normal_in_camera],
+                inv,
+            );
+        }
+        let p = ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() };
+        push("color_to_float".into(), |k| &k.color_to_float, gpu.uniform_buffer("core.color_to_float.params", &p), &[&rgb8, &color, &intensity], [w0, h0, 1]);
+
+        Ok(Self { calibration, config, depth_raw, rgb8, depth_unfiltered_m, color, intensity, levels, stages })
+    }
+
+    /// The calibration this preprocessor was built for.
+    pub fn calibration(&self) -> &RgbdCalibration {
+        &self.calibration
+    }
+
+    /// The settings this preprocessor was built with.
+    pub fn config(&self) -> &PreprocessConfig {
+        &self.config
+    }
+
+    /// The recorded dispatches, in execution order.
+    pub fn stages(&self) -> &[Stage] {
+        &self.stages
+    }
+
+    /// Uploads a frame's depth and colour, checking their sizes.
+    pub fn upload(&self, gpu: &Gpu, frame: &RgbdFrame) -> Result<()> {
+        let k = self.calibration.intrinsics;
+        let check = |what, w, h| {
+            if (w, h) != (k.width_px, k.height_px) {
+                Err(Error::FrameSize { what, got_width: w, got_height: h, want_width: k.width_px, want_height: k.height_px })
+            } else {
+                Ok(())
+            }
+        };
+        check("depth image", frame.depth.width_px, frame.depth.height_px)?;
+        check("colour image", frame.color.width_px, frame.color.height_px)?;
+        gpu.write_buffer(&self.depth_raw, &frame.depth.units);
+        gpu.write_buffer(&self.rgb8, &frame.color.rgb8);
+        Ok(())
+    }
+
+    /// Records the whole chain.
+    pub fn encode(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder) {
+        for ix in 0..self.stages.len() {
+            self.encode_stage(gpu, encoder, ix);
+        }
+    }
+
+    /// Records stage `ix` alone (benchmarks time stages one by one).
+    pub fn encode_stage(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, ix: usize) {
+        let s = &self.stages[ix];
+        (s.pipeline)(&gpu.kernels).dispatch(encoder, &s.bind_group, s.invocations);
+    }
+
+    /// Uploads, runs and waits: the whole preprocessing of one frame.
+    pub async fn run(&self, gpu: &Gpu, frame: &RgbdFrame) -> Result<()> {
+        self.upload(gpu, frame)?;
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.preprocess") });
+        self.encode(gpu, &mut encoder);
+        gpu.submit_and_wait(encoder).await
+    }
+}
+
