@@ -1,0 +1,166 @@
+// SPDX-License-Identifier: MIT
+//! TUM trajectory files: one pose per line, `timestamp tx ty tz qx qy qz qw`.
+//!
+//! The pose maps camera coordinates to world coordinates (`world_from_camera`), translation in
+//! metres, rotation as a unit quaternion with the scalar last. `#` lines are comments. This is
+//! the format of the benchmark's `groundtruth.txt` and of the trajectories its tools evaluate.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use glam::{DQuat, DVec3};
+
+use super::{data_fields, format_timestamp_s, parse_timestamp_ns};
+use crate::{Error, Result, Se3};
+
+/// A camera pose at a point in time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimedPose {
+    /// Time of the pose, nanoseconds (same clock as the frames' timestamps).
+    pub timestamp_ns: i64,
+    /// Camera-to-world transform.
+    pub world_from_camera: Se3,
+}
+
+/// A quaternion norm below this is treated as no rotation at all (malformed input).
+const MIN_QUATERNION_NORM: f64 = 1e-6;
+
+/// A quaternion whose norm is within this of 1 is taken as normalised already.
+const UNIT_QUATERNION_TOLERANCE: f64 = 8.0 * f64::EPSILON;
+
+/// Reads a TUM trajectory file.
+pub fn read_tum_trajectory(path: &Path) -> Result<Vec<TimedPose>> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_owned(), source })?;
+    parse_tum_trajectory(&text, path)
+}
+
+/// Parses the text of a TUM trajectory file; `path` only names the file in errors.
+///
+/// Quaternions are normalised (unless unit to rounding already); a line with the wrong number of fields, a non-finite number or
+/// a zero quaternion is an [`Error::Parse`].
+pub fn parse_tum_trajectory(text: &str, path: &Path) -> Result<Vec<TimedPose>> {
+    let mut poses = Vec::new();
+    for (line_ix, line) in text.lines().enumerate() {
+        let Some(fields) = data_fields(line) else { continue };
+        let parse_error = |message: String| Error::Parse { path: path.to_owned(), line: line_ix + 1, message };
+        if fields.len() != 8 {
+            return Err(parse_error(format!("expected 8 fields `timestamp tx ty tz qx qy qz qw`, found {}", fields.len())));
+        }
+        let timestamp_ns = parse_timestamp_ns(fields[0])
+            .ok_or_else(|| parse_error(format!("invalid timestamp {:?}: expected decimal seconds", fields[0])))?;
+        let mut values = [0.0_f64; 7];
+        for (value, field) in values.iter_mut().zip(&fields[1..]) {
+            *value = field.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| parse_error(format!("invalid number {field:?}")))?;
+        }
+        let [tx, ty, tz, qx, qy, qz, qw] = values;
+        let quaternion = DQuat::from_xyzw(qx, qy, qz, qw);
+        let norm = quaternion.length();
+        if norm < MIN_QUATERNION_NORM {
+            return Err(parse_error("quaternion has zero length".to_owned()));
+        }
+        // Leave quaternions that are unit to rounding untouched, so written poses read back bit for bit.
+        let rotation = if (norm - 1.0).abs() <= UNIT_QUATERNION_TOLERANCE { quaternion } else { quaternion / norm };
+        poses.push(TimedPose { timestamp_ns, world_from_camera: Se3 { rotation, translation_m: DVec3::new(tx, ty, tz) } });
+    }
+    Ok(poses)
+}
+
+/// Renders poses in the TUM trajectory format, with a `#` header line.
+///
+/// Timestamps keep their exact nanosecond value ([`super::format_timestamp_s`]); numbers use
+/// Rust's shortest representation that parses back to the same `f64`, so the text round-trips.
+pub fn format_tum_trajectory(poses: &[TimedPose]) -> String {
+    let mut text = String::with_capacity(32 + poses.len() * 96);
+    text.push_str("# timestamp tx ty tz qx qy qz qw\n");
+    for pose in poses {
+        let t = pose.world_from_camera.translation_m;
+        let q = pose.world_from_camera.rotation;
+        // Writing to a String cannot fail.
+        writeln!(text, "{} {} {} {} {} {} {} {}", format_timestamp_s(pose.timestamp_ns), t.x, t.y, t.z, q.x, q.y, q.z, q.w).ok();
+    }
+    text
+}
+
+/// Writes poses to a TUM trajectory file (see [`format_tum_trajectory`]).
+pub fn write_tum_trajectory(path: &Path, poses: &[TimedPose]) -> Result<()> {
+    std::fs::write(path, format_tum_trajectory(poses)).map_err(|source| Error::Io { path: path.to_owned(), source })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::test_util::{ScratchDir, TUM_FR1_RPY_DIR};
+
+    fn sample_poses() -> Vec<TimedPose> {
+        vec![
+            TimedPose { timestamp_ns: 1_305_031_229_528_784_000, world_from_camera: Se3::IDENTITY },
+            TimedPose {
+                timestamp_ns: 1_305_031_229_564_442_123,
+                world_from_camera: Se3::new(DQuat::from_xyzw(0.6853, 0.5405, -0.0074, -0.4881), DVec3::new(1.3047, 0.6853, 1.5750)),
+            },
+            TimedPose {
+                timestamp_ns: -42,
+                world_from_camera: Se3::new(DQuat::from_rotation_y(0.1234567890123), DVec3::new(-1e-9, 1e12, 0.1 + 0.2)),
+            },
+        ]
+    }
+
+    #[test]
+    fn round_trips_through_text() {
+        let poses = sample_poses();
+        let text = format_tum_trajectory(&poses);
+        let parsed = parse_tum_trajectory(&text, Path::new("mem.txt")).expect("parsing what we wrote");
+        assert_eq!(parsed, poses, "text:\n{text}");
+        assert!(text.lines().nth(1).expect("first pose line").starts_with("1305031229.528784 "), "text:\n{text}");
+    }
+
+    #[test]
+    fn round_trips_through_a_file() {
+        let dir = ScratchDir::new("trajectory");
+        let path = dir.path().join("traj.txt");
+        let poses = sample_poses();
+        write_tum_trajectory(&path, &poses).expect("writing");
+        assert_eq!(read_tum_trajectory(&path).expect("reading"), poses, "file round trip");
+    }
+
+    #[test]
+    fn reads_tum_ground_truth() {
+        let path = Path::new(TUM_FR1_RPY_DIR).join("groundtruth.txt");
+        let poses = read_tum_trajectory(&path).expect("reading groundtruth.txt");
+        assert_eq!(poses.len(), 430, "pose lines in groundtruth.txt");
+        assert_eq!(poses[0].timestamp_ns, 1_305_031_229_033_100_000, "first timestamp");
+        let t = poses[0].world_from_camera.translation_m;
+        assert_eq!((t.x, t.y, t.z), (1.3047, 0.6853, 1.5750), "first translation");
+        let q = poses[0].world_from_camera.rotation;
+        let q_file = DQuat::from_xyzw(0.6853, 0.5405, -0.0074, -0.4881).normalize();
+        assert!(q.abs_diff_eq(q_file, 1e-12), "first rotation {q:?}");
+    }
+
+    #[test]
+    fn reports_malformed_lines_with_line_numbers() {
+        let cases = [
+            ("# header\n1.0 0 0 0 0 0 0\n", 2, "expected 8 fields"),
+            ("\n\n1.0 0 0 0 0 0 0 1 9\n", 3, "expected 8 fields"),
+            ("1.0 0 0 0 0 0 0 1\nx 0 0 0 0 0 0 1\n", 2, "invalid timestamp"),
+            ("1.0 0 0 nan 0 0 0 1\n", 1, "invalid number"),
+            ("1.0 0 0 0 0 0 0 abc\n", 1, "invalid number"),
+            ("1.0 0 0 0 0 0 0 0\n", 1, "zero length"),
+        ];
+        for (text, want_line, want_message) in cases {
+            match parse_tum_trajectory(text, Path::new("gt.txt")) {
+                Err(Error::Parse { path, line, message }) => {
+                    assert_eq!(path, Path::new("gt.txt"), "path in error for {text:?}");
+                    assert_eq!(line, want_line, "line in error for {text:?}");
+                    assert!(message.contains(want_message), "message {message:?} for {text:?}");
+                }
+                other => panic!("expected a parse error for {text:?}, got {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn missing_file_is_an_io_error_naming_it() {
+        let err = read_tum_trajectory(Path::new("/nonexistent/traj.txt")).expect_err("reading a missing file");
+        assert!(matches!(&err, Error::Io { path, .. } if path == Path::new("/nonexistent/traj.txt")), "{err:?}");
+    }
+}

@@ -1,0 +1,94 @@
+// SPDX-License-Identifier: MIT
+//! Where frames come from: the [`FrameSource`] trait and [`open_source`], which picks the
+//! implementation for a path (a TUM RGB-D directory or a `.wfr` recording).
+
+use std::path::Path;
+
+pub use crate::io::trajectory::TimedPose;
+use crate::io::tum::TumDataset;
+use crate::recording::{RECORDING_MAGIC, RecordingReader};
+use crate::{Error, Result, RgbdCalibration, RgbdFrame};
+
+/// A finite, random-access sequence of RGB-D frames with one calibration.
+pub trait FrameSource: Send {
+    /// Human-readable name (a directory or file name).
+    fn name(&self) -> String;
+
+    /// Calibration of every frame.
+    fn calibration(&self) -> RgbdCalibration;
+
+    /// Number of frames; valid indices are `0..frame_count()`.
+    fn frame_count(&self) -> usize;
+
+    /// Reads and decodes frame `index`; its images have the calibration's size.
+    fn read_frame(&mut self, index: usize) -> Result<RgbdFrame>;
+
+    /// Ground-truth camera poses (`world_from_camera`), if the source has them.
+    fn ground_truth(&self) -> Option<&[TimedPose]>;
+}
+
+/// Opens `path` as a frame source: a directory is read as a TUM RGB-D sequence, a file
+/// starting with the recording magic as a `.wfr` recording.
+///
+/// `calibration_override` replaces the calibration of the source; for a recording it must
+/// have the recorded image size.
+pub fn open_source(path: &Path, calibration_override: Option<RgbdCalibration>) -> Result<Box<dyn FrameSource>> {
+    let metadata = std::fs::metadata(path).map_err(|source| Error::Io { path: path.to_owned(), source })?;
+    if metadata.is_dir() {
+        return Ok(Box::new(TumDataset::open(path, calibration_override)?));
+    }
+    let mut magic = [0_u8; RECORDING_MAGIC.len()];
+    let magic_len = std::fs::File::open(path)
+        .and_then(|mut file| read_up_to(&mut file, &mut magic))
+        .map_err(|source| Error::Io { path: path.to_owned(), source })?;
+    if magic[..magic_len] != RECORDING_MAGIC[..] {
+        return Err(Error::Dataset {
+            path: path.to_owned(),
+            message: "neither a TUM RGB-D directory nor a webfusion recording (.wfr)".to_owned(),
+        });
+    }
+    let mut recording = RecordingReader::open(path)?;
+    if let Some(calibration) = calibration_override {
+        recording.override_calibration(calibration)?;
+    }
+    Ok(Box::new(recording))
+}
+
+/// Fills `buffer` as far as the reader allows; returns the number of bytes read.
+fn read_up_to(reader: &mut impl std::io::Read, buffer: &mut [u8]) -> std::io::Result<usize> {
+    let mut filled = 0;
+    while filled < buffer.len() {
+        match reader.read(&mut buffer[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(filled)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::test_util::{ScratchDir, TUM_FR1_RPY_DIR};
+
+    #[test]
+    fn opens_a_tum_directory() {
+        let source = open_source(Path::new(TUM_FR1_RPY_DIR), None).expect("opening the TUM excerpt");
+        assert_eq!(source.frame_count(), 100, "frames");
+        assert!(source.ground_truth().is_some(), "ground truth");
+    }
+
+    #[test]
+    fn rejects_other_files() {
+        let scratch = ScratchDir::new("source");
+        let path = scratch.path().join("notes.txt");
+        std::fs::write(&path, "hello").expect("writing");
+        assert!(matches!(open_source(&path, None), Err(Error::Dataset { .. })), "text file");
+        let empty = scratch.path().join("empty.wfr");
+        std::fs::write(&empty, "").expect("writing");
+        assert!(matches!(open_source(&empty, None), Err(Error::Dataset { .. })), "empty file");
+        assert!(matches!(open_source(&scratch.path().join("missing"), None), Err(Error::Io { .. })), "missing path");
+    }
+}
