@@ -1,0 +1,186 @@
+// SPDX-License-Identifier: MIT
+//! GPU test harness for webfusion's native tests.
+//!
+//! - [`gpu`] creates a fresh device per test on a Vulkan adapter, preferring a CPU adapter
+//!   (Mesa lavapipe) so results do not depend on the machine's GPU. No adapter is a loud
+//!   failure, never a skip.
+//! - [`run_kernel`] runs one kernel on given inputs with outputs pre-filled with
+//!   [`SENTINEL_F32`], so "not written" can never pass as a result.
+//! - [`compare_f32`] / [`compare_vec4`] compare GPU and CPU outputs: NaN (invalid) masks must
+//!   agree exactly, valid values within a [`Tolerance`]. [`assert_negative_control`] proves, for
+//!   each test, that the comparison does fail on a perturbed result.
+//! - [`finish`] fails the test if wgpu reported any uncaptured validation error.
+
+use std::path::PathBuf;
+
+use webfusion_core::io::tum::TumDataset;
+use webfusion_core::kernels::KernelPipeline;
+use webfusion_core::source::FrameSource;
+use webfusion_core::{Gpu, GpuOptions, RgbdCalibration, RgbdFrame};
+
+/// Written into every output buffer before a kernel runs: finite, so it cannot be mistaken
+/// for the NaN invalid marker, and far from any real value.
+pub const SENTINEL_F32: f32 = f32::from_bits(0xDEAD_BEEF);
+
+/// A fresh GPU context on a Vulkan adapter (lavapipe preferred). Panics with a clear message
+/// when none exists.
+pub fn gpu() -> Gpu {
+    let options = GpuOptions { prefer_cpu_adapter: true, ..Default::default() };
+    match pollster::block_on(Gpu::new(&options)) {
+        Ok(gpu) => gpu,
+        Err(e) => panic!("GPU tests need a Vulkan adapter and none is usable: {e}"),
+    }
+}
+
+/// Fails the test if wgpu reported any uncaptured error during it.
+pub fn finish(gpu: &Gpu) {
+    let errors = gpu.take_errors();
+    assert!(errors.is_empty(), "wgpu reported {} uncaptured error(s):\n{}", errors.len(), errors.join("\n"));
+}
+
+/// Maximum allowed |gpu - cpu| = `absolute + relative * |cpu|`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tolerance {
+    /// Absolute part, in the compared quantity's unit.
+    pub absolute: f32,
+    /// Relative part.
+    pub relative: f32,
+}
+
+impl Tolerance {
+    /// Bit-for-bit equality of valid values.
+    pub const EXACT: Tolerance = Tolerance { absolute: 0.0, relative: 0.0 };
+
+    /// The allowed error at reference value `cpu`.
+    pub fn allowed(&self, cpu: f32) -> f32 {
+        self.absolute + self.relative * cpu.abs()
+    }
+}
+
+/// What a successful comparison saw.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Comparison {
+    /// Values compared.
+    pub compared: usize,
+    /// Of those, invalid (NaN) in both.
+    pub invalid: usize,
+    /// Largest |gpu - cpu| among valid values.
+    pub max_abs_err: f32,
+}
+
+/// Compares flat f32 outputs. Invalid (NaN) must match exactly; valid values within `tol`.
+pub fn compare_f32(what: &str, gpu: &[f32], cpu: &[f32], tol: Tolerance) -> Result<Comparison, String> {
+    if gpu.len() != cpu.len() {
+        return Err(format!("{what}: GPU gave {} values, CPU {}", gpu.len(), cpu.len()));
+    }
+    let mut c = Comparison { compared: gpu.len(), ..Default::default() };
+    for (i, (&g, &r)) in gpu.iter().zip(cpu).enumerate() {
+        match (g.is_nan(), r.is_nan()) {
+            (true, true) => c.invalid += 1,
+            (false, false) => {
+                let err = (g - r).abs();
+                if !(err <= tol.allowed(r)) {
+                    return Err(format!("{what}[{i}]: GPU {g:e} vs CPU {r:e}, |diff| {err:e} > allowed {:e}", tol.allowed(r)));
+                }
+                c.max_abs_err = c.max_abs_err.max(err);
+            }
+            _ => return Err(format!("{what}[{i}]: validity differs: GPU {g:e} vs CPU {r:e}")),
+        }
+    }
+    Ok(c)
+}
+
+/// Compares vec4 outputs component-wise (see [`compare_f32`]).
+pub fn compare_vec4(what: &str, gpu: &[[f32; 4]], cpu: &[[f32; 4]], tol: Tolerance) -> Result<Comparison, String> {
+    compare_f32(what, gpu.as_flattened(), cpu.as_flattened(), tol)
+}
+
+/// Proves the comparison can fail: for a passing pair, each of these perturbations of the GPU
+/// result must be rejected: a valid value moved by 4x the tolerance (plus 1e-3 relative), a
+/// valid value replaced by NaN, an invalid value replaced by 0, and a value left at the
+/// sentinel.
+pub fn assert_negative_control(what: &str, gpu: &[f32], cpu: &[f32], tol: Tolerance) {
+    compare_f32(what, gpu, cpu, tol).unwrap_or_else(|e| panic!("negative control needs a passing pair first: {e}"));
+    let valid_ix = cpu.iter().position(|v| !v.is_nan()).expect("negative control needs at least one valid value");
+    let mut moved = gpu.to_vec();
+    let r = cpu[valid_ix];
+    moved[valid_ix] = r + 4.0 * tol.allowed(r) + 1e-3 * r.abs().max(1e-3);
+    assert!(compare_f32(what, &moved, cpu, tol).is_err(), "{what}: a value moved beyond tolerance was accepted");
+    let mut nan = gpu.to_vec();
+    nan[valid_ix] = f32::NAN;
+    assert!(compare_f32(what, &nan, cpu, tol).is_err(), "{what}: a valid value turned NaN was accepted");
+    let mut sentinel = gpu.to_vec();
+    sentinel[valid_ix] = SENTINEL_F32;
+    assert!(compare_f32(what, &sentinel, cpu, tol).is_err(), "{what}: an unwritten (sentinel) value was accepted");
+    if let Some(invalid_ix) = cpu.iter().position(|v| v.is_nan()) {
+        let mut filled = gpu.to_vec();
+        filled[invalid_ix] = 0.0;
+        assert!(compare_f32(what, &filled, cpu, tol).is_err(), "{what}: an invalid value turned 0 was accepted");
+    }
+}
+
+/// [`assert_negative_control`] for vec4 outputs.
+pub fn assert_negative_control_vec4(what: &str, gpu: &[[f32; 4]], cpu: &[[f32; 4]], tol: Tolerance) {
+    assert_negative_control(what, gpu.as_flattened(), cpu.as_flattened(), tol);
+}
+
+/// Runs `pipeline` once: binding 0 gets `params` as a uniform, then `inputs` (bytes) and then
+/// `output_sizes` storage buffers (bytes), all outputs pre-filled with [`SENTINEL_F32`].
+/// Returns the outputs' bytes.
+pub fn run_kernel<P: bytemuck::Pod>(gpu: &Gpu, pipeline: &KernelPipeline, params: &P, inputs: &[&[u8]], output_sizes: &[usize], invocations: [u32; 3]) -> Vec<Vec<u8>> {
+    let name = pipeline.kernel.name;
+    let params_buffer = gpu.uniform_buffer(&format!("test.{name}.params"), params);
+    let input_buffers: Vec<wgpu::Buffer> = inputs
+        .iter()
+        .enumerate()
+        .map(|(i, bytes)| {
+            let b = gpu.storage_buffer::<u8>(&format!("test.{name}.input{i}"), bytes.len());
+            gpu.write_buffer(&b, bytes);
+            b
+        })
+        .collect();
+    let output_buffers: Vec<wgpu::Buffer> = output_sizes
+        .iter()
+        .enumerate()
+        .map(|(i, &size)| {
+            let b = gpu.storage_buffer::<u8>(&format!("test.{name}.output{i}"), size);
+            gpu.fill_buffer(&b, SENTINEL_F32);
+            b
+        })
+        .collect();
+    let mut all = vec![&params_buffer];
+    all.extend(input_buffers.iter());
+    all.extend(output_buffers.iter());
+    let bind_group = pipeline.bind_group(&gpu.device, &all);
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.run_kernel") });
+    pipeline.dispatch(&mut encoder, &bind_group, invocations);
+    pollster::block_on(gpu.submit_and_wait(encoder)).expect("GPU work finishes");
+    output_buffers
+        .iter()
+        .zip(output_sizes)
+        .map(|(b, &size)| pollster::block_on(gpu.read_buffer::<u8>(b, size.next_multiple_of(4))).expect("readback").into_iter().take(size).collect())
+        .collect()
+}
+
+/// Reinterprets bytes read back from the GPU.
+pub fn cast<T: bytemuck::Pod>(bytes: &[u8]) -> Vec<T> {
+    bytemuck::pod_collect_to_vec(bytes)
+}
+
+/// `../shared/data/tum_fr1_rpy_0-99` (real Kinect frames with mocap ground truth). Override
+/// with `WEBFUSION_TUM_DIR`. Panics if missing: these tests never skip silently.
+pub fn tum_dir() -> PathBuf {
+    let dir = std::env::var_os("WEBFUSION_TUM_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/tum_fr1_rpy_0-99"));
+    assert!(dir.join("depth.txt").exists(), "real-data tests need the TUM frames at {} (set WEBFUSION_TUM_DIR)", dir.display());
+    dir
+}
+
+/// Frame `index` of the shared TUM sequence with its calibration.
+pub fn tum_frame(index: usize) -> (RgbdCalibration, RgbdFrame) {
+    let mut dataset = TumDataset::open(tum_dir(), None).expect("open shared TUM data");
+    let calibration = dataset.calibration();
+    let frame = dataset.read_frame(index).expect("read TUM frame");
+    (calibration, frame)
+}
