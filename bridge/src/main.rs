@@ -1,0 +1,194 @@
+// SPDX-License-Identifier: MIT
+//! `webfusion`: the native command of webfusion: GPU preprocessing of RGB-D logs, benchmarks,
+//! recording conversion (the capture bridge and reconstruction land here as they are built).
+
+mod calib;
+mod record;
+mod timing;
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::{Parser, Subcommand};
+use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
+use webfusion_core::source::{FrameSource, open_source};
+use webfusion_core::{Gpu, GpuOptions};
+
+use crate::calib::CalibrationArgs;
+use crate::timing::{StageTimes, Stopwatch};
+
+/// The bundled sample log (TUM fr1/rpy, 100 frames, CC BY 4.0; see data/README.md).
+const DEFAULT_SAMPLE: &str = "data/sample/fr1_rpy.wfr";
+
+#[derive(Parser)]
+#[command(name = "webfusion", version, about = "Real-time RGB-D reconstruction on WebGPU/Vulkan: native tools")]
+struct Cli {
+    /// Use the GPU adapter whose name contains this (also: env WEBFUSION_ADAPTER).
+    #[arg(long, global = true)]
+    adapter: Option<String>,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print the GPU adapter, its limits and the kernel set.
+    Info,
+    /// Run the GPU preprocessing (depth -> filtered pyramid, vertex and normal maps, colour)
+    /// over every frame of a log and print per-stage timings.
+    Preprocess(PreprocessArgs),
+    /// Benchmark each preprocessing kernel at the log's resolution: median of N runs after
+    /// warm-up, one submission per kernel.
+    Bench(BenchArgs),
+    /// Convert any source (TUM directory, recording) into a `.wfr` recording.
+    Record(record::RecordArgs),
+}
+
+#[derive(clap::Args)]
+struct PreprocessArgs {
+    /// TUM RGB-D directory or `.wfr` recording.
+    #[arg(long, default_value = DEFAULT_SAMPLE)]
+    source: PathBuf,
+    /// Frames to process, `A..B` (end exclusive); default all.
+    #[arg(long)]
+    frames: Option<String>,
+    #[command(flatten)]
+    calibration: CalibrationArgs,
+    /// Write per-stage statistics as JSON here.
+    #[arg(long)]
+    stats_json: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// TUM RGB-D directory or `.wfr` recording (the first frame is used).
+    #[arg(long, default_value = DEFAULT_SAMPLE)]
+    source: PathBuf,
+    /// Timed runs per kernel.
+    #[arg(long, default_value_t = 30)]
+    iterations: usize,
+    /// Untimed runs first (the first pass over new buffers is slow on lavapipe).
+    #[arg(long, default_value_t = 5)]
+    warmup: usize,
+    #[command(flatten)]
+    calibration: CalibrationArgs,
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    let options = GpuOptions { adapter_name_contains: cli.adapter.clone(), prefer_cpu_adapter: false };
+    match cli.command {
+        Command::Info => info(&options),
+        Command::Preprocess(args) => preprocess(&options, &args),
+        Command::Bench(args) => bench(&options, &args),
+        Command::Record(args) => record::run(&args),
+    }
+}
+
+fn open(source: &std::path::Path, calibration: &CalibrationArgs) -> anyhow::Result<Box<dyn FrameSource>> {
+    open_source(source, calibration.resolve()?).with_context(|| format!("opening source {}", source.display()))
+}
+
+fn gpu(options: &GpuOptions) -> anyhow::Result<Gpu> {
+    let gpu = pollster::block_on(Gpu::new(options))?;
+    eprintln!("GPU: {}", gpu.adapter_summary());
+    Ok(gpu)
+}
+
+fn info(options: &GpuOptions) -> anyhow::Result<()> {
+    let gpu = gpu(options)?;
+    let l = &gpu.limits;
+    println!("adapter: {}", gpu.adapter_summary());
+    println!("driver: {} {}", gpu.adapter_info.driver, gpu.adapter_info.driver_info);
+    println!("max_storage_buffer_binding_size: {} MiB", l.max_storage_buffer_binding_size >> 20);
+    println!("max_compute_workgroup_storage_size: {} KiB", l.max_compute_workgroup_storage_size >> 10);
+    println!("kernels:");
+    for k in webfusion_shaders::ALL {
+        println!("  {:<20} workgroup {:?}, {} bindings", k.name, k.workgroup_size, k.bindings.len());
+    }
+    Ok(())
+}
+
+fn frame_range(spec: Option<&str>, count: usize) -> anyhow::Result<std::ops::Range<usize>> {
+    let Some(spec) = spec else { return Ok(0..count) };
+    let (a, b) = spec.split_once("..").with_context(|| format!("--frames {spec:?}: expected A..B"))?;
+    let start: usize = if a.is_empty() { 0 } else { a.parse().with_context(|| format!("--frames start {a:?}"))? };
+    let end: usize = if b.is_empty() { count } else { b.parse().with_context(|| format!("--frames end {b:?}"))? };
+    anyhow::ensure!(start < end && end <= count, "--frames {spec}: the source has frames 0..{count}");
+    Ok(start..end)
+}
+
+fn preprocess(options: &GpuOptions, args: &PreprocessArgs) -> anyhow::Result<()> {
+    let mut source = open(&args.source, &args.calibration)?;
+    let range = frame_range(args.frames.as_deref(), source.frame_count())?;
+    let gpu = gpu(options)?;
+    let pre = DepthPreprocessor::new(&gpu, source.calibration(), PreprocessConfig::default())?;
+    let mut times = StageTimes::default();
+    let n_frames = range.len();
+    for (done, index) in range.enumerate() {
+        let sw = Stopwatch::start();
+        let frame = source.read_frame(index).with_context(|| format!("reading frame {index} of {}", source.name()))?;
+        times.record("read+decode", sw.ms());
+        let sw = Stopwatch::start();
+        pre.upload(&gpu, &frame)?;
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("webfusion.preprocess") });
+        pre.encode(&gpu, &mut encoder);
+        pollster::block_on(gpu.submit_and_wait(encoder))?;
+        times.record("gpu preprocess (upload + all kernels)", sw.ms());
+        if (done + 1) % 10 == 0 || done + 1 == n_frames {
+            eprint!("\rframe {}/{}", done + 1, n_frames);
+        }
+    }
+    eprintln!();
+    let errors = gpu.take_errors();
+    anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
+    println!("{} frames of {} on {}", n_frames, source.name(), gpu.adapter_summary());
+    times.print();
+    if let Some(path) = &args.stats_json {
+        let json = serde_json::json!({ "frames": n_frames, "adapter": gpu.adapter_summary(), "stages_ms": times.to_json() });
+        std::fs::write(path, serde_json::to_string_pretty(&json)?).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn bench(options: &GpuOptions, args: &BenchArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.iterations > 0, "--iterations must be > 0");
+    let mut source = open(&args.source, &args.calibration)?;
+    let frame = source.read_frame(0)?;
+    let gpu = gpu(options)?;
+    let pre = DepthPreprocessor::new(&gpu, source.calibration(), PreprocessConfig::default())?;
+    let k = source.calibration().intrinsics;
+    pre.upload(&gpu, &frame)?;
+    let mut times = StageTimes::default();
+    for iteration in 0..args.warmup + args.iterations {
+        let timed = iteration >= args.warmup;
+        let sw = Stopwatch::start();
+        pre.upload(&gpu, &frame)?;
+        pollster::block_on(gpu.wait(None))?;
+        if timed {
+            times.record("upload (depth + colour)", sw.ms());
+        }
+        for (ix, stage) in pre.stages().iter().enumerate() {
+            let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("webfusion.bench") });
+            pre.encode_stage(&gpu, &mut encoder, ix);
+            let sw = Stopwatch::start();
+            pollster::block_on(gpu.submit_and_wait(encoder))?;
+            if timed {
+                times.record(&stage.name, sw.ms());
+            }
+        }
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("webfusion.bench.all") });
+        pre.encode(&gpu, &mut encoder);
+        let sw = Stopwatch::start();
+        pollster::block_on(gpu.submit_and_wait(encoder))?;
+        if timed {
+            times.record("whole chain, one submission", sw.ms());
+        }
+    }
+    let errors = gpu.take_errors();
+    anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
+    println!("preprocessing kernels at {}x{} on {}", k.width_px, k.height_px, gpu.adapter_summary());
+    println!("wall-clock per submission (submit + wait), median of {} after {} warm-up runs", args.iterations, args.warmup);
+    times.print();
+    Ok(())
+}

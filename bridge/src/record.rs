@@ -1,0 +1,300 @@
+// SPDX-License-Identifier: MIT
+//! `webfusion record`: converts a frame source (TUM RGB-D directory or `.wfr` recording) into
+//! a `.wfr` recording, ground truth included.
+
+use std::io::{IsTerminal as _, Write as _};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, bail};
+use webfusion_core::camera::TUM_DEPTH_UNITS_PER_METRE;
+use webfusion_core::codec::{ColorCodec, DEFAULT_JPEG_QUALITY, DepthCodec};
+use webfusion_core::recording::{RecordingOptions, RecordingSummary, RecordingWriter};
+use webfusion_core::source::{FrameSource, open_source};
+use webfusion_core::{PinholeIntrinsics, RgbdCalibration};
+
+/// Image size assumed when `--intrinsics` gives only `fx,fy,cx,cy` (Kinect-class sensors).
+const DEFAULT_WIDTH_PX: u32 = 640;
+/// See [`DEFAULT_WIDTH_PX`].
+const DEFAULT_HEIGHT_PX: u32 = 480;
+/// Bytes per pixel of raw frames, for the compression ratio: 16-bit depth + RGB8 colour.
+const RAW_DEPTH_BYTES_PER_PX: u64 = 2;
+/// See [`RAW_DEPTH_BYTES_PER_PX`].
+const RAW_COLOR_BYTES_PER_PX: u64 = 3;
+
+/// Depth codec of the recording.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum DepthCodecArg {
+    /// RVL, lossless, fastest.
+    Rvl,
+    /// RVL then DEFLATE, lossless, about 2x smaller.
+    RvlDeflate,
+}
+
+/// Colour codec of the recording.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum ColorCodecArg {
+    /// Lossy JPEG (see --jpeg-quality).
+    Jpeg,
+    /// Lossless PNG.
+    Png,
+}
+
+/// A half-open range of frame indices; either end may be open.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct FrameRange {
+    /// First frame, default 0.
+    pub(crate) start: Option<usize>,
+    /// One past the last frame, default the frame count.
+    pub(crate) end: Option<usize>,
+}
+
+/// Arguments of `webfusion record`.
+#[derive(Clone, Debug, clap::Args)]
+pub(crate) struct RecordArgs {
+    /// TUM RGB-D directory or .wfr recording to read.
+    #[arg(long, value_name = "PATH")]
+    pub(crate) source: PathBuf,
+
+    /// Recording to write (.wfr); written to FILE.partial first, then renamed.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) out: PathBuf,
+
+    /// Frames to convert, half-open: 10..20, 10.., ..20 [default: all].
+    #[arg(long, value_name = "A..B", value_parser = parse_frame_range)]
+    pub(crate) frames: Option<FrameRange>,
+
+    /// Depth codec.
+    #[arg(long, value_enum, default_value_t = DepthCodecArg::RvlDeflate)]
+    pub(crate) depth_codec: DepthCodecArg,
+
+    /// Colour codec.
+    #[arg(long, value_enum, default_value_t = ColorCodecArg::Jpeg)]
+    pub(crate) color_codec: ColorCodecArg,
+
+    /// JPEG quality, 1..=100.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_JPEG_QUALITY, value_parser = clap::value_parser!(u8).range(1..=100))]
+    pub(crate) jpeg_quality: u8,
+
+    /// Override the intrinsics: fx,fy,cx,cy in pixels, optionally followed by width,height
+    /// [default size: 640,480].
+    #[arg(long, value_name = "FX,FY,CX,CY", value_parser = parse_intrinsics)]
+    pub(crate) intrinsics: Option<PinholeIntrinsics>,
+
+    /// Override the depth scale, in raw depth units per metre (TUM: 5000) [default with
+    /// --intrinsics: 5000; otherwise the source's].
+    #[arg(long, value_name = "UNITS_PER_METRE")]
+    pub(crate) depth_scale: Option<f32>,
+}
+
+/// Runs `webfusion record`: progress on stderr, a summary on stdout.
+pub(crate) fn run(args: &RecordArgs) -> anyhow::Result<()> {
+    let calibration_override = calibration_override(args)?;
+    let mut source =
+        open_source(&args.source, calibration_override).with_context(|| format!("opening source {}", args.source.display()))?;
+    let frames = resolve_frame_range(args.frames, source.frame_count())?;
+    let color_codec = match args.color_codec {
+        ColorCodecArg::Jpeg => ColorCodec::Jpeg,
+        ColorCodecArg::Png => ColorCodec::Png,
+    };
+    let depth_codec = match args.depth_codec {
+        DepthCodecArg::Rvl => DepthCodec::Rvl,
+        DepthCodecArg::RvlDeflate => DepthCodec::RvlDeflate,
+    };
+    let options = RecordingOptions { depth_codec, color_codec, jpeg_quality: args.jpeg_quality };
+    let partial = partial_path(&args.out)?;
+
+    let summary = match write_recording(source.as_mut(), frames.clone(), options, &partial) {
+        Ok(summary) => summary,
+        Err(error) => {
+            std::fs::remove_file(&partial).ok();
+            return Err(error);
+        }
+    };
+    std::fs::rename(&partial, &args.out).with_context(|| format!("renaming {} to {}", partial.display(), args.out.display()))?;
+
+    let k = source.calibration().intrinsics;
+    print_summary(&args.out, &source.name(), frames, &summary, k.pixel_count() as u64, options);
+    Ok(())
+}
+
+fn write_recording(
+    source: &mut dyn FrameSource,
+    frames: Range<usize>,
+    options: RecordingOptions,
+    out: &Path,
+) -> anyhow::Result<RecordingSummary> {
+    let mut writer = RecordingWriter::create(out, source.calibration(), options)?;
+    let total = frames.len();
+    let mut stderr = std::io::stderr();
+    // One updating line on a terminal; about ten lines in a log.
+    let interactive = stderr.is_terminal();
+    let log_every = total.div_ceil(10).max(1);
+    for (done, index) in (1_usize..).zip(frames) {
+        let frame = source.read_frame(index).with_context(|| format!("reading frame {index} of {}", source.name()))?;
+        writer.write_frame(&frame).with_context(|| format!("writing frame {index}"))?;
+        let progress = format!("recording frame {done}/{total} ({:.1} MB)", writer.bytes_written() as f64 * 1e-6);
+        if interactive {
+            write!(stderr, "\r{progress}").ok();
+            stderr.flush().ok();
+        } else if done.is_multiple_of(log_every) || done == total {
+            writeln!(stderr, "{progress}").ok();
+        }
+    }
+    if interactive {
+        writeln!(stderr).ok();
+    }
+    if let Some(poses) = source.ground_truth() {
+        writer.set_ground_truth(poses);
+    }
+    Ok(writer.finish()?)
+}
+
+fn print_summary(
+    out: &Path,
+    source_name: &str,
+    frames: Range<usize>,
+    summary: &RecordingSummary,
+    pixels_per_frame: u64,
+    options: RecordingOptions,
+) {
+    let frame_count = summary.frame_count as u64;
+    let raw_depth = frame_count * pixels_per_frame * RAW_DEPTH_BYTES_PER_PX;
+    let raw_color = frame_count * pixels_per_frame * RAW_COLOR_BYTES_PER_PX;
+    let ratio = |raw: u64, packed: u64| if packed == 0 { 0.0 } else { raw as f64 / packed as f64 };
+    let mb = |bytes: u64| bytes as f64 * 1e-6;
+    let color = match options.color_codec {
+        ColorCodec::Jpeg => format!("JPEG q{}", options.jpeg_quality),
+        other => other.name().to_uppercase(),
+    };
+    println!("wrote {} ({} frames {}..{} of {source_name})", out.display(), summary.frame_count, frames.start, frames.end);
+    println!(
+        "  file:   {} bytes = {:.2} MB, {:.1}:1 vs raw ({:.2} MB)",
+        summary.total_bytes,
+        mb(summary.total_bytes),
+        ratio(raw_depth + raw_color, summary.total_bytes),
+        mb(raw_depth + raw_color)
+    );
+    println!(
+        "  depth:  {} {:.2} MB, {:.2}:1 vs raw 16-bit, {:.1} kB/frame",
+        options.depth_codec.name(),
+        mb(summary.depth_payload_bytes),
+        ratio(raw_depth, summary.depth_payload_bytes),
+        summary.depth_payload_bytes as f64 / frame_count.max(1) as f64 * 1e-3
+    );
+    println!(
+        "  colour: {color} {:.2} MB, {:.1}:1 vs raw RGB8, {:.1} kB/frame",
+        mb(summary.color_payload_bytes),
+        ratio(raw_color, summary.color_payload_bytes),
+        summary.color_payload_bytes as f64 / frame_count.max(1) as f64 * 1e-3
+    );
+    println!("  ground truth: {} poses", summary.ground_truth_pose_count);
+}
+
+/// The calibration to impose on the source, from `--intrinsics` and `--depth-scale`.
+fn calibration_override(args: &RecordArgs) -> anyhow::Result<Option<RgbdCalibration>> {
+    if let Some(scale) = args.depth_scale
+        && !(scale.is_finite() && scale > 0.0)
+    {
+        bail!("--depth-scale must be a positive number of depth units per metre, got {scale}");
+    }
+    Ok(match (args.intrinsics, args.depth_scale) {
+        (None, None) => None,
+        (Some(intrinsics), scale) => {
+            Some(RgbdCalibration { intrinsics, depth_units_per_metre: scale.unwrap_or(TUM_DEPTH_UNITS_PER_METRE) })
+        }
+        (None, Some(depth_units_per_metre)) => {
+            let source = open_source(&args.source, None)
+                .with_context(|| format!("reading the calibration of {} to change its depth scale", args.source.display()))?;
+            Some(RgbdCalibration { depth_units_per_metre, ..source.calibration() })
+        }
+    })
+}
+
+/// `FILE.partial` next to `out`.
+fn partial_path(out: &Path) -> anyhow::Result<PathBuf> {
+    let Some(name) = out.file_name() else { bail!("--out {} does not name a file", out.display()) };
+    let mut partial = name.to_os_string();
+    partial.push(".partial");
+    Ok(out.with_file_name(partial))
+}
+
+fn resolve_frame_range(range: Option<FrameRange>, frame_count: usize) -> anyhow::Result<Range<usize>> {
+    let range = range.unwrap_or(FrameRange { start: None, end: None });
+    let (start, end) = (range.start.unwrap_or(0), range.end.unwrap_or(frame_count));
+    if start >= end || end > frame_count {
+        bail!("--frames {start}..{end} is empty or outside the source's {frame_count} frames");
+    }
+    Ok(start..end)
+}
+
+fn parse_frame_range(text: &str) -> Result<FrameRange, String> {
+    let (start, end) = text.split_once("..").ok_or_else(|| format!("expected A..B, A.. or ..B, got {text:?}"))?;
+    let bound = |s: &str| -> Result<Option<usize>, String> {
+        if s.is_empty() { Ok(None) } else { s.parse().map(Some).map_err(|_| format!("{s:?} is not a frame index")) }
+    };
+    Ok(FrameRange { start: bound(start)?, end: bound(end)? })
+}
+
+fn parse_intrinsics(text: &str) -> Result<PinholeIntrinsics, String> {
+    let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+    if fields.len() != 4 && fields.len() != 6 {
+        return Err(format!("expected fx,fy,cx,cy or fx,fy,cx,cy,width,height, got {text:?}"));
+    }
+    let number = |s: &str| -> Result<f32, String> {
+        s.parse::<f32>().ok().filter(|v| v.is_finite()).ok_or_else(|| format!("{s:?} is not a number"))
+    };
+    let size = |s: &str| -> Result<u32, String> {
+        s.parse::<u32>().ok().filter(|&v| v > 0).ok_or_else(|| format!("{s:?} is not a positive pixel count"))
+    };
+    let (width_px, height_px) =
+        if fields.len() == 6 { (size(fields[4])?, size(fields[5])?) } else { (DEFAULT_WIDTH_PX, DEFAULT_HEIGHT_PX) };
+    let intrinsics = PinholeIntrinsics {
+        fx_px: number(fields[0])?,
+        fy_px: number(fields[1])?,
+        cx_px: number(fields[2])?,
+        cy_px: number(fields[3])?,
+        width_px,
+        height_px,
+    };
+    if intrinsics.fx_px <= 0.0 || intrinsics.fy_px <= 0.0 {
+        return Err(format!("focal lengths must be positive, got {text:?}"));
+    }
+    Ok(intrinsics)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_frame_ranges() {
+        assert_eq!(parse_frame_range("10..20"), Ok(FrameRange { start: Some(10), end: Some(20) }), "closed");
+        assert_eq!(parse_frame_range("10.."), Ok(FrameRange { start: Some(10), end: None }), "open end");
+        assert_eq!(parse_frame_range("..5"), Ok(FrameRange { start: None, end: Some(5) }), "open start");
+        assert!(parse_frame_range("10").is_err(), "no dots");
+        assert!(parse_frame_range("a..b").is_err(), "not numbers");
+        assert_eq!(resolve_frame_range(None, 100).expect("all"), 0..100, "default");
+        assert_eq!(resolve_frame_range(parse_frame_range("..5").ok(), 100).expect("prefix"), 0..5, "prefix");
+        assert!(resolve_frame_range(parse_frame_range("5..5").ok(), 100).is_err(), "empty");
+        assert!(resolve_frame_range(parse_frame_range("90..101").ok(), 100).is_err(), "past the end");
+    }
+
+    #[test]
+    fn parses_intrinsics() {
+        let k = parse_intrinsics("517.3,516.5,318.6,255.3").expect("four values");
+        assert_eq!((k.fx_px, k.cy_px, k.width_px, k.height_px), (517.3, 255.3, 640, 480), "default size");
+        let k = parse_intrinsics("100, 100, 80, 60, 160, 120").expect("six values");
+        assert_eq!((k.width_px, k.height_px), (160, 120), "explicit size");
+        assert!(parse_intrinsics("1,2,3").is_err(), "too few");
+        assert!(parse_intrinsics("1,2,3,x").is_err(), "not a number");
+        assert!(parse_intrinsics("-1,2,3,4").is_err(), "negative focal length");
+        assert!(parse_intrinsics("1,2,3,4,0,480").is_err(), "zero width");
+    }
+
+    #[test]
+    fn partial_path_appends_a_suffix() {
+        assert_eq!(partial_path(Path::new("data/x.wfr")).expect("file"), Path::new("data/x.wfr.partial"), "suffix");
+        assert!(partial_path(Path::new("/")).is_err(), "no file name");
+    }
+}
