@@ -1,0 +1,97 @@
+// SPDX-License-Identifier: MIT
+//! The preprocessing kernels on WebGPU in a real browser (headless Chromium, SwiftShader),
+//! checked against the CPU reference on a real Kinect frame: the same WGSL as native.
+#![cfg(target_arch = "wasm32")]
+
+use wasm_bindgen_test::*;
+use webfusion_core::cpu::preprocess::preprocess;
+use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
+use webfusion_core::{ColorImage, DepthImage, Gpu, GpuOptions, RgbdCalibration, RgbdFrame};
+
+wasm_bindgen_test_configure!(run_in_browser);
+
+const DEPTH_PNG: &[u8] = include_bytes!("../../../shared/data/tum_fr1_rpy_0-99/depth/1305031229.528784.png");
+const RGB_PNG: &[u8] = include_bytes!("../../../shared/data/tum_fr1_rpy_0-99/rgb/1305031229.528748.png");
+
+fn decode_png(bytes: &[u8]) -> (u32, u32, png::BitDepth, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = decoder.read_info().expect("png header");
+    let mut buf = vec![0; reader.output_buffer_size().expect("png size")];
+    let info = reader.next_frame(&mut buf).expect("png data");
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, info.bit_depth, buf)
+}
+
+fn frame() -> RgbdFrame {
+    let (w, h, bits, depth_be) = decode_png(DEPTH_PNG);
+    assert_eq!(bits, png::BitDepth::Sixteen, "TUM depth is 16-bit");
+    let units = depth_be.chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect();
+    let (cw, ch, _, rgb8) = decode_png(RGB_PNG);
+    RgbdFrame {
+        index: 0,
+        depth_timestamp_ns: 1_305_031_229_528_784_000,
+        color_timestamp_ns: 1_305_031_229_528_748_000,
+        depth: DepthImage::new(w, h, units).expect("depth size"),
+        color: ColorImage::new(cw, ch, rgb8).expect("colour size"),
+    }
+}
+
+/// Largest |a - b| over valid entries, or an error if the NaN masks differ.
+fn max_diff(what: &str, gpu: &[f32], cpu: &[f32]) -> Result<f32, String> {
+    let mut worst = 0.0f32;
+    for (i, (g, c)) in gpu.iter().zip(cpu).enumerate() {
+        match (g.is_nan(), c.is_nan()) {
+            (true, true) => {}
+            (false, false) => worst = worst.max((g - c).abs()),
+            _ => return Err(format!("{what}[{i}]: validity differs: GPU {g} vs CPU {c}")),
+        }
+    }
+    Ok(worst)
+}
+
+#[wasm_bindgen_test]
+async fn preprocessing_on_webgpu_matches_cpu_reference() {
+    let gpu = Gpu::new(&GpuOptions::default()).await.expect("a WebGPU adapter (run Chromium with --enable-unsafe-webgpu)");
+    assert_eq!(gpu.adapter_info.backend, wgpu::Backend::BrowserWebGpu, "this test must run on the browser's WebGPU");
+    console_log!("adapter: {}", gpu.adapter_summary());
+    let calibration = RgbdCalibration { intrinsics: webfusion_core::camera::TUM_FREIBURG1, depth_units_per_metre: 5000.0 };
+    let config = PreprocessConfig::default();
+    let frame = frame();
+    let pre = DepthPreprocessor::new(&gpu, calibration, config).expect("preprocessor");
+    // Sentinel: finite and far from any real value, so an unwritten output cannot pass.
+    let sentinel = f32::from_bits(0xDEAD_BEEF);
+    gpu.fill_buffer(&pre.levels[0].depth_m, sentinel);
+    gpu.fill_buffer(&pre.levels[0].normal_in_camera, sentinel);
+    pre.run(&gpu, &frame).await.expect("GPU preprocessing");
+    let cpu = preprocess(&calibration, &config, &frame);
+    let n = calibration.intrinsics.pixel_count();
+
+    let depth: Vec<f32> = gpu.read_buffer(&pre.levels[0].depth_m, n).await.expect("readback");
+    let d = max_diff("depth_m", &depth, &cpu.levels[0].depth_m).unwrap();
+    // Tolerances: SwiftShader's exp() and division are within a few ulp like lavapipe's.
+    assert!(d <= 5e-6, "filtered depth differs by {d} m");
+    let normals: Vec<[f32; 4]> = gpu.read_buffer(&pre.levels[0].normal_in_camera, n).await.expect("readback");
+    let nd = max_diff("normal", normals.as_flattened(), cpu.levels[0].normal_in_camera.as_flattened()).unwrap();
+    assert!(nd <= 5e-4, "normals differ by {nd}");
+    let coarse: Vec<f32> = gpu.read_buffer(&pre.levels[2].depth_m, calibration.intrinsics.pyramid_level(2).pixel_count()).await.expect("readback");
+    let cd = max_diff("depth_m[2]", &coarse, &cpu.levels[2].depth_m).unwrap();
+    assert!(cd <= 5e-6, "coarse depth differs by {cd} m");
+    let valid = depth.iter().filter(|d| !d.is_nan()).count();
+    assert!(valid > n / 2, "a real frame has mostly valid depth ({valid} of {n})");
+
+    // Negative control: the same comparison rejects a perturbed and an unwritten result.
+    let ix = depth.iter().position(|d| !d.is_nan()).expect("a valid pixel");
+    let mut perturbed = depth.clone();
+    perturbed[ix] += 1e-3;
+    assert!(max_diff("depth_m", &perturbed, &cpu.levels[0].depth_m).unwrap() > 5e-6, "a 1 mm error is detected");
+    let mut unwritten = depth.clone();
+    unwritten[ix] = sentinel;
+    assert!(max_diff("depth_m", &unwritten, &cpu.levels[0].depth_m).unwrap() > 5e-6, "a sentinel value is detected");
+    let mut holed = depth.clone();
+    holed[ix] = f32::NAN;
+    assert!(max_diff("depth_m", &holed, &cpu.levels[0].depth_m).is_err(), "a mask difference is detected");
+
+    let errors = gpu.take_errors();
+    assert!(errors.is_empty(), "WebGPU reported errors: {errors:?}");
+    console_log!("webgpu vs cpu: depth {d:e} m, normals {nd:e}, coarse depth {cd:e} m");
+}
