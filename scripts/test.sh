@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Runs every test: native unit and GPU tests (Mesa lavapipe) under nextest, then the wasm
+# tests in headless Chromium on WebGPU. Installs what is missing first.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+eval "$(scripts/setup.sh test)"
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp/webfusion-xdg-$(id -u)}"
+mkdir -p -m 0700 "$XDG_RUNTIME_DIR"
+log=$(mktemp -d)
+
+echo "== native tests (cargo nextest, Vulkan: lavapipe or any adapter) =="
+set +e
+cargo nextest run --workspace --no-fail-fast 2>&1 | tee "$log/native.txt"
+native_rc=${PIPESTATUS[0]}
+
+echo "== browser tests (wasm-bindgen-test, headless Chromium, WebGPU) =="
+(cd web && CHROMEDRIVER=/usr/bin/chromedriver WASM_BINDGEN_TEST_TIMEOUT=300 \
+  cargo test -p webfusion-web --target wasm32-unknown-unknown -- --nocapture) 2>&1 | tee "$log/web.txt"
+web_rc=${PIPESTATUS[0]}
+set -e
+
+# One closing line over both runners.
+native_passed=$(grep -oE '[0-9]+ passed' "$log/native.txt" | tail -1 | grep -oE '[0-9]+' || echo 0)
+native_failed=$(grep -oE '[0-9]+ failed' "$log/native.txt" | tail -1 | grep -oE '[0-9]+' || echo 0)
+sum() { awk '{ s += $1 } END { print s + 0 }'; }
+web_passed=$(grep -E '^test result' "$log/web.txt" | grep -oE '[0-9]+ passed' | sum)
+web_failed=$(grep -E '^test result' "$log/web.txt" | grep -oE '[0-9]+ failed' | sum)
+[ "$native_rc" -ne 0 ] && [ "$native_failed" = 0 ] && native_failed=1
+[ "$web_rc" -ne 0 ] && [ "${web_failed}" = 0 ] && web_failed=1
+echo
+echo "native: ${native_passed} passed, ${native_failed} failed; browser: ${web_passed} passed, ${web_failed} failed"
+echo "all: $((native_passed + ${web_passed})) passed, $((native_failed + ${web_failed})) failed"
+[ "$native_rc" -eq 0 ] && [ "$web_rc" -eq 0 ]
