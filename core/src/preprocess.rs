@@ -129,6 +129,61 @@ impl PreprocessConfig {
     }
 }
 
+/// The kernel parameters of each stage, built in one place for the GPU chain and its CPU
+/// twin (`cpu::preprocess`), so the two cannot drift apart.
+impl PreprocessConfig {
+    /// `depth_to_metres` at full resolution.
+    pub fn depth_to_metres_params(&self, calibration: &RgbdCalibration) -> DepthToMetresParams {
+        let k = calibration.intrinsics;
+        DepthToMetresParams {
+            width_px: k.width_px,
+            height_px: k.height_px,
+            metres_per_unit: calibration.metres_per_depth_unit(),
+            min_depth_m: self.min_depth_m,
+            max_depth_m: self.max_depth_m,
+            ..Default::default()
+        }
+    }
+
+    /// `depth_pyramid_down` from level `fine` to level `coarse`.
+    pub fn depth_pyramid_down_params(&self, fine: &PinholeIntrinsics, coarse: &PinholeIntrinsics) -> DepthPyramidDownParams {
+        DepthPyramidDownParams {
+            src_width_px: fine.width_px,
+            src_height_px: fine.height_px,
+            dst_width_px: coarse.width_px,
+            dst_height_px: coarse.height_px,
+            max_depth_diff_m: self.pyramid_max_depth_diff_m,
+            ..Default::default()
+        }
+    }
+
+    /// `normal_map` at a level with intrinsics `k`.
+    pub fn normal_map_params(&self, k: &PinholeIntrinsics) -> NormalMapParams {
+        NormalMapParams { width_px: k.width_px, height_px: k.height_px, min_cross_norm_sq: self.min_cross_norm_sq, ..Default::default() }
+    }
+}
+
+impl BilateralConfig {
+    /// `bilateral_filter` at full resolution.
+    pub fn params(&self, k: &PinholeIntrinsics) -> BilateralFilterParams {
+        BilateralFilterParams {
+            width_px: k.width_px,
+            height_px: k.height_px,
+            radius_px: self.radius_px,
+            sigma_space_px: self.sigma_space_px,
+            sigma_range_m: self.sigma_range_m,
+            ..Default::default()
+        }
+    }
+}
+
+impl GradientSmoothingConfig {
+    /// One `gradient_smooth` pass along `axis` (0 = x, 1 = y) at a level with intrinsics `k`.
+    pub fn params(&self, k: &PinholeIntrinsics, axis: u32) -> GradientSmoothParams {
+        GradientSmoothParams { width_px: k.width_px, height_px: k.height_px, radius_px: self.radius_px, axis, sigma_px: self.sigma_px, ..Default::default() }
+    }
+}
+
 /// One level of the depth/vertex/normal pyramid.
 #[derive(Debug)]
 pub struct PyramidLevel {
@@ -219,36 +274,15 @@ impl DepthPreprocessor {
         };
         let (w0, h0) = (k0.width_px, k0.height_px);
         let to_metres_out = depth_unfiltered_m.as_ref().unwrap_or(&levels[0].depth_m);
-        let p = DepthToMetresParams {
-            width_px: w0,
-            height_px: h0,
-            metres_per_unit: calibration.metres_per_depth_unit(),
-            min_depth_m: config.min_depth_m,
-            max_depth_m: config.max_depth_m,
-            ..Default::default()
-        };
+        let p = config.depth_to_metres_params(&calibration);
         push("depth_to_metres".into(), |k| &k.depth_to_metres, gpu.uniform_buffer("core.depth_to_metres.params", &p), &[&depth_raw, to_metres_out], [w0, h0, 1]);
         if let (Some(b), Some(unfiltered)) = (config.bilateral, &depth_unfiltered_m) {
-            let p = BilateralFilterParams {
-                width_px: w0,
-                height_px: h0,
-                radius_px: b.radius_px,
-                sigma_space_px: b.sigma_space_px,
-                sigma_range_m: b.sigma_range_m,
-                ..Default::default()
-            };
+            let p = b.params(&k0);
             push("bilateral_filter".into(), |k| &k.bilateral_filter, gpu.uniform_buffer("core.bilateral_filter.params", &p), &[unfiltered, &levels[0].depth_m], [w0, h0, 1]);
         }
         for l in 1..levels.len() {
             let (fine, coarse) = (&levels[l - 1], &levels[l]);
-            let p = DepthPyramidDownParams {
-                src_width_px: fine.intrinsics.width_px,
-                src_height_px: fine.intrinsics.height_px,
-                dst_width_px: coarse.intrinsics.width_px,
-                dst_height_px: coarse.intrinsics.height_px,
-                max_depth_diff_m: config.pyramid_max_depth_diff_m,
-                ..Default::default()
-            };
+            let p = config.depth_pyramid_down_params(&fine.intrinsics, &coarse.intrinsics);
             let inv = [p.dst_width_px, p.dst_height_px, 1];
             push(format!("depth_pyramid_down[{l}]"), |k| &k.depth_pyramid_down, gpu.uniform_buffer("core.depth_pyramid_down.params", &p), &[&fine.depth_m, &coarse.depth_m], inv);
         }
@@ -267,13 +301,13 @@ impl DepthPreprocessor {
             );
             if let (Some(g), Some((tmp_x, tmp_y))) = (config.gradient_smoothing, &grad_tmp) {
                 for axis in 0..2u32 {
-                    let p = GradientSmoothParams { width_px: k.width_px, height_px: k.height_px, radius_px: g.radius_px, axis, sigma_px: g.sigma_px, ..Default::default() };
+                    let p = g.params(&k, axis);
                     let io: [&wgpu::Buffer; 4] =
                         if axis == 0 { [&level.grad_x, &level.grad_y, tmp_x, tmp_y] } else { [tmp_x, tmp_y, &level.grad_x, &level.grad_y] };
                     push(format!("gradient_smooth[{l}].{}", ["x", "y"][axis as usize]), |k| &k.gradient_smooth, gpu.uniform_buffer("core.gradient_smooth.params", &p), &io, inv);
                 }
             }
-            let p = NormalMapParams { width_px: k.width_px, height_px: k.height_px, min_cross_norm_sq: config.min_cross_norm_sq, ..Default::default() };
+            let p = config.normal_map_params(&k);
             push(
                 format!("normal_map[{l}]"),
                 |k| &k.normal_map,

@@ -4,9 +4,7 @@
 
 use super::shared::{pack_bytes, pack_u16_pairs};
 use crate::kernels::{
-    GpuIntrinsics, bilateral_filter::BilateralFilterParams, color_to_float::ColorToFloatParams, depth_pyramid_down::DepthPyramidDownParams,
-    depth_to_metres::DepthToMetresParams, gradient_smooth::GradientSmoothParams, normal_map::NormalMapParams,
-    vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams,
+    GpuIntrinsics, color_to_float::ColorToFloatParams, vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams,
 };
 use crate::preprocess::PreprocessConfig;
 use crate::{PinholeIntrinsics, RgbdCalibration, RgbdFrame};
@@ -47,26 +45,12 @@ pub fn preprocess(calibration: &RgbdCalibration, config: &PreprocessConfig, fram
     let (w0, h0) = (k0.width_px, k0.height_px);
     let n0 = k0.pixel_count();
     let mut depth_unfiltered_m = vec![0.0; n0];
-    let p = DepthToMetresParams {
-        width_px: w0,
-        height_px: h0,
-        metres_per_unit: calibration.metres_per_depth_unit(),
-        min_depth_m: config.min_depth_m,
-        max_depth_m: config.max_depth_m,
-        ..Default::default()
-    };
+    let p = config.depth_to_metres_params(calibration);
     super::depth_to_metres(&p, &pack_u16_pairs(&frame.depth.units), &mut depth_unfiltered_m);
     let depth0 = match config.bilateral {
         Some(b) => {
             let mut out = vec![0.0; n0];
-            let p = BilateralFilterParams {
-                width_px: w0,
-                height_px: h0,
-                radius_px: b.radius_px,
-                sigma_space_px: b.sigma_space_px,
-                sigma_range_m: b.sigma_range_m,
-                ..Default::default()
-            };
+            let p = b.params(&k0);
             super::bilateral_filter(&p, &depth_unfiltered_m, &mut out);
             out
         }
@@ -75,14 +59,7 @@ pub fn preprocess(calibration: &RgbdCalibration, config: &PreprocessConfig, fram
     let mut depths = vec![depth0];
     for l in 1..config.pyramid_levels {
         let (fine, coarse) = (k0.pyramid_level(l - 1), k0.pyramid_level(l));
-        let p = DepthPyramidDownParams {
-            src_width_px: fine.width_px,
-            src_height_px: fine.height_px,
-            dst_width_px: coarse.width_px,
-            dst_height_px: coarse.height_px,
-            max_depth_diff_m: config.pyramid_max_depth_diff_m,
-            ..Default::default()
-        };
+        let p = config.depth_pyramid_down_params(&fine, &coarse);
         let mut out = vec![0.0; coarse.pixel_count()];
         super::depth_pyramid_down(&p, &depths[l - 1], &mut out);
         depths.push(out);
@@ -100,14 +77,14 @@ pub fn preprocess(calibration: &RgbdCalibration, config: &PreprocessConfig, fram
             super::vertex_gradients(&p, &vertex_in_camera, &mut grad_x, &mut grad_y);
             if let Some(g) = config.gradient_smoothing {
                 for axis in 0..2 {
-                    let p = GradientSmoothParams { width_px: k.width_px, height_px: k.height_px, radius_px: g.radius_px, axis, sigma_px: g.sigma_px, ..Default::default() };
+                    let p = g.params(&k, axis);
                     let (mut ox, mut oy) = (vec![[0.0; 4]; n], vec![[0.0; 4]; n]);
                     super::gradient_smooth(&p, &grad_x, &grad_y, &mut ox, &mut oy);
                     (grad_x, grad_y) = (ox, oy);
                 }
             }
             let mut normal_in_camera = vec![[0.0; 4]; n];
-            let p = NormalMapParams { width_px: k.width_px, height_px: k.height_px, min_cross_norm_sq: config.min_cross_norm_sq, ..Default::default() };
+            let p = config.normal_map_params(&k);
             super::normal_map(&p, &vertex_in_camera, &grad_x, &grad_y, &mut normal_in_camera);
             CpuPyramidLevel { intrinsics: k, depth_m, vertex_in_camera, grad_x, grad_y, normal_in_camera }
         })
