@@ -3,6 +3,8 @@
 //! recording conversion (the capture bridge and reconstruction land here as they are built).
 
 mod calib;
+mod eval;
+mod reconstruct;
 mod record;
 mod timing;
 
@@ -40,8 +42,12 @@ enum Command {
     /// Benchmark each preprocessing kernel at the log's resolution: median of N runs after
     /// warm-up, one submission per kernel.
     Bench(BenchArgs),
+    /// Reconstruct a log with KinectFusion: trajectory, mesh and per-stage statistics.
+    Reconstruct(reconstruct::ReconstructArgs),
     /// Convert any source (TUM directory, recording) into a `.wfr` recording.
     Record(record::RecordArgs),
+    /// Trajectory error of an estimate against ground truth (TUM files): ATE and RPE as evo computes them.
+    Eval(eval::EvalArgs),
 }
 
 #[derive(clap::Args)]
@@ -82,6 +88,8 @@ fn main() -> anyhow::Result<()> {
         Command::Preprocess(args) => preprocess(&options, &args),
         Command::Bench(args) => bench(&options, &args),
         Command::Record(args) => record::run(&args),
+        Command::Eval(args) => eval::run(&args),
+        Command::Reconstruct(args) => reconstruct::run(&options, &args),
     }
 }
 

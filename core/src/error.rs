@@ -114,6 +114,32 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// Trajectory evaluation found too few ground-truth/estimate pose pairs.
+    #[error("{what} needs at least {required} associated pose pairs (timestamps closer than the maximum difference), found {pairs}")]
+    TooFewAssociations {
+        /// The evaluation (`ATE`, `RPE`, `Umeyama alignment`).
+        what: &'static str,
+        /// Pairs found.
+        pairs: usize,
+        /// Pairs needed.
+        required: usize,
+    },
+    /// Trajectories cannot be aligned (positions collinear, coincident or not finite).
+    #[error("cannot align the trajectories: {message}")]
+    DegenerateAlignment {
+        /// What is wrong.
+        message: String,
+    },
+    /// A kernel produced more output than its buffer holds (counted past the capacity).
+    #[error("{stage} needs room for {needed} outputs but its buffer holds {capacity}")]
+    OutputOverflow {
+        /// The kernel whose output overflowed, e.g. `mc_generate`.
+        stage: &'static str,
+        /// Outputs it produced (the size needed).
+        needed: u64,
+        /// Outputs the buffer holds.
+        capacity: u64,
+    },
 }
 
 /// `Result` with [`Error`].

@@ -167,24 +167,39 @@ impl Gpu {
 
     /// Copies the first `len` elements of `buffer` back to the CPU.
     pub async fn read_buffer<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, len: usize) -> Result<Vec<T>> {
-        let size = (len * std::mem::size_of::<T>()) as u64;
+        self.read_buffers(&[(buffer, len)]).await
+    }
+
+    /// Copies the first `len` elements of each buffer back to the CPU in one submission and
+    /// one mapping, concatenated in order (ICP reads its two partial-sum buffers this way).
+    pub async fn read_buffers<T: bytemuck::Pod>(&self, parts: &[(&wgpu::Buffer, usize)]) -> Result<Vec<T>> {
+        let sizes: Vec<u64> = parts.iter().map(|&(_, len)| ((len * std::mem::size_of::<T>()) as u64).next_multiple_of(4)).collect();
+        let total: u64 = sizes.iter().sum();
         let label = "core.readback".to_owned();
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(&label),
-            size: size.next_multiple_of(4),
+            size: total.max(4),
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(&label) });
-        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size.next_multiple_of(4));
+        let mut offset = 0;
+        for (&(buffer, _), &size) in parts.iter().zip(&sizes) {
+            encoder.copy_buffer_to_buffer(buffer, 0, &staging, offset, size);
+            offset += size;
+        }
         let index = self.queue.submit(Some(encoder.finish()));
         let (sender, receiver) = oneshot();
         staging.map_async(wgpu::MapMode::Read, .., move |r| sender.send(r));
         self.wait(Some(index)).await?;
         receiver.await.map_err(|e| Error::BufferMap { label: label.clone(), message: e.to_string() })?;
         let view = staging.get_mapped_range(..).map_err(|e| Error::BufferMap { label: label.clone(), message: e.to_string() })?;
-        let bytes = &view[..size as usize];
-        let out = bytemuck::pod_collect_to_vec(bytes);
+        let mut out = Vec::with_capacity(parts.iter().map(|p| p.1).sum());
+        let mut offset = 0usize;
+        for (&(_, len), &size) in parts.iter().zip(&sizes) {
+            out.extend(bytemuck::pod_collect_to_vec::<u8, T>(&view[offset..offset + len * std::mem::size_of::<T>()]));
+            offset += size as usize;
+        }
         drop(view);
         staging.unmap();
         Ok(out)

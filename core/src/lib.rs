@@ -11,14 +11,18 @@ pub mod camera;
 pub mod codec;
 pub mod cpu;
 mod error;
+pub mod eval;
 pub mod frame;
+pub mod fusion;
 pub mod gpu;
 pub mod io;
 pub mod kernels;
+pub mod mesh;
 pub mod pose;
 pub mod preprocess;
 pub mod recording;
 pub mod source;
+pub mod tsdf;
 
 pub use camera::{PinholeIntrinsics, RgbdCalibration};
 pub use error::{Error, Result};

@@ -32,6 +32,18 @@ fn params_structs_match_wgsl() {
         [width_px, height_px, radius_px, axis, sigma_px, _pad0, _pad1, _pad2]);
     check_layout!(shaders::NORMAL_MAP, "NormalMapParams", kernels::normal_map::NormalMapParams, [width_px, height_px, min_cross_norm_sq, _pad0]);
     check_layout!(shaders::COLOR_TO_FLOAT, "ColorToFloatParams", kernels::color_to_float::ColorToFloatParams, [width_px, height_px, _pad0, _pad1]);
+    check_layout!(shaders::INTENSITY_PYRAMID_DOWN, "IntensityPyramidDownParams", kernels::intensity_pyramid_down::IntensityPyramidDownParams,
+        [src_width_px, src_height_px, dst_width_px, dst_height_px]);
+    check_layout!(shaders::RGB_REDUCE, "RgbReduceParams", kernels::rgb_reduce::RgbReduceParams,
+        [intrinsics, world_from_camera, camera_prev_from_world, world_from_camera_prev, max_depth_diff_m, max_residual, thread_count, _pad0]);
+    check_layout!(shaders::MC_COUNT, "VolumeDesc", webfusion_core::tsdf::VolumeDesc,
+        [dim_x, dim_y, dim_z, max_weight, origin_x_m, origin_y_m, origin_z_m, voxel_size_m, truncation_m, _pad0, _pad1, _pad2]);
+    check_layout!(shaders::MC_COUNT, "McCountParams", kernels::mc_count::McCountParams, [volume, n_blocks_x, n_blocks_y, n_blocks, _pad0]);
+    check_layout!(shaders::MC_SCAN, "McScanParams", kernels::mc_scan::McScanParams, [n_blocks, capacity_triangles, max_workgroups_per_dimension, _pad0]);
+    check_layout!(shaders::MC_SCAN, "McCounters", kernels::mc_scan::McCounters, [n_triangles, capacity_triangles, failed, n_active_blocks, generate_workgroups_x, generate_workgroups_y, generate_workgroups_z, _pad0]);
+    check_layout!(shaders::MC_GENERATE, "McGenerateParams", kernels::mc_generate::McGenerateParams,
+        [volume, n_blocks_x, n_blocks_y, first_triangle, capacity_triangles, has_color, _pad0, _pad1, _pad2]);
+    check_layout!(shaders::MC_GENERATE, "McVertex", kernels::mc_generate::McVertex, [x_m, y_m, z_m, edge_id, normal_x, normal_y, normal_z, color_rgb8]);
 }
 
 #[test]
@@ -43,5 +55,5 @@ fn every_kernel_has_params_at_binding_zero_and_a_cpu_reference() {
         assert!(matches!(webfusion_core::cpu::coverage(k.name), webfusion_core::cpu::CpuKernel::Present), "{} lacks a CPU reference", k.name);
         assert!(k.source.contains("//! "), "{} documents what one invocation computes", k.name);
     }
-    assert_eq!(shaders::ALL.len(), 8, "kernel count changed: add its layout check above");
+    assert_eq!(shaders::ALL.len(), 16, "kernel count changed: add its layout check above");
 }

@@ -45,3 +45,80 @@ pub(crate) fn plane_depth_m(k: &PinholeIntrinsics, z0_m: f32, normal: [f32; 3]) 
     }
     out
 }
+
+/// The analytic test room: the inside of a box (walls, floor, ceiling), a solid box standing on
+/// the floor and a sphere, in world metres (y down, the first camera looking along +z).
+pub(crate) struct Room;
+
+impl Room {
+    const ROOM_MIN: [f32; 3] = [-1.6, -1.2, -1.0];
+    const ROOM_MAX: [f32; 3] = [1.6, 1.0, 3.2];
+    const BOX_MIN: [f32; 3] = [-0.6, 0.4, 1.5];
+    const BOX_MAX: [f32; 3] = [0.0, 1.0, 2.1];
+    const SPHERE_CENTRE: [f32; 3] = [0.6, 0.1, 1.9];
+    const SPHERE_RADIUS_M: f32 = 0.35;
+
+    /// Distance along the unit ray `dir` from `o` to the first surface (f64 for exactness).
+    pub(crate) fn ray_distance(o: [f64; 3], dir: [f64; 3]) -> Option<f64> {
+        let mut best = f64::INFINITY;
+        // Inside the room: the nearest exit face.
+        let mut exit = f64::INFINITY;
+        for i in 0..3 {
+            if dir[i] > 0.0 {
+                exit = exit.min((f64::from(Self::ROOM_MAX[i]) - o[i]) / dir[i]);
+            } else if dir[i] < 0.0 {
+                exit = exit.min((f64::from(Self::ROOM_MIN[i]) - o[i]) / dir[i]);
+            }
+        }
+        best = best.min(exit);
+        // Solid box: slab entry.
+        let (mut t_near, mut t_far) = (f64::NEG_INFINITY, f64::INFINITY);
+        for i in 0..3 {
+            let (lo, hi) = (f64::from(Self::BOX_MIN[i]), f64::from(Self::BOX_MAX[i]));
+            if dir[i].abs() < 1e-15 {
+                if o[i] < lo || o[i] > hi {
+                    t_near = f64::INFINITY;
+                }
+                continue;
+            }
+            let (a, b) = ((lo - o[i]) / dir[i], (hi - o[i]) / dir[i]);
+            t_near = t_near.max(a.min(b));
+            t_far = t_far.min(a.max(b));
+        }
+        if t_near <= t_far && t_near > 0.0 {
+            best = best.min(t_near);
+        }
+        // Sphere.
+        let c = Self::SPHERE_CENTRE.map(f64::from);
+        let oc = [o[0] - c[0], o[1] - c[1], o[2] - c[2]];
+        let b = oc[0] * dir[0] + oc[1] * dir[1] + oc[2] * dir[2];
+        let cc = oc[0] * oc[0] + oc[1] * oc[1] + oc[2] * oc[2] - f64::from(Self::SPHERE_RADIUS_M).powi(2);
+        let disc = b * b - cc;
+        if disc >= 0.0 {
+            let t = -b - disc.sqrt();
+            if t > 0.0 {
+                best = best.min(t);
+            }
+        }
+        best.is_finite().then_some(best)
+    }
+
+    /// Raw depth (units of 1/`UNITS_PER_M` m) seen from `world_from_camera`.
+    pub(crate) fn render_depth_units(k: &PinholeIntrinsics, world_from_camera: &webfusion_core::Se3) -> Vec<u16> {
+        let mut out = Vec::with_capacity(k.pixel_count());
+        let o = world_from_camera.translation_m;
+        for y in 0..k.height_px {
+            for x in 0..k.width_px {
+                let ray = glam::DVec3::new((f64::from(x) - f64::from(k.cx_px)) / f64::from(k.fx_px), (f64::from(y) - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
+                let dir_cam = ray.normalize();
+                let dir = world_from_camera.rotation * dir_cam;
+                let units = Self::ray_distance(o.to_array(), dir.to_array())
+                    .map(|t| (t * dir_cam.z * f64::from(UNITS_PER_M)).round())
+                    .filter(|&u| u > 0.0 && u < 65535.0)
+                    .map_or(0, |u| u as u16);
+                out.push(units);
+            }
+        }
+        out
+    }
+}

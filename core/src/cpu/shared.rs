@@ -42,3 +42,112 @@ pub fn pack_u16_pairs(values: &[u16]) -> Vec<u32> {
 pub fn pack_bytes(bytes: &[u8]) -> Vec<u32> {
     bytes.chunks(4).map(|c| c.iter().enumerate().fold(0u32, |w, (i, b)| w | (u32::from(*b) << (8 * i)))).collect()
 }
+
+use crate::tsdf::VolumeDesc;
+
+/// Twin of `TSDF_SCALE` in `shared/tsdf.wgsl`.
+pub const TSDF_SCALE: f32 = 32767.0;
+
+/// Twin of `voxel_index()`.
+pub fn voxel_index(d: &VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
+    x + d.dim_x * (y + d.dim_y * z)
+}
+
+/// Twin of `voxel_centre_in_world()`.
+pub fn voxel_centre_in_world(d: &VolumeDesc, x: u32, y: u32, z: u32) -> [f32; 3] {
+    [
+        d.origin_x_m + (x as f32 + 0.5) * d.voxel_size_m,
+        d.origin_y_m + (y as f32 + 0.5) * d.voxel_size_m,
+        d.origin_z_m + (z as f32 + 0.5) * d.voxel_size_m,
+    ]
+}
+
+/// Twin of `pack_voxel()`: rounds to nearest, ties to even, as WGSL `round`.
+pub fn pack_voxel(tsdf: f32, weight: u32) -> u32 {
+    let t = (tsdf.clamp(-1.0, 1.0) * TSDF_SCALE).round_ties_even() as i32;
+    (t as u32 & 0xffff) | (weight.min(0xffff) << 16)
+}
+
+/// Twin of `voxel_tsdf()`.
+pub fn voxel_tsdf(word: u32) -> f32 {
+    (((word << 16) as i32) >> 16) as f32 / TSDF_SCALE
+}
+
+/// Twin of `voxel_weight()`.
+pub fn voxel_weight(word: u32) -> u32 {
+    word >> 16
+}
+
+/// Twin of `pack_rgb8()`.
+pub fn pack_rgb8(rgb: [f32; 3]) -> u32 {
+    let c = rgb.map(|v| (v.clamp(0.0, 1.0) * 255.0).round_ties_even() as u32);
+    c[0] | (c[1] << 8) | (c[2] << 16)
+}
+
+/// Twin of `unpack_rgb8()`.
+pub fn unpack_rgb8(word: u32) -> [f32; 3] {
+    [(word & 0xff) as f32 / 255.0, ((word >> 8) & 0xff) as f32 / 255.0, ((word >> 16) & 0xff) as f32 / 255.0]
+}
+
+/// Twin of `TsdfSample` in `shared/tsdf_sample.wgsl`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TsdfSample {
+    /// Interpolated TSDF, truncation units.
+    pub tsdf: f32,
+    /// False if a surrounding voxel was never observed or lies outside.
+    pub valid: bool,
+}
+
+/// Twin of `sample_tsdf()`, reading `tsdf_volume`.
+pub fn sample_tsdf(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> TsdfSample {
+    let origin = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
+    let g: [f32; 3] = std::array::from_fn(|i| (p_world[i] - origin[i]) / d.voxel_size_m - 0.5);
+    let base_f = g.map(f32::floor);
+    let invalid = TsdfSample { tsdf: 0.0, valid: false };
+    let dims = [d.dim_x, d.dim_y, d.dim_z];
+    if (0..3).any(|i| !(base_f[i] >= 0.0) || base_f[i] >= (dims[i] - 1) as f32) {
+        return invalid;
+    }
+    let b = base_f.map(|v| v as u32);
+    let f: [f32; 3] = std::array::from_fn(|i| g[i] - base_f[i]);
+    let mut acc = 0.0f32;
+    for corner in 0..8u32 {
+        let o = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
+        let word = tsdf_volume[voxel_index(d, b[0] + o[0], b[1] + o[1], b[2] + o[2]) as usize];
+        if voxel_weight(word) == 0 {
+            return invalid;
+        }
+        let wx = if o[0] == 1 { f[0] } else { 1.0 - f[0] };
+        let wy = if o[1] == 1 { f[1] } else { 1.0 - f[1] };
+        let wz = if o[2] == 1 { f[2] } else { 1.0 - f[2] };
+        acc += wx * wy * wz * voxel_tsdf(word);
+    }
+    TsdfSample { tsdf: acc, valid: true }
+}
+
+/// `m * v` for a column-major 4x4 matrix, as WGSL `mat4x4<f32> * vec4<f32>`.
+pub fn mat4_mul_vec4(m: &[[f32; 4]; 4], v: [f32; 4]) -> [f32; 4] {
+    std::array::from_fn(|r| m[0][r] * v[0] + m[1][r] * v[1] + m[2][r] * v[2] + m[3][r] * v[3])
+}
+
+/// `m * (p, 1)`, dropping w.
+pub fn transform_point(m: &[[f32; 4]; 4], p: [f32; 3]) -> [f32; 3] {
+    let r = mat4_mul_vec4(m, [p[0], p[1], p[2], 1.0]);
+    [r[0], r[1], r[2]]
+}
+
+/// `m * (d, 0)`, dropping w.
+pub fn transform_vector(m: &[[f32; 4]; 4], d: [f32; 3]) -> [f32; 3] {
+    let r = mat4_mul_vec4(m, [d[0], d[1], d[2], 0.0]);
+    [r[0], r[1], r[2]]
+}
+
+/// Dot product.
+pub fn dot3(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Cross product.
+pub fn cross3(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}

@@ -10,7 +10,15 @@ pub mod color_to_float;
 pub mod depth_pyramid_down;
 pub mod depth_to_metres;
 pub mod gradient_smooth;
+pub mod mc_count;
+pub mod mc_generate;
+pub mod mc_scan;
+pub mod icp_reduce;
+pub mod intensity_pyramid_down;
 pub mod normal_map;
+pub mod raycast;
+pub mod rgb_reduce;
+pub mod tsdf_integrate;
 pub mod vertex_gradients;
 pub mod vertex_map;
 
@@ -158,6 +166,22 @@ pub struct Kernels {
     pub normal_map: KernelPipeline,
     /// `color_to_float`.
     pub color_to_float: KernelPipeline,
+    /// `tsdf_integrate`.
+    pub tsdf_integrate: KernelPipeline,
+    /// `raycast`.
+    pub raycast: KernelPipeline,
+    /// `icp_reduce`.
+    pub icp_reduce: KernelPipeline,
+    /// `intensity_pyramid_down`.
+    pub intensity_pyramid_down: KernelPipeline,
+    /// `rgb_reduce`.
+    pub rgb_reduce: KernelPipeline,
+    /// `mc_count` (marching cubes, pass 1).
+    pub mc_count: KernelPipeline,
+    /// `mc_scan` (marching cubes, pass 2).
+    pub mc_scan: KernelPipeline,
+    /// `mc_generate` (marching cubes, pass 3).
+    pub mc_generate: KernelPipeline,
 }
 
 impl Kernels {
@@ -173,6 +197,14 @@ impl Kernels {
             gradient_smooth: KernelPipeline::new(device, &s::GRADIENT_SMOOTH),
             normal_map: KernelPipeline::new(device, &s::NORMAL_MAP),
             color_to_float: KernelPipeline::new(device, &s::COLOR_TO_FLOAT),
+            tsdf_integrate: KernelPipeline::new(device, &s::TSDF_INTEGRATE),
+            raycast: KernelPipeline::new(device, &s::RAYCAST),
+            icp_reduce: KernelPipeline::new(device, &s::ICP_REDUCE),
+            intensity_pyramid_down: KernelPipeline::new(device, &s::INTENSITY_PYRAMID_DOWN),
+            rgb_reduce: KernelPipeline::new(device, &s::RGB_REDUCE),
+            mc_count: KernelPipeline::new(device, &s::MC_COUNT),
+            mc_scan: KernelPipeline::new(device, &s::MC_SCAN),
+            mc_generate: KernelPipeline::new(device, &s::MC_GENERATE),
         }
     }
 }

@@ -1,0 +1,243 @@
+// SPDX-License-Identifier: MIT
+//! The TSDF volume: configuration, its GPU description and the dense voxel store.
+//!
+//! Layout (see `shaders/wgsl/shared/tsdf.wgsl`): one u32 per voxel, x fastest, packing a
+//! signed-normalised 16-bit TSDF in truncation units (low half) and a 16-bit weight (high half).
+//! 256³ voxels take 64 MiB, half of the 128 MiB binding the device is created with; the optional
+//! colour volume takes as much again in its own binding.
+//!
+//! The pipeline talks to the store through [`TsdfStore`] (its description and buffers), so a
+//! sparse voxel-block-hashing store can replace [`DenseTsdfVolume`] later without touching
+//! tracking or export.
+
+use crate::{Error, Gpu, Result, Se3};
+
+/// Default voxels per axis.
+pub const DEFAULT_VOLUME_DIM_VOXELS: u32 = 256;
+/// Default edge length of the cubic volume, metres (256 voxels of 11.7 mm).
+pub const DEFAULT_VOLUME_SIZE_M: f32 = 3.0;
+/// Default truncation distance, in voxels (μ = 4 voxels = 4.7 cm at the default size).
+pub const DEFAULT_TRUNCATION_VOXELS: f32 = 4.0;
+/// Default cap of the running-average weight (frames): bounds how slowly old data fades.
+pub const DEFAULT_MAX_WEIGHT: u32 = 128;
+
+/// Where the volume sits relative to the first camera.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum VolumePlacement {
+    /// The first camera sits at the centre of the volume's near face, looking at its centre:
+    /// best for an object or desk in front of the camera (KinectFusion's setting).
+    #[default]
+    InFront,
+    /// The first camera sits at the volume's centre: best for a camera turning in place
+    /// (e.g. TUM fr1/rpy, which turns 90° away from its first view).
+    Centred,
+}
+
+/// Creation-time settings of the volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TsdfConfig {
+    /// Voxels along x, y, z.
+    pub dims_voxels: [u32; 3],
+    /// Voxel edge length, metres.
+    pub voxel_size_m: f32,
+    /// Truncation distance μ, metres.
+    pub truncation_m: f32,
+    /// Cap of the integration weight.
+    pub max_weight: u32,
+    /// Also fuse colour (a second u32 per voxel, RGB8).
+    pub color: bool,
+    /// Placement relative to the first camera.
+    pub placement: VolumePlacement,
+}
+
+impl Default for TsdfConfig {
+    fn default() -> Self {
+        Self::cube(DEFAULT_VOLUME_DIM_VOXELS, DEFAULT_VOLUME_SIZE_M / DEFAULT_VOLUME_DIM_VOXELS as f32)
+    }
+}
+
+impl TsdfConfig {
+    /// A cube of `dim` voxels of `voxel_size_m`, with the default truncation (in voxels),
+    /// weight cap and colour on.
+    pub fn cube(dim: u32, voxel_size_m: f32) -> Self {
+        Self { dims_voxels: [dim; 3], voxel_size_m, truncation_m: DEFAULT_TRUNCATION_VOXELS * voxel_size_m, max_weight: DEFAULT_MAX_WEIGHT, color: true, placement: VolumePlacement::InFront }
+    }
+
+    /// Number of voxels.
+    pub fn voxel_count(&self) -> u64 {
+        self.dims_voxels.iter().map(|&d| u64::from(d)).product()
+    }
+
+    /// Edge lengths, metres.
+    pub fn extent_m(&self) -> [f32; 3] {
+        self.dims_voxels.map(|d| d as f32 * self.voxel_size_m)
+    }
+
+    /// Bytes of GPU memory the dense store takes (TSDF words plus colour words).
+    pub fn memory_bytes(&self) -> u64 {
+        self.voxel_count() * 4 * if self.color { 2 } else { 1 }
+    }
+
+    /// Rejects settings the kernels cannot honour.
+    pub fn validate(&self, max_binding_bytes: u64) -> Result<()> {
+        let bad = |why: String| Err(Error::InvalidConfig(format!("TSDF volume: {why}")));
+        if self.dims_voxels.iter().any(|&d| !(2..=2048).contains(&d)) {
+            return bad(format!("dimensions {:?} must be 2..=2048 voxels per axis", self.dims_voxels));
+        }
+        if !(self.voxel_size_m > 0.0 && self.voxel_size_m.is_finite()) {
+            return bad(format!("voxel size {} m must be positive", self.voxel_size_m));
+        }
+        if !(self.truncation_m >= self.voxel_size_m && self.truncation_m.is_finite()) {
+            return bad(format!("truncation {} m must be at least one voxel ({} m)", self.truncation_m, self.voxel_size_m));
+        }
+        if !(1..=0xffff).contains(&self.max_weight) {
+            return bad(format!("max weight {} must be 1..=65535", self.max_weight));
+        }
+        if self.voxel_count() * 4 > max_binding_bytes {
+            return bad(format!("{} voxels need {} MiB, over the device's {} MiB storage binding", self.voxel_count(), (self.voxel_count() * 4) >> 20, max_binding_bytes >> 20));
+        }
+        Ok(())
+    }
+
+    /// The description the kernels get, for a volume whose voxel (0, 0, 0) corner is at
+    /// `origin_in_world`.
+    pub fn desc(&self, origin_in_world: [f32; 3]) -> VolumeDesc {
+        VolumeDesc {
+            dim_x: self.dims_voxels[0],
+            dim_y: self.dims_voxels[1],
+            dim_z: self.dims_voxels[2],
+            max_weight: self.max_weight,
+            origin_x_m: origin_in_world[0],
+            origin_y_m: origin_in_world[1],
+            origin_z_m: origin_in_world[2],
+            voxel_size_m: self.voxel_size_m,
+            truncation_m: self.truncation_m,
+            ..Default::default()
+        }
+    }
+
+    /// The corner of voxel (0, 0, 0) for the first camera at `world_from_camera`, following
+    /// [`Self::placement`]. The volume stays axis-aligned in world; with an identity first
+    /// pose (the usual case) [`VolumePlacement::InFront`] spans x, y in [-e/2, e/2] and z in
+    /// [0, e] of the first camera's frame.
+    pub fn origin_for_first_camera(&self, world_from_camera: &Se3) -> [f32; 3] {
+        let [ex, ey, ez] = self.extent_m();
+        let ahead_m = match self.placement {
+            VolumePlacement::InFront => f64::from(ez) / 2.0,
+            VolumePlacement::Centred => 0.0,
+        };
+        let centre = world_from_camera.transform_point(glam::DVec3::new(0.0, 0.0, ahead_m));
+        [centre.x as f32 - ex / 2.0, centre.y as f32 - ey / 2.0, centre.z as f32 - ez / 2.0]
+    }
+}
+
+/// Mirror of WGSL `VolumeDesc` (shaders/wgsl/shared/tsdf.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct VolumeDesc {
+    /// Voxels along x.
+    pub dim_x: u32,
+    /// Voxels along y.
+    pub dim_y: u32,
+    /// Voxels along z.
+    pub dim_z: u32,
+    /// Cap of the integration weight.
+    pub max_weight: u32,
+    /// World x of voxel (0, 0, 0)'s outer corner, metres.
+    pub origin_x_m: f32,
+    /// World y of the origin corner, metres.
+    pub origin_y_m: f32,
+    /// World z of the origin corner, metres.
+    pub origin_z_m: f32,
+    /// Voxel edge, metres.
+    pub voxel_size_m: f32,
+    /// Truncation distance μ, metres.
+    pub truncation_m: f32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Padding.
+    pub _pad2: u32,
+}
+
+impl VolumeDesc {
+    /// Number of voxels.
+    pub fn voxel_count(&self) -> usize {
+        self.dim_x as usize * self.dim_y as usize * self.dim_z as usize
+    }
+
+    /// World-space corners (min, max) of the volume, metres.
+    pub fn bounds_in_world(&self) -> ([f32; 3], [f32; 3]) {
+        let lo = [self.origin_x_m, self.origin_y_m, self.origin_z_m];
+        let dims = [self.dim_x, self.dim_y, self.dim_z];
+        (lo, std::array::from_fn(|i| lo[i] + dims[i] as f32 * self.voxel_size_m))
+    }
+}
+
+/// What the pipeline needs from a TSDF store: its description and the buffers the kernels bind.
+pub trait TsdfStore {
+    /// Description of the volume (dimensions, placement, truncation).
+    fn desc(&self) -> VolumeDesc;
+    /// Voxel words (TSDF + weight).
+    fn voxels(&self) -> &wgpu::Buffer;
+    /// Colour words (RGB8), or a one-word placeholder when colour is off.
+    fn colors(&self) -> &wgpu::Buffer;
+    /// Whether colour is fused.
+    fn has_color(&self) -> bool;
+    /// Forgets everything fused so far.
+    fn reset(&self, gpu: &Gpu);
+    /// GPU memory held, bytes.
+    fn memory_bytes(&self) -> u64;
+}
+
+/// The dense store: every voxel of the box allocated.
+#[derive(Debug)]
+pub struct DenseTsdfVolume {
+    config: TsdfConfig,
+    desc: VolumeDesc,
+    voxels: wgpu::Buffer,
+    colors: wgpu::Buffer,
+}
+
+impl DenseTsdfVolume {
+    /// Allocates an empty (never observed) volume with its corner at `origin_in_world`.
+    pub fn new(gpu: &Gpu, config: TsdfConfig, origin_in_world: [f32; 3]) -> Result<Self> {
+        config.validate(gpu.limits.max_storage_buffer_binding_size)?;
+        let n = config.voxel_count() as usize;
+        let voxels = gpu.storage_buffer::<u32>("core.tsdf.voxels", n);
+        let colors = gpu.storage_buffer::<u32>("core.tsdf.colors", if config.color { n } else { 1 });
+        let volume = Self { config, desc: config.desc(origin_in_world), voxels, colors };
+        volume.reset(gpu);
+        Ok(volume)
+    }
+
+    /// The settings it was created with.
+    pub fn config(&self) -> &TsdfConfig {
+        &self.config
+    }
+}
+
+impl TsdfStore for DenseTsdfVolume {
+    fn desc(&self) -> VolumeDesc {
+        self.desc
+    }
+    fn voxels(&self) -> &wgpu::Buffer {
+        &self.voxels
+    }
+    fn colors(&self) -> &wgpu::Buffer {
+        &self.colors
+    }
+    fn has_color(&self) -> bool {
+        self.config.color
+    }
+    fn reset(&self, gpu: &Gpu) {
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.tsdf.reset") });
+        encoder.clear_buffer(&self.voxels, 0, None);
+        encoder.clear_buffer(&self.colors, 0, None);
+        gpu.queue.submit([encoder.finish()]);
+    }
+    fn memory_bytes(&self) -> u64 {
+        self.voxels.size() + self.colors.size()
+    }
+}

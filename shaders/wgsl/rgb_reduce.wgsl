@@ -1,0 +1,121 @@
+// SPDX-License-Identifier: MIT
+//! Photometric normal equations (direct RGB-D odometry as in DVO / ElasticFusion), in the same
+//! 6-DOF parametrisation as `icp_reduce`. Each invocation walks pixels ix, ix + threads, ... of
+//! the current frame's level: maps the vertex to world with the estimate `world_from_camera`
+//! (p), then into the previous frame (`camera_prev_from_world`), projects it (u'), checks the
+//! previous depth there agrees within `max_depth_diff_m` (visibility), and uses the residual
+//! r = I_prev(u') - I_cur(u) with bilinear I_prev and its central-difference gradient g.
+//! With gp = (∂π/∂p_prev)ᵀ g and gw = R_prev gp, the row is J = [p x gw, gw] (twist applied on
+//! the left, like ICP). Residuals beyond `max_residual` are rejected; the workgroup reduces
+//! like `icp_reduce` and writes 32 floats per workgroup in the same layout.
+#import invalid
+#import camera
+
+struct RgbReduceParams {
+    intrinsics: Intrinsics,
+    world_from_camera: mat4x4<f32>,
+    camera_prev_from_world: mat4x4<f32>,
+    world_from_camera_prev: mat4x4<f32>,
+    max_depth_diff_m: f32,
+    max_residual: f32,
+    thread_count: u32,
+    _pad0: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: RgbReduceParams;
+@group(0) @binding(1) var<storage, read> vertex_in_camera: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> intensity: array<f32>;
+@group(0) @binding(3) var<storage, read> prev_intensity: array<f32>;
+@group(0) @binding(4) var<storage, read> prev_depth_m: array<f32>;
+@group(0) @binding(5) var<storage, read_write> partial_sums: array<vec4<f32>>;
+
+const WORKGROUP_SIZE: u32 = 128u;
+const SUM_VEC4S: u32 = 8u;
+
+var<workgroup> scratch: array<array<vec4<f32>, SUM_VEC4S>, WORKGROUP_SIZE>;
+
+// Bilinear previous intensity at (x, y); the caller keeps 0 <= x < w - 1, 0 <= y < h - 1.
+fn prev_bilinear(x: f32, y: f32) -> f32 {
+    let w = params.intrinsics.width_px;
+    let x0 = u32(x);
+    let y0 = u32(y);
+    let fx = x - f32(x0);
+    let fy = y - f32(y0);
+    let i = y0 * w + x0;
+    let top = prev_intensity[i] * (1.0 - fx) + prev_intensity[i + 1u] * fx;
+    let bottom = prev_intensity[i + w] * (1.0 - fx) + prev_intensity[i + w + 1u] * fx;
+    return top * (1.0 - fy) + bottom * fy;
+}
+
+@compute @workgroup_size(128, 1, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
+    let k = params.intrinsics;
+    let pixel_count = k.width_px * k.height_px;
+    var acc: array<vec4<f32>, SUM_VEC4S>;
+    for (var i = 0u; i < SUM_VEC4S; i++) {
+        acc[i] = vec4<f32>(0.0);
+    }
+    for (var ix = gid.x; ix < pixel_count; ix += params.thread_count) {
+        let v_cam = vertex_in_camera[ix];
+        if !is_valid_f32(v_cam.z) {
+            continue;
+        }
+        let p = (params.world_from_camera * vec4<f32>(v_cam.xyz, 1.0)).xyz;
+        let q = (params.camera_prev_from_world * vec4<f32>(p, 1.0)).xyz;
+        if !(q.z > 0.0) {
+            continue;
+        }
+        let u = k.fx_px * q.x / q.z + k.cx_px;
+        let w = k.fy_px * q.y / q.z + k.cy_px;
+        // One pixel of margin for the central differences.
+        if !(u >= 1.0 && w >= 1.0 && u < f32(k.width_px) - 2.0 && w < f32(k.height_px) - 2.0) {
+            continue;
+        }
+        let nearest = u32(w + 0.5) * k.width_px + u32(u + 0.5);
+        let z_prev = prev_depth_m[nearest];
+        if !is_valid_f32(z_prev) || !(abs(z_prev - q.z) <= params.max_depth_diff_m) {
+            continue;
+        }
+        let r = prev_bilinear(u, w) - intensity[ix];
+        if !(abs(r) <= params.max_residual) {
+            continue;
+        }
+        let gx = 0.5 * (prev_bilinear(u + 1.0, w) - prev_bilinear(u - 1.0, w));
+        let gy = 0.5 * (prev_bilinear(u, w + 1.0) - prev_bilinear(u, w - 1.0));
+        let inv_z = 1.0 / q.z;
+        let gp = vec3<f32>(gx * k.fx_px * inv_z, gy * k.fy_px * inv_z, -(gx * k.fx_px * q.x + gy * k.fy_px * q.y) * inv_z * inv_z);
+        let gw = (params.world_from_camera_prev * vec4<f32>(gp, 0.0)).xyz;
+        let a = cross(p, gw);
+        let j0 = a.x;
+        let j1 = a.y;
+        let j2 = a.z;
+        let j3 = gw.x;
+        let j4 = gw.y;
+        let j5 = gw.z;
+        acc[0] += vec4<f32>(j0 * j0, j0 * j1, j0 * j2, j0 * j3);
+        acc[1] += vec4<f32>(j0 * j4, j0 * j5, j1 * j1, j1 * j2);
+        acc[2] += vec4<f32>(j1 * j3, j1 * j4, j1 * j5, j2 * j2);
+        acc[3] += vec4<f32>(j2 * j3, j2 * j4, j2 * j5, j3 * j3);
+        acc[4] += vec4<f32>(j3 * j4, j3 * j5, j4 * j4, j4 * j5);
+        acc[5] += vec4<f32>(j5 * j5, j0 * r, j1 * r, j2 * r);
+        acc[6] += vec4<f32>(j3 * r, j4 * r, j5 * r, r * r);
+        acc[7] += vec4<f32>(1.0, 0.0, 0.0, 0.0);
+    }
+    for (var i = 0u; i < SUM_VEC4S; i++) {
+        scratch[lid][i] = acc[i];
+    }
+    for (var stride = WORKGROUP_SIZE / 2u; stride > 0u; stride >>= 1u) {
+        workgroupBarrier();
+        if lid < stride {
+            for (var i = 0u; i < SUM_VEC4S; i++) {
+                scratch[lid][i] += scratch[lid + stride][i];
+            }
+        }
+    }
+    workgroupBarrier();
+    if lid == 0u {
+        for (var i = 0u; i < SUM_VEC4S; i++) {
+            partial_sums[wid.x * SUM_VEC4S + i] = scratch[0][i];
+        }
+    }
+}

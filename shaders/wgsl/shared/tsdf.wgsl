@@ -1,0 +1,55 @@
+// SPDX-License-Identifier: MIT
+// Dense TSDF volume (000-digest §1.3.2): `dim_x * dim_y * dim_z` voxels, x fastest, one u32 each
+// packing a signed-normalised 16-bit TSDF in [-1, 1] (units of the truncation distance; low half,
+// two's complement) and a 16-bit integration weight (high half; 0 = never observed). Voxel
+// (x, y, z) has its centre at origin + (x + 0.5, y + 0.5, z + 0.5) * voxel_size, in world metres.
+// Mirrors `VolumeDesc` in core/src/tsdf.rs and the helpers in core/src/cpu/shared.rs.
+
+struct VolumeDesc {
+    dim_x: u32,
+    dim_y: u32,
+    dim_z: u32,
+    max_weight: u32,
+    origin_x_m: f32,
+    origin_y_m: f32,
+    origin_z_m: f32,
+    voxel_size_m: f32,
+    truncation_m: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+}
+
+const TSDF_SCALE: f32 = 32767.0;
+
+fn voxel_index(d: VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
+    return x + d.dim_x * (y + d.dim_y * z);
+}
+
+fn voxel_centre_in_world(d: VolumeDesc, x: u32, y: u32, z: u32) -> vec3<f32> {
+    return vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m) + (vec3<f32>(f32(x), f32(y), f32(z)) + vec3<f32>(0.5)) * d.voxel_size_m;
+}
+
+// TSDF in [-1, 1] and weight -> one voxel word. The TSDF rounds to nearest, ties to even.
+fn pack_voxel(tsdf: f32, weight: u32) -> u32 {
+    let t = i32(round(clamp(tsdf, -1.0, 1.0) * TSDF_SCALE));
+    return (bitcast<u32>(t) & 0xffffu) | (min(weight, 0xffffu) << 16u);
+}
+
+fn voxel_tsdf(word: u32) -> f32 {
+    return f32(bitcast<i32>(word << 16u) >> 16u) / TSDF_SCALE;
+}
+
+fn voxel_weight(word: u32) -> u32 {
+    return word >> 16u;
+}
+
+// RGB8 colour of a voxel, packed r | g << 8 | b << 16 (alpha byte unused, 0).
+fn pack_rgb8(rgb: vec3<f32>) -> u32 {
+    let c = vec3<u32>(round(clamp(rgb, vec3<f32>(0.0), vec3<f32>(1.0)) * 255.0));
+    return c.x | (c.y << 8u) | (c.z << 16u);
+}
+
+fn unpack_rgb8(word: u32) -> vec3<f32> {
+    return vec3<f32>(f32(word & 0xffu), f32((word >> 8u) & 0xffu), f32((word >> 16u) & 0xffu)) / 255.0;
+}
