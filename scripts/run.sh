@@ -20,8 +20,9 @@ mkdir -p -m 0700 "$XDG_RUNTIME_DIR"
 echo "== building the web app (trunk) =="
 trunk build index.html --release
 
-echo "== native GPU preprocessing of the bundled sample =="
-cargo run --release -q -p webfusion-bridge -- preprocess --source data/sample/fr1_rpy.wfr
+echo "== native KinectFusion on the bundled sample (trajectory, mesh, ATE against the sample's ground truth, per-stage times) =="
+# fr1/rpy turns 90 degrees in place: put the camera at the centre of a 5.1 m volume.
+cargo run --release -q -p webfusion-bridge -- reconstruct data/sample/fr1_rpy.wfr --out out/sample --centred --voxel-size 0.02
 
 if [ "$serve" = 1 ]; then
   echo

@@ -128,7 +128,20 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     }
     println!("{n_frames} frames of {} on {}; {} lost", source.name(), gpu.adapter_summary(), lost.len());
     times.print();
+    // Sources with ground truth (TUM directories, recordings that carry it) are scored at once.
+    let ate = source.ground_truth().and_then(|gt| match webfusion_core::eval::ate(gt, &trajectory, &Default::default()) {
+        Ok(report) => {
+            let e = &report.error_m;
+            println!("ATE against the source's ground truth ({} pairs): RMSE {:.2} cm, mean {:.2} cm, max {:.2} cm", e.count, e.rmse * 100.0, e.mean * 100.0, e.max * 100.0);
+            Some(serde_json::json!({ "pairs": e.count, "rmse_m": e.rmse, "mean_m": e.mean, "median_m": e.median, "max_m": e.max }))
+        }
+        Err(error) => {
+            eprintln!("ATE not computed: {error}");
+            None
+        }
+    });
     let stats = serde_json::json!({
+        "ate": ate,
         "frames": n_frames,
         "lost_frames": lost,
         "adapter": gpu.adapter_summary(),

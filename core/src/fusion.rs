@@ -42,7 +42,7 @@ pub const DEFAULT_MAX_JUMP_RAD: f64 = 25.0 * std::f64::consts::PI / 180.0;
 pub const DEFAULT_HUBER_DELTA_M: f32 = 0.01;
 /// Default weight of the photometric term against the geometric one (0: depth only). The
 /// geometric rows are in metres and the photometric ones in intensity units ([0, 1]).
-pub const DEFAULT_RGB_WEIGHT: f32 = 0.01;
+pub const DEFAULT_RGB_WEIGHT: f32 = 0.03;
 /// Default largest accepted intensity residual.
 pub const DEFAULT_RGB_MAX_RESIDUAL: f32 = 0.3;
 /// Default largest depth disagreement for a photometric pair (visibility test), metres.

@@ -64,3 +64,34 @@ fn tracks_an_analytic_room_to_a_millimetre_and_a_tenth_of_a_degree() {
     }
     finish(&gpu);
 }
+
+/// Real Kinect data: the first 20 frames of TUM fr1/rpy (turning about 30° at up to
+/// 120°/s) must all be tracked, and the trajectory must agree with the motion-capture ground
+/// truth to a few centimetres (ATE after SE(3) alignment, TUM conventions). The full 100-frame
+/// accuracy run is `scripts/bench_reconstruct.sh`.
+#[test]
+fn tracks_real_kinect_frames_against_motion_capture() {
+    use webfusion_core::eval::{AteOptions, ate};
+    use webfusion_core::io::trajectory::TimedPose;
+    use webfusion_core::source::FrameSource as _;
+    use webfusion_core::tsdf::VolumePlacement;
+
+    let gpu = gpu();
+    let mut dataset = webfusion_core::io::tum::TumDataset::open(webfusion_tests::tum_dir(), None).expect("TUM data");
+    let ground_truth = dataset.ground_truth().expect("ground truth").to_vec();
+    // A coarse volume keeps the test fast on lavapipe: 160³ voxels of 3 cm around the camera.
+    let config = FusionConfig { tsdf: TsdfConfig { placement: VolumePlacement::Centred, ..TsdfConfig::cube(160, 0.03) }, ..FusionConfig::default() };
+    let mut fusion = KinectFusion::new(&gpu, dataset.calibration(), config).expect("pipeline");
+    let mut trajectory = Vec::new();
+    for i in 0..20 {
+        let frame = dataset.read_frame(i).expect("frame");
+        let report = pollster::block_on(fusion.process_frame(&gpu, &frame)).expect("process");
+        assert!(!report.state.is_lost(), "frame {i} lost: {:?}", report.state);
+        trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: report.world_from_camera });
+    }
+    let report = ate(&ground_truth, &trajectory, &AteOptions::default()).expect("ATE");
+    eprintln!("ATE over 20 real frames: RMSE {:.2} cm, max {:.2} cm", report.error_m.rmse * 100.0, report.error_m.max * 100.0);
+    assert_eq!(report.error_m.count, 20, "every frame associated");
+    assert!(report.error_m.rmse < 0.03, "ATE RMSE {:.3} m", report.error_m.rmse);
+    finish(&gpu);
+}
