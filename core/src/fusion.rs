@@ -115,6 +115,8 @@ impl FusionConfig {
     /// Rejects settings the pipeline cannot honour.
     pub fn validate(&self) -> Result<()> {
         self.preprocess.validate()?;
+        // The device's binding limit is checked again when the volume is allocated.
+        self.tsdf.validate(u64::MAX)?;
         let levels = self.icp.iterations_per_level.len();
         if levels == 0 || levels > self.preprocess.pyramid_levels {
             return Err(Error::InvalidConfig(format!("ICP uses {levels} levels but preprocessing builds {}", self.preprocess.pyramid_levels)));

@@ -1,0 +1,104 @@
+// SPDX-License-Identifier: MIT
+//! The `webfusion` binary on bad input: a clear error naming the problem, a non-zero exit,
+//! never a panic; and `eval` on exact trajectories.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn webfusion(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_webfusion")).args(args).env("XDG_RUNTIME_DIR", std::env::temp_dir()).output().expect("run webfusion")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("webfusion-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+fn assert_clean_failure(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "expected failure, got success; stderr: {err}");
+    assert!(!err.contains("panicked"), "panicked: {err}");
+    assert!(err.contains(needle), "stderr should mention {needle:?}: {err}");
+}
+
+#[test]
+fn reconstruct_names_a_missing_source() {
+    let out = scratch("missing");
+    let o = webfusion(&["reconstruct", "/nonexistent/fr1_dir", "--out", out.to_str().expect("utf-8")]);
+    assert_clean_failure(&o, "/nonexistent/fr1_dir");
+}
+
+#[test]
+fn reconstruct_names_an_unreadable_depth_png() {
+    // A TUM directory whose first depth image is not a PNG.
+    let dir = scratch("corrupt").join("rgbd_dataset_freiburg1_test");
+    for sub in ["rgb", "depth"] {
+        std::fs::create_dir_all(dir.join(sub)).expect("mkdir");
+    }
+    std::fs::write(dir.join("rgb.txt"), "# rgb\n1.000000 rgb/1.000000.png\n").expect("rgb.txt");
+    std::fs::write(dir.join("depth.txt"), "# depth\n1.001000 depth/1.001000.png\n").expect("depth.txt");
+    std::fs::write(dir.join("rgb/1.000000.png"), b"not a png").expect("rgb");
+    std::fs::write(dir.join("depth/1.001000.png"), b"not a png either").expect("depth");
+    let out = scratch("corrupt-out");
+    let o = webfusion(&["reconstruct", dir.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--no-mesh"]);
+    assert_clean_failure(&o, "1.001000.png");
+}
+
+#[test]
+fn reconstruct_asks_for_intrinsics_when_the_camera_is_unknown() {
+    let dir = scratch("unknown-camera").join("my_scan");
+    std::fs::create_dir_all(&dir).expect("mkdir");
+    std::fs::write(dir.join("rgb.txt"), "1.0 rgb/a.png\n").expect("rgb.txt");
+    std::fs::write(dir.join("depth.txt"), "1.0 depth/a.png\n").expect("depth.txt");
+    let out = scratch("unknown-camera-out");
+    let o = webfusion(&["reconstruct", dir.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8")]);
+    assert_clean_failure(&o, "--intrinsics");
+}
+
+#[test]
+fn reconstruct_rejects_bad_settings() {
+    let out = scratch("settings");
+    let o = webfusion(&["reconstruct", "--out", out.to_str().expect("utf-8"), "--voxel-size=-0.01"]);
+    assert_clean_failure(&o, "voxel size");
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/sample/fr1_rpy.wfr");
+    let o = webfusion(&["reconstruct", sample.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--frames", "5..2"]);
+    assert_clean_failure(&o, "--frames");
+}
+
+fn write_trajectory(path: &Path, offset_m: f64) {
+    let mut text = String::from("# timestamp tx ty tz qx qy qz qw\n");
+    for i in 0..10 {
+        let t = 100.0 + f64::from(i) * 0.033;
+        text += &format!("{t:.6} {:.6} {:.6} {:.6} 0 0 0 1\n", 0.1 * f64::from(i) + offset_m, (0.2 * f64::from(i)).sin(), 0.05 * f64::from(i * i));
+    }
+    std::fs::write(path, text).expect("write trajectory");
+}
+
+#[test]
+fn eval_scores_exact_and_offset_trajectories() {
+    let dir = scratch("eval");
+    let (gt, est) = (dir.join("gt.txt"), dir.join("est.txt"));
+    write_trajectory(&gt, 0.0);
+    write_trajectory(&est, 0.25);
+    // Aligned: a pure offset vanishes. Unaligned: every pair is 25 cm off.
+    let o = webfusion(&["eval", "--gt", gt.to_str().expect("utf-8"), "--est", est.to_str().expect("utf-8"), "--json", dir.join("a.json").to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = webfusion(&["eval", "--gt", gt.to_str().expect("utf-8"), "--est", est.to_str().expect("utf-8"), "--no-align", "--json", dir.join("b.json").to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let aligned = std::fs::read_to_string(dir.join("a.json")).expect("a.json");
+    let unaligned = std::fs::read_to_string(dir.join("b.json")).expect("b.json");
+    let rmse = |json: &str| -> f64 {
+        let v: serde_json::Value = serde_json::from_str(json).expect("eval JSON");
+        v["ate"]["stats"]["rmse_m"].as_f64().expect("ate.stats.rmse_m")
+    };
+    assert!(rmse(&aligned) < 1e-9, "aligned ATE {}", rmse(&aligned));
+    assert!((rmse(&unaligned) - 0.25).abs() < 1e-9, "unaligned ATE {}", rmse(&unaligned));
+    let o = webfusion(&["eval", "--gt", dir.join("nope.txt").to_str().expect("utf-8"), "--est", est.to_str().expect("utf-8")]);
+    assert_clean_failure(&o, "nope.txt");
+}
