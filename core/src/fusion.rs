@@ -39,7 +39,7 @@ pub const DEFAULT_MAX_JUMP_M: f64 = 0.20;
 /// Default largest plausible rotation between consecutive frames, radians (25°).
 pub const DEFAULT_MAX_JUMP_RAD: f64 = 25.0 * std::f64::consts::PI / 180.0;
 /// Default Huber threshold on point-to-plane residuals, metres.
-pub const DEFAULT_HUBER_DELTA_M: f32 = 0.01;
+pub const DEFAULT_HUBER_DELTA_M: f32 = 0.03;
 /// Default weight of the photometric term against the geometric one (0: depth only). The
 /// geometric rows are in metres and the photometric ones in intensity units ([0, 1]).
 pub const DEFAULT_RGB_WEIGHT: f32 = 0.03;
