@@ -1,5 +1,7 @@
 // SPDX-License-Identifier: MIT
-//! Each invocation updates one voxel (000-digest §1.3.2, Eq. 1.6-1.8): projects its centre into
+//! Each invocation walks one voxel column (x, y) along z (as KinectFusion does: one thread per
+//! column keeps the workgroup count small) and updates each voxel (000-digest §1.3.2,
+//! Eq. 1.6-1.8): projects its centre into
 //! the depth image (nearest pixel), takes the signed distance along the optical axis
 //! sdf = depth - z (positive in front of the surface), skips voxels outside the frustum,
 //! without depth, or more than μ behind the surface, and folds min(1, sdf / μ) into the
@@ -25,13 +27,19 @@ struct TsdfIntegrateParams {
 @group(0) @binding(3) var<storage, read_write> tsdf_volume: array<u32>;
 @group(0) @binding(4) var<storage, read_write> color_volume: array<u32>;
 
-@compute @workgroup_size(8, 8, 4)
+@compute @workgroup_size(16, 16, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let d = params.volume;
-    if gid.x >= d.dim_x || gid.y >= d.dim_y || gid.z >= d.dim_z {
+    if gid.x >= d.dim_x || gid.y >= d.dim_y {
         return;
     }
-    let p_world = voxel_centre_in_world(d, gid.x, gid.y, gid.z);
+    for (var z = 0u; z < d.dim_z; z++) {
+        integrate_voxel(d, gid.x, gid.y, z);
+    }
+}
+
+fn integrate_voxel(d: VolumeDesc, x: u32, y: u32, z: u32) {
+    let p_world = voxel_centre_in_world(d, x, y, z);
     let p_cam = (params.camera_from_world * vec4<f32>(p_world, 1.0)).xyz;
     if !(p_cam.z > 0.0) {
         return;
@@ -52,7 +60,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let tsdf = min(1.0, sdf / d.truncation_m);
-    let ix = voxel_index(d, gid.x, gid.y, gid.z);
+    let ix = voxel_index(d, x, y, z);
     let word = tsdf_volume[ix];
     let w = voxel_weight(word);
     let updated = (voxel_tsdf(word) * f32(w) + tsdf) / f32(w + 1u);

@@ -49,7 +49,7 @@ impl TsdfIntegrateBindings<'_> {
     }
 }
 
-/// Records one `tsdf_integrate` dispatch over every voxel of `p.volume`.
+/// Records one `tsdf_integrate` dispatch: one invocation per voxel column of `p.volume`.
 pub fn encode(gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, bind_group: &wgpu::BindGroup, p: &TsdfIntegrateParams) {
-    gpu.kernels.tsdf_integrate.dispatch(encoder, bind_group, [p.volume.dim_x, p.volume.dim_y, p.volume.dim_z]);
+    gpu.kernels.tsdf_integrate.dispatch(encoder, bind_group, [p.volume.dim_x, p.volume.dim_y, 1]);
 }
