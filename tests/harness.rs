@@ -184,3 +184,31 @@ pub fn tum_frame(index: usize) -> (RgbdCalibration, RgbdFrame) {
     let frame = dataset.read_frame(index).expect("read TUM frame");
     (calibration, frame)
 }
+
+/// Runs `pipeline` once with `params` at binding 0 and `buffers` (initial bytes, in binding
+/// order) as storage buffers that the kernel may read and write; returns every buffer's bytes
+/// afterwards. For kernels that update state in place (the TSDF volume).
+pub fn run_kernel_in_place<P: bytemuck::Pod>(gpu: &Gpu, pipeline: &KernelPipeline, params: &P, buffers: &[&[u8]], invocations: [u32; 3]) -> Vec<Vec<u8>> {
+    let name = pipeline.kernel.name;
+    let params_buffer = gpu.uniform_buffer(&format!("test.{name}.params"), params);
+    let storage: Vec<wgpu::Buffer> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, bytes)| {
+            let b = gpu.storage_buffer::<u8>(&format!("test.{name}.buffer{i}"), bytes.len());
+            gpu.write_buffer(&b, bytes);
+            b
+        })
+        .collect();
+    let mut all = vec![&params_buffer];
+    all.extend(storage.iter());
+    let bind_group = pipeline.bind_group(&gpu.device, &all);
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.run_kernel_in_place") });
+    pipeline.dispatch(&mut encoder, &bind_group, invocations);
+    pollster::block_on(gpu.submit_and_wait(encoder)).expect("GPU work finishes");
+    storage
+        .iter()
+        .zip(buffers)
+        .map(|(b, bytes)| pollster::block_on(gpu.read_buffer::<u8>(b, bytes.len().next_multiple_of(4))).expect("readback").into_iter().take(bytes.len()).collect())
+        .collect()
+}

@@ -32,6 +32,14 @@ fn params_structs_match_wgsl() {
         [width_px, height_px, radius_px, axis, sigma_px, _pad0, _pad1, _pad2]);
     check_layout!(shaders::NORMAL_MAP, "NormalMapParams", kernels::normal_map::NormalMapParams, [width_px, height_px, min_cross_norm_sq, _pad0]);
     check_layout!(shaders::COLOR_TO_FLOAT, "ColorToFloatParams", kernels::color_to_float::ColorToFloatParams, [width_px, height_px, _pad0, _pad1]);
+    check_layout!(shaders::TSDF_INTEGRATE, "VolumeDesc", webfusion_core::tsdf::VolumeDesc,
+        [dim_x, dim_y, dim_z, max_weight, origin_x_m, origin_y_m, origin_z_m, voxel_size_m, truncation_m, _pad0, _pad1, _pad2]);
+    check_layout!(shaders::TSDF_INTEGRATE, "TsdfIntegrateParams", kernels::tsdf_integrate::TsdfIntegrateParams,
+        [volume, intrinsics, camera_from_world, color_enabled, _pad0, _pad1, _pad2]);
+    check_layout!(shaders::RAYCAST, "RaycastParams", kernels::raycast::RaycastParams,
+        [volume, intrinsics, world_from_camera, min_depth_m, max_depth_m, step_factor, max_steps]);
+    check_layout!(shaders::ICP_REDUCE, "IcpReduceParams", kernels::icp_reduce::IcpReduceParams,
+        [intrinsics, world_from_camera, camera_prev_from_world, dist_thresh_m, cos_angle_thresh, thread_count, huber_delta_m, noise_weighting, _pad0, _pad1, _pad2]);
     check_layout!(shaders::INTENSITY_PYRAMID_DOWN, "IntensityPyramidDownParams", kernels::intensity_pyramid_down::IntensityPyramidDownParams,
         [src_width_px, src_height_px, dst_width_px, dst_height_px]);
     check_layout!(shaders::RGB_REDUCE, "RgbReduceParams", kernels::rgb_reduce::RgbReduceParams,

@@ -1,0 +1,203 @@
+// SPDX-License-Identifier: MIT
+//! `raycast`: an analytic TSDF (a plane and a sphere) renders to its exact depth and normals,
+//! the GPU matches the CPU reference for every output, and rays that meet nothing give NaN / 0.
+//!
+//! Tolerances: where both sides hit, vertex and depth within 1e-4 m, normal components within
+//! 1e-3, shaded and colour bytes within 1 level. The march accumulates t in f32 and the
+//! zero-crossing test is a comparison, so under FMA contraction a ray grazing a silhouette can
+//! hit on one side and miss on the other: at most 0.5 % of the pixels may disagree that way.
+
+use glam::{DQuat, DVec3};
+use webfusion_core::cpu::{self, shared::pack_rgb8};
+use webfusion_core::kernels::GpuIntrinsics;
+use webfusion_core::kernels::raycast::{DEFAULT_MAX_STEPS, DEFAULT_STEP_FACTOR, RaycastParams};
+use webfusion_core::mesh::tsdf_from_sdf;
+use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
+use webfusion_core::{PinholeIntrinsics, Se3};
+use webfusion_tests::{SENTINEL_F32, cast, finish, gpu, run_kernel};
+
+use crate::synthetic::K_SMALL;
+
+const PLANE_Z_M: f32 = 1.5;
+const SPHERE_CENTRE: [f32; 3] = [0.3, 0.1, 1.0];
+const SPHERE_RADIUS_M: f32 = 0.2;
+const MAX_DISAGREEING_FRACTION: f64 = 5e-3;
+
+fn scene_sdf(p: [f32; 3]) -> f32 {
+    let d = [p[0] - SPHERE_CENTRE[0], p[1] - SPHERE_CENTRE[1], p[2] - SPHERE_CENTRE[2]];
+    let sphere = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() - SPHERE_RADIUS_M;
+    (PLANE_Z_M - p[2]).min(sphere)
+}
+
+fn scene() -> (VolumeDesc, Vec<u32>, Vec<u32>) {
+    let config = TsdfConfig::cube(64, 0.04);
+    let desc = config.desc(config.origin_for_first_camera(&Se3::IDENTITY));
+    let voxels = tsdf_from_sdf(&desc, 1, scene_sdf);
+    // Colour: red on the sphere's side of x = 0.1, blue elsewhere.
+    let colors = (0..desc.voxel_count())
+        .map(|i| {
+            let x = (i % desc.dim_x as usize) as f32 * desc.voxel_size_m + desc.origin_x_m;
+            pack_rgb8(if x > 0.1 { [1.0, 0.0, 0.0] } else { [0.0, 0.0, 1.0] })
+        })
+        .collect();
+    (desc, voxels, colors)
+}
+
+struct Images {
+    vertex: Vec<[f32; 4]>,
+    normal: Vec<[f32; 4]>,
+    depth: Vec<f32>,
+    shaded: Vec<u32>,
+    color: Vec<u32>,
+}
+
+fn params(desc: VolumeDesc, k: PinholeIntrinsics, world_from_camera: &Se3) -> RaycastParams {
+    RaycastParams {
+        volume: desc,
+        intrinsics: GpuIntrinsics::from(k),
+        world_from_camera: world_from_camera.to_mat4().to_cols_array_2d(),
+        min_depth_m: 0.3,
+        max_depth_m: 5.0,
+        step_factor: DEFAULT_STEP_FACTOR,
+        max_steps: DEFAULT_MAX_STEPS,
+    }
+}
+
+fn render(p: &RaycastParams, voxels: &[u32], colors: &[u32]) -> (Images, Images) {
+    let gpu = gpu();
+    let n = (p.intrinsics.width_px * p.intrinsics.height_px) as usize;
+    let out = run_kernel(&gpu, &gpu.kernels.raycast, p, &[bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)], &[16 * n, 16 * n, 4 * n, 4 * n, 4 * n], [
+        p.intrinsics.width_px,
+        p.intrinsics.height_px,
+        1,
+    ]);
+    finish(&gpu);
+    let g = Images { vertex: cast(&out[0]), normal: cast(&out[1]), depth: cast(&out[2]), shaded: cast(&out[3]), color: cast(&out[4]) };
+    let mut c = Images { vertex: vec![[0.0; 4]; n], normal: vec![[0.0; 4]; n], depth: vec![0.0; n], shaded: vec![0; n], color: vec![0; n] };
+    cpu::raycast(p, voxels, colors, &mut c.vertex, &mut c.normal, &mut c.depth, &mut c.shaded, &mut c.color);
+    (g, c)
+}
+
+/// Pixels where GPU and CPU disagree beyond the tolerances (hit vs miss counts as one).
+fn disagreements(g: &Images, c: &Images) -> usize {
+    let bytes_close = |a: u32, b: u32| (0..4).all(|i| ((a >> (8 * i)) & 0xff).abs_diff((b >> (8 * i)) & 0xff) <= 1);
+    (0..c.depth.len())
+        .filter(|&i| {
+            let (gh, ch) = (!g.depth[i].is_nan(), !c.depth[i].is_nan());
+            if gh != ch {
+                return true;
+            }
+            if !ch {
+                return !(g.vertex[i].iter().all(|v| v.is_nan()) && g.normal[i].iter().all(|v| v.is_nan()) && g.shaded[i] == 0 && g.color[i] == 0);
+            }
+            let close = |a: &[f32; 4], b: &[f32; 4], tol: f32| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol);
+            !(close(&g.vertex[i], &c.vertex[i], 1e-4)
+                && close(&g.normal[i], &c.normal[i], 1e-3)
+                && (g.depth[i] - c.depth[i]).abs() <= 1e-4
+                && bytes_close(g.shaded[i], c.shaded[i])
+                && bytes_close(g.color[i], c.color[i]))
+        })
+        .count()
+}
+
+fn assert_agree(what: &str, g: &Images, c: &Images) {
+    let n = disagreements(g, c);
+    let allowed = (MAX_DISAGREEING_FRACTION * c.depth.len() as f64).floor() as usize;
+    eprintln!("{what}: {n} of {} pixels disagree (allowed {allowed})", c.depth.len());
+    assert!(n <= allowed, "{what}: {n} pixels disagree, allowed {allowed}");
+}
+
+/// Ray parameter of the analytic first hit (plane or sphere) for pixel (x, y) at identity, and
+/// the closest approach of the ray to the sphere's centre.
+fn analytic_hit(k: &PinholeIntrinsics, x: u32, y: u32) -> (f32, f32) {
+    let ray = DVec3::new((f64::from(x) - f64::from(k.cx_px)) / f64::from(k.fx_px), (f64::from(y) - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
+    let c = DVec3::new(f64::from(SPHERE_CENTRE[0]), f64::from(SPHERE_CENTRE[1]), f64::from(SPHERE_CENTRE[2]));
+    let dir = ray.normalize();
+    let tc = c.dot(dir);
+    let closest = (c - dir * tc).length();
+    let mut depth = f64::from(PLANE_Z_M);
+    if closest < f64::from(SPHERE_RADIUS_M) {
+        let t = tc - (f64::from(SPHERE_RADIUS_M).powi(2) - closest * closest).sqrt();
+        depth = depth.min(t * dir.z);
+    }
+    (depth as f32, closest as f32)
+}
+
+#[test]
+fn plane_and_sphere_render_to_their_true_depth_and_normals() {
+    let (desc, voxels, colors) = scene();
+    let k = K_SMALL;
+    let (g, c) = render(&params(desc, k, &Se3::IDENTITY), &voxels, &colors);
+    assert_agree("identity", &g, &c);
+    let (mut plane, mut sphere) = (0, 0);
+    for y in 0..k.height_px {
+        for x in 0..k.width_px {
+            let i = (y * k.width_px + x) as usize;
+            let (depth, closest) = analytic_hit(&k, x, y);
+            let got = g.depth[i];
+            assert!(!got.is_nan(), "pixel ({x}, {y}) sees the scene");
+            if closest > SPHERE_RADIUS_M + 2.0 * desc.truncation_m {
+                // Away from the sphere the TSDF is linear: trilinear sampling and the crossing
+                // interpolation are exact up to the 16-bit quantisation.
+                plane += 1;
+                assert!((got - PLANE_Z_M).abs() < 1e-4, "plane pixel ({x}, {y}): depth {got}");
+                let n = g.normal[i];
+                assert!(n[0].abs() < 1e-3 && n[1].abs() < 1e-3 && (n[2] + 1.0).abs() < 1e-5, "plane normal {n:?}");
+            } else if closest < SPHERE_RADIUS_M - 0.02 {
+                sphere += 1;
+                assert!((got - depth).abs() < 5e-3, "sphere pixel ({x}, {y}): depth {got} vs {depth}");
+                let p = g.vertex[i];
+                let radial = [p[0] - SPHERE_CENTRE[0], p[1] - SPHERE_CENTRE[1], p[2] - SPHERE_CENTRE[2]];
+                let len = (radial[0] * radial[0] + radial[1] * radial[1] + radial[2] * radial[2]).sqrt();
+                let cos = (0..3).map(|a| radial[a] / len * g.normal[i][a]).sum::<f32>();
+                assert!(cos > (2.0f32).to_radians().cos(), "sphere normal within 2° of radial at ({x}, {y}): cos {cos}");
+            }
+        }
+    }
+    assert!(plane > 500 && sphere > 100, "both surfaces covered ({plane} plane, {sphere} sphere pixels)");
+}
+
+#[test]
+fn gpu_matches_cpu_at_a_rotated_pose_and_the_comparison_can_fail() {
+    let (desc, voxels, colors) = scene();
+    let pose = Se3::new(DQuat::from_axis_angle(DVec3::new(0.3, 1.0, -0.2).normalize(), 0.25), DVec3::new(0.2, -0.1, 0.1));
+    let k = PinholeIntrinsics { fx_px: 129.4, fy_px: 129.2, cx_px: 79.6, cy_px: 63.8, width_px: 160, height_px: 120 };
+    let (g, c) = render(&params(desc, k, &pose), &voxels, &colors);
+    let hits = c.depth.iter().filter(|d| !d.is_nan()).count();
+    assert!(hits > 5000 && hits < c.depth.len(), "a mix of hits and misses ({hits})");
+    assert_agree("rotated", &g, &c);
+    // Negative controls: each kind of error must be counted.
+    let i = c.depth.iter().position(|d| !d.is_nan()).expect("a hit");
+    let base = disagreements(&g, &c);
+    let mut bad = Images { vertex: g.vertex.clone(), normal: g.normal.clone(), depth: g.depth.clone(), shaded: g.shaded.clone(), color: g.color.clone() };
+    bad.depth[i] += 1e-3;
+    assert_eq!(disagreements(&bad, &c), base + 1, "a depth 1 mm off is counted");
+    bad.depth[i] = g.depth[i];
+    bad.normal[i][0] += 0.01;
+    assert_eq!(disagreements(&bad, &c), base + 1, "a tilted normal is counted");
+    bad.normal[i] = g.normal[i];
+    bad.color[i] ^= 0x04;
+    assert_eq!(disagreements(&bad, &c), base + 1, "a colour 4 levels off is counted");
+    bad.color[i] = g.color[i];
+    bad.depth[i] = SENTINEL_F32;
+    assert_eq!(disagreements(&bad, &c), base + 1, "an unwritten depth is counted");
+    let all_wrong = Images { depth: vec![f32::NAN; c.depth.len()], ..bad };
+    assert!(disagreements(&all_wrong, &c) > (MAX_DISAGREEING_FRACTION * c.depth.len() as f64) as usize, "everything missing fails");
+}
+
+#[test]
+fn rays_that_meet_nothing_are_invalid() {
+    let (desc, voxels, colors) = scene();
+    // Looking backwards, out of the volume, and (separately) into never-observed space.
+    let backwards = Se3::new(DQuat::from_rotation_y(std::f64::consts::PI), DVec3::ZERO);
+    let unobserved = vec![0u32; voxels.len()];
+    for (what, pose, vox) in [("backwards", backwards, &voxels), ("unobserved", Se3::IDENTITY, &unobserved)] {
+        let (g, c) = render(&params(desc, K_SMALL, &pose), vox, &colors);
+        for i in 0..g.depth.len() {
+            assert!(g.depth[i].is_nan() && c.depth[i].is_nan(), "{what}: pixel {i} should miss");
+            assert_eq!(g.depth[i].to_bits(), 0x7fc0_0000, "{what}: the invalid marker bit pattern");
+            assert!(g.vertex[i].iter().chain(&g.normal[i]).all(|v| v.to_bits() == 0x7fc0_0000), "{what}: vertex/normal invalid");
+            assert_eq!((g.shaded[i], g.color[i]), (0, 0), "{what}: no colour on a miss");
+        }
+    }
+}
