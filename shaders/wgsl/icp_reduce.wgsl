@@ -12,6 +12,7 @@
 //! floats: [JᵀJ row-major upper triangle (21), Jᵀr (6), r², count, 0, 0, 0].
 #import invalid
 #import camera
+#import normal_equations
 
 struct IcpReduceParams {
     intrinsics: Intrinsics,
@@ -42,19 +43,12 @@ fn kinect_sigma_m(z_m: f32) -> f32 {
 @group(0) @binding(4) var<storage, read> predicted_normal_in_world: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> partial_sums: array<vec4<f32>>;
 
-const WORKGROUP_SIZE: u32 = 128u;
-const SUM_VEC4S: u32 = 8u;
-
-var<workgroup> scratch: array<array<vec4<f32>, SUM_VEC4S>, WORKGROUP_SIZE>;
 
 @compute @workgroup_size(128, 1, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     let k = params.intrinsics;
     let pixel_count = k.width_px * k.height_px;
-    var acc: array<vec4<f32>, SUM_VEC4S>;
-    for (var i = 0u; i < SUM_VEC4S; i++) {
-        acc[i] = vec4<f32>(0.0);
-    }
+    var acc = ne_zero();
     for (var ix = gid.x; ix < pixel_count; ix += params.thread_count) {
         let v_cam = vertex_in_camera[ix];
         let n_cam = normal_in_camera[ix];
@@ -93,38 +87,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation
         }
         // Weighted least squares: scale the row by sqrt(weight).
         let sw = sqrt(weight);
-        let a = cross(v, m.xyz) * sw;
-        let j0 = a.x;
-        let j1 = a.y;
-        let j2 = a.z;
-        let j3 = m.x * sw;
-        let j4 = m.y * sw;
-        let j5 = m.z * sw;
-        let rw = r * sw;
-        acc[0] += vec4<f32>(j0 * j0, j0 * j1, j0 * j2, j0 * j3);
-        acc[1] += vec4<f32>(j0 * j4, j0 * j5, j1 * j1, j1 * j2);
-        acc[2] += vec4<f32>(j1 * j3, j1 * j4, j1 * j5, j2 * j2);
-        acc[3] += vec4<f32>(j2 * j3, j2 * j4, j2 * j5, j3 * j3);
-        acc[4] += vec4<f32>(j3 * j4, j3 * j5, j4 * j4, j4 * j5);
-        acc[5] += vec4<f32>(j5 * j5, j0 * rw, j1 * rw, j2 * rw);
-        acc[6] += vec4<f32>(j3 * rw, j4 * rw, j5 * rw, rw * rw);
-        acc[7] += vec4<f32>(1.0, 0.0, 0.0, 0.0);
+        ne_add_row(&acc, cross(v, m.xyz) * sw, m.xyz * sw, r * sw);
     }
-    for (var i = 0u; i < SUM_VEC4S; i++) {
-        scratch[lid][i] = acc[i];
-    }
-    for (var stride = WORKGROUP_SIZE / 2u; stride > 0u; stride >>= 1u) {
-        workgroupBarrier();
-        if lid < stride {
-            for (var i = 0u; i < SUM_VEC4S; i++) {
-                scratch[lid][i] += scratch[lid + stride][i];
-            }
-        }
-    }
-    workgroupBarrier();
-    if lid == 0u {
-        for (var i = 0u; i < SUM_VEC4S; i++) {
-            partial_sums[wid.x * SUM_VEC4S + i] = scratch[0][i];
-        }
-    }
+    ne_reduce_and_store(acc, lid, wid.x);
 }

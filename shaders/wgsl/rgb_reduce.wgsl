@@ -10,6 +10,7 @@
 //! like `icp_reduce` and writes 32 floats per workgroup in the same layout.
 #import invalid
 #import camera
+#import normal_equations
 
 struct RgbReduceParams {
     intrinsics: Intrinsics,
@@ -29,10 +30,6 @@ struct RgbReduceParams {
 @group(0) @binding(4) var<storage, read> prev_depth_m: array<f32>;
 @group(0) @binding(5) var<storage, read_write> partial_sums: array<vec4<f32>>;
 
-const WORKGROUP_SIZE: u32 = 128u;
-const SUM_VEC4S: u32 = 8u;
-
-var<workgroup> scratch: array<array<vec4<f32>, SUM_VEC4S>, WORKGROUP_SIZE>;
 
 // Bilinear previous intensity at (x, y); the caller keeps 0 <= x < w - 1, 0 <= y < h - 1.
 fn prev_bilinear(x: f32, y: f32) -> f32 {
@@ -51,10 +48,7 @@ fn prev_bilinear(x: f32, y: f32) -> f32 {
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     let k = params.intrinsics;
     let pixel_count = k.width_px * k.height_px;
-    var acc: array<vec4<f32>, SUM_VEC4S>;
-    for (var i = 0u; i < SUM_VEC4S; i++) {
-        acc[i] = vec4<f32>(0.0);
-    }
+    var acc = ne_zero();
     for (var ix = gid.x; ix < pixel_count; ix += params.thread_count) {
         let v_cam = vertex_in_camera[ix];
         if !is_valid_f32(v_cam.z) {
@@ -85,37 +79,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation
         let inv_z = 1.0 / q.z;
         let gp = vec3<f32>(gx * k.fx_px * inv_z, gy * k.fy_px * inv_z, -(gx * k.fx_px * q.x + gy * k.fy_px * q.y) * inv_z * inv_z);
         let gw = (params.world_from_camera_prev * vec4<f32>(gp, 0.0)).xyz;
-        let a = cross(p, gw);
-        let j0 = a.x;
-        let j1 = a.y;
-        let j2 = a.z;
-        let j3 = gw.x;
-        let j4 = gw.y;
-        let j5 = gw.z;
-        acc[0] += vec4<f32>(j0 * j0, j0 * j1, j0 * j2, j0 * j3);
-        acc[1] += vec4<f32>(j0 * j4, j0 * j5, j1 * j1, j1 * j2);
-        acc[2] += vec4<f32>(j1 * j3, j1 * j4, j1 * j5, j2 * j2);
-        acc[3] += vec4<f32>(j2 * j3, j2 * j4, j2 * j5, j3 * j3);
-        acc[4] += vec4<f32>(j3 * j4, j3 * j5, j4 * j4, j4 * j5);
-        acc[5] += vec4<f32>(j5 * j5, j0 * r, j1 * r, j2 * r);
-        acc[6] += vec4<f32>(j3 * r, j4 * r, j5 * r, r * r);
-        acc[7] += vec4<f32>(1.0, 0.0, 0.0, 0.0);
+        ne_add_row(&acc, cross(p, gw), gw, r);
     }
-    for (var i = 0u; i < SUM_VEC4S; i++) {
-        scratch[lid][i] = acc[i];
-    }
-    for (var stride = WORKGROUP_SIZE / 2u; stride > 0u; stride >>= 1u) {
-        workgroupBarrier();
-        if lid < stride {
-            for (var i = 0u; i < SUM_VEC4S; i++) {
-                scratch[lid][i] += scratch[lid + stride][i];
-            }
-        }
-    }
-    workgroupBarrier();
-    if lid == 0u {
-        for (var i = 0u; i < SUM_VEC4S; i++) {
-            partial_sums[wid.x * SUM_VEC4S + i] = scratch[0][i];
-        }
-    }
+    ne_reduce_and_store(acc, lid, wid.x);
 }

@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/icp_reduce.wgsl`: the same per-thread walk and the same
-//! tree reduction order, so only fused multiply-adds separate it from the GPU.
+//! tree reduction order (`reduce_normal_equations`), so only fused multiply-adds separate it
+//! from the GPU.
 
-use super::shared::{cross3, dot3, is_valid_f32, transform_point, transform_vector};
-use crate::kernels::icp_reduce::{IcpReduceParams, SUM_FLOATS, WORKGROUP_SIZE, kinect_sigma_m};
+use super::shared::{cross3, dot3, is_valid_f32, reduce_normal_equations, transform_point, transform_vector};
+use crate::kernels::icp_reduce::{IcpReduceParams, kinect_sigma_m};
 
 /// One point-to-plane correspondence's weighted row (√w J, √w r) (the kernel's loop body):
 /// `None` when the pixel has no valid pair. Shared by the reference and the tracker's diagnostics.
@@ -48,7 +49,7 @@ pub fn icp_row(params: &IcpReduceParams, v_cam: [f32; 4], n_cam: [f32; 4], predi
     Some([a[0], a[1], a[2], m3[0] * sw, m3[1] * sw, m3[2] * sw, r * sw])
 }
 
-/// Fills `partial_sums` (one [`SUM_FLOATS`] block per workgroup) as the kernel does.
+/// Fills `partial_sums` (one block of `SUM_FLOATS` per workgroup) as the kernel does.
 pub fn icp_reduce(
     params: &IcpReduceParams,
     vertex_in_camera: &[[f32; 4]],
@@ -58,34 +59,7 @@ pub fn icp_reduce(
     partial_sums: &mut [f32],
 ) {
     let pixel_count = params.intrinsics.width_px * params.intrinsics.height_px;
-    let workgroups = params.thread_count.div_ceil(WORKGROUP_SIZE);
-    for wid in 0..workgroups {
-        let mut scratch = vec![[0.0f32; SUM_FLOATS]; WORKGROUP_SIZE as usize];
-        for lid in 0..WORKGROUP_SIZE {
-            let acc = &mut scratch[lid as usize];
-            let mut ix = wid * WORKGROUP_SIZE + lid;
-            while ix < pixel_count {
-                let row = icp_row(params, vertex_in_camera[ix as usize], normal_in_camera[ix as usize], predicted_vertex_in_world, predicted_normal_in_world);
-                ix += params.thread_count;
-                let Some([j0, j1, j2, j3, j4, j5, r]) = row else { continue };
-                let terms = [
-                    j0 * j0, j0 * j1, j0 * j2, j0 * j3, j0 * j4, j0 * j5, j1 * j1, j1 * j2, j1 * j3, j1 * j4, j1 * j5, j2 * j2, j2 * j3, j2 * j4, j2 * j5, j3 * j3,
-                    j3 * j4, j3 * j5, j4 * j4, j4 * j5, j5 * j5, j0 * r, j1 * r, j2 * r, j3 * r, j4 * r, j5 * r, r * r, 1.0,
-                ];
-                for (a, t) in acc.iter_mut().zip(terms) {
-                    *a += t;
-                }
-            }
-        }
-        let mut stride = WORKGROUP_SIZE / 2;
-        while stride > 0 {
-            for lid in 0..stride as usize {
-                for i in 0..SUM_FLOATS {
-                    scratch[lid][i] += scratch[lid + stride as usize][i];
-                }
-            }
-            stride >>= 1;
-        }
-        partial_sums[wid as usize * SUM_FLOATS..][..SUM_FLOATS].copy_from_slice(&scratch[0]);
-    }
+    reduce_normal_equations(params.thread_count, pixel_count, partial_sums, |ix| {
+        icp_row(params, vertex_in_camera[ix], normal_in_camera[ix], predicted_vertex_in_world, predicted_normal_in_world)
+    });
 }

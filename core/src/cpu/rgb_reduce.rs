@@ -2,8 +2,7 @@
 //! CPU reference of `shaders/wgsl/rgb_reduce.wgsl`: the same per-thread walk and tree
 //! reduction as the kernel.
 
-use super::shared::{cross3, is_valid_f32, transform_point, transform_vector};
-use crate::kernels::icp_reduce::{SUM_FLOATS, WORKGROUP_SIZE};
+use super::shared::{cross3, is_valid_f32, reduce_normal_equations, transform_point, transform_vector};
 use crate::kernels::rgb_reduce::RgbReduceParams;
 
 fn prev_bilinear(params: &RgbReduceParams, prev_intensity: &[f32], x: f32, y: f32) -> f32 {
@@ -54,34 +53,5 @@ pub fn rgb_row(params: &RgbReduceParams, ix: usize, vertex_in_camera: &[[f32; 4]
 /// Fills `partial_sums` (one block of `SUM_FLOATS` per workgroup) as the kernel does.
 pub fn rgb_reduce(params: &RgbReduceParams, vertex_in_camera: &[[f32; 4]], intensity: &[f32], prev_intensity: &[f32], prev_depth_m: &[f32], partial_sums: &mut [f32]) {
     let pixel_count = params.intrinsics.width_px * params.intrinsics.height_px;
-    let workgroups = params.thread_count.div_ceil(WORKGROUP_SIZE);
-    for wid in 0..workgroups {
-        let mut scratch = vec![[0.0f32; SUM_FLOATS]; WORKGROUP_SIZE as usize];
-        for lid in 0..WORKGROUP_SIZE {
-            let acc = &mut scratch[lid as usize];
-            let mut ix = wid * WORKGROUP_SIZE + lid;
-            while ix < pixel_count {
-                let row = rgb_row(params, ix as usize, vertex_in_camera, intensity, prev_intensity, prev_depth_m);
-                ix += params.thread_count;
-                let Some([j0, j1, j2, j3, j4, j5, r]) = row else { continue };
-                let terms = [
-                    j0 * j0, j0 * j1, j0 * j2, j0 * j3, j0 * j4, j0 * j5, j1 * j1, j1 * j2, j1 * j3, j1 * j4, j1 * j5, j2 * j2, j2 * j3, j2 * j4, j2 * j5, j3 * j3,
-                    j3 * j4, j3 * j5, j4 * j4, j4 * j5, j5 * j5, j0 * r, j1 * r, j2 * r, j3 * r, j4 * r, j5 * r, r * r, 1.0,
-                ];
-                for (a, t) in acc.iter_mut().zip(terms) {
-                    *a += t;
-                }
-            }
-        }
-        let mut stride = WORKGROUP_SIZE / 2;
-        while stride > 0 {
-            for lid in 0..stride as usize {
-                for i in 0..SUM_FLOATS {
-                    scratch[lid][i] += scratch[lid + stride as usize][i];
-                }
-            }
-            stride >>= 1;
-        }
-        partial_sums[wid as usize * SUM_FLOATS..][..SUM_FLOATS].copy_from_slice(&scratch[0]);
-    }
+    reduce_normal_equations(params.thread_count, pixel_count, partial_sums, |ix| rgb_row(params, ix, vertex_in_camera, intensity, prev_intensity, prev_depth_m));
 }

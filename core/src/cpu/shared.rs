@@ -151,3 +151,48 @@ pub fn dot3(a: [f32; 3], b: [f32; 3]) -> f32 {
 pub fn cross3(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
+
+/// Twin of `NE_WORKGROUP_SIZE` in `shared/normal_equations.wgsl`.
+pub const NE_WORKGROUP_SIZE: u32 = 128;
+/// Floats per workgroup sum (8 vec4).
+pub const NE_SUM_FLOATS: usize = 32;
+
+/// Twin of `ne_add_row()`: adds the row `[a (3), b (3), r]` to `acc`.
+pub fn ne_add_row(acc: &mut [f32; NE_SUM_FLOATS], row: [f32; 7]) {
+    let [j0, j1, j2, j3, j4, j5, r] = row;
+    let terms = [
+        j0 * j0, j0 * j1, j0 * j2, j0 * j3, j0 * j4, j0 * j5, j1 * j1, j1 * j2, j1 * j3, j1 * j4, j1 * j5, j2 * j2, j2 * j3, j2 * j4, j2 * j5, j3 * j3, j3 * j4,
+        j3 * j5, j4 * j4, j4 * j5, j5 * j5, j0 * r, j1 * r, j2 * r, j3 * r, j4 * r, j5 * r, r * r, 1.0,
+    ];
+    for (a, t) in acc.iter_mut().zip(terms) {
+        *a += t;
+    }
+}
+
+/// The kernels' grid-stride walk plus `ne_reduce_and_store()`: thread `lid` of workgroup `wid`
+/// visits pixels `wid * 128 + lid`, then every `thread_count`-th; `row(ix)` is the kernel's
+/// loop body. Fills one [`NE_SUM_FLOATS`] block per workgroup in the same tree order.
+pub fn reduce_normal_equations(thread_count: u32, pixel_count: u32, partial_sums: &mut [f32], row: impl Fn(usize) -> Option<[f32; 7]>) {
+    for wid in 0..thread_count.div_ceil(NE_WORKGROUP_SIZE) {
+        let mut scratch = vec![[0.0f32; NE_SUM_FLOATS]; NE_WORKGROUP_SIZE as usize];
+        for lid in 0..NE_WORKGROUP_SIZE {
+            let mut ix = wid * NE_WORKGROUP_SIZE + lid;
+            while ix < pixel_count {
+                if let Some(r) = row(ix as usize) {
+                    ne_add_row(&mut scratch[lid as usize], r);
+                }
+                ix += thread_count;
+            }
+        }
+        let mut stride = NE_WORKGROUP_SIZE as usize / 2;
+        while stride > 0 {
+            for lid in 0..stride {
+                for i in 0..NE_SUM_FLOATS {
+                    scratch[lid][i] += scratch[lid + stride][i];
+                }
+            }
+            stride >>= 1;
+        }
+        partial_sums[wid as usize * NE_SUM_FLOATS..][..NE_SUM_FLOATS].copy_from_slice(&scratch[0]);
+    }
+}

@@ -6,12 +6,12 @@
 use super::GpuIntrinsics;
 use crate::Gpu;
 
-/// Threads per workgroup (must match `WORKGROUP_SIZE` in the WGSL).
-pub const WORKGROUP_SIZE: u32 = 128;
+/// Threads per workgroup (`NE_WORKGROUP_SIZE` in shared/normal_equations.wgsl).
+pub const WORKGROUP_SIZE: u32 = crate::cpu::shared::NE_WORKGROUP_SIZE;
 /// Workgroups per dispatch: each writes one partial sum; the host adds them in f64.
 pub const WORKGROUPS: u32 = 64;
 /// Floats per partial sum: JᵀJ upper triangle (21), Jᵀr (6), r², inlier count, 3 zeros.
-pub const SUM_FLOATS: usize = 32;
+pub const SUM_FLOATS: usize = crate::cpu::shared::NE_SUM_FLOATS;
 
 /// Mirror of WGSL `IcpReduceParams`.
 #[repr(C)]
