@@ -114,6 +114,20 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// A bridge protocol message is malformed.
+    #[error("malformed webfusion protocol message: {message}")]
+    Protocol {
+        /// What is wrong.
+        message: String,
+    },
+    /// A bridge protocol message has a version this build does not speak.
+    #[error("webfusion protocol version {got} is not supported (this build speaks version {supported}); update the bridge or the app so both match")]
+    ProtocolVersion {
+        /// Version in the message.
+        got: u8,
+        /// Version this build speaks.
+        supported: u8,
+    },
     /// Trajectory evaluation found too few ground-truth/estimate pose pairs.
     #[error("{what} needs at least {required} associated pose pairs (timestamps closer than the maximum difference), found {pairs}")]
     TooFewAssociations {

@@ -20,6 +20,7 @@ pub mod kernels;
 pub mod mesh;
 pub mod pose;
 pub mod preprocess;
+pub mod protocol;
 pub mod recording;
 pub mod source;
 pub mod tsdf;

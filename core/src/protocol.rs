@@ -1,0 +1,654 @@
+// SPDX-License-Identifier: MIT
+//! The bridge's WebSocket protocol, shared by the native bridge and the browser app.
+//!
+//! Pure encoding and decoding, no I/O: one [`Message`] per WebSocket binary message.
+//! Every message starts with a 4-byte header, `b"WF"`, the protocol version
+//! ([`PROTOCOL_VERSION`]) and a kind byte; all numbers after it are little-endian.
+//!
+//! | kind | direction | body |
+//! |---|---|---|
+//! | 1 `Hello` | server → client | source name, frame count, calibration, ground truth flag, delivery |
+//! | 2 `Frame` | server → client | sequence, index, timestamps, optional ground-truth pose, depth (RVL), colour |
+//! | 3 `Status` | server → client | playback state, next index, rate, loop, delivery, sent/dropped counts |
+//! | 4 `Error` | server → client | code and message; the server closes after it |
+//! | 16 `Control` | client → server | play, pause, step, seek, rate, loop, delivery |
+//!
+//! A message of another version is rejected with [`Error::Protocol`] naming both versions, so
+//! old and new peers fail loudly instead of misreading each other. Decoding never allocates
+//! more than the message's own length and never panics on hostile input (fuzzed in
+//! `tests/protocol_fuzz.rs`).
+
+use glam::{DQuat, DVec3};
+
+use crate::codec::{ColorCodec, DepthCodec};
+use crate::{ColorImage, DepthImage, Error, PinholeIntrinsics, Result, RgbdCalibration, RgbdFrame, Se3};
+
+/// First two bytes of every message.
+pub const PROTOCOL_MAGIC: [u8; 2] = *b"WF";
+/// The protocol version this build speaks.
+pub const PROTOCOL_VERSION: u8 = 1;
+/// Largest message a client may send; control messages are a few bytes.
+pub const MAX_CLIENT_MESSAGE_BYTES: usize = 1024;
+/// Largest message a server may send (a raw 1280x1024 RGB frame plus depth fits easily).
+pub const MAX_SERVER_MESSAGE_BYTES: usize = 16 << 20;
+/// Longest source name or error message, in bytes.
+pub const MAX_TEXT_BYTES: usize = 4096;
+
+const KIND_HELLO: u8 = 1;
+const KIND_FRAME: u8 = 2;
+const KIND_STATUS: u8 = 3;
+const KIND_ERROR: u8 = 4;
+const KIND_CONTROL: u8 = 16;
+
+/// How a server delivers frames to one client.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Delivery {
+    /// Every frame, in order; the source waits for the client (replay, evaluation).
+    Lossless,
+    /// Newest frames first: a bounded queue drops stale frames for a slow client.
+    Live,
+}
+
+/// Playback state of a client's session.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlaybackState {
+    /// Waiting for `Play` or `Step`.
+    Paused,
+    /// Sending frames.
+    Playing,
+    /// Past the last frame and not looping.
+    Ended,
+}
+
+/// Colour payload encoding on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WireColor {
+    /// Packed RGB8, `3 * width * height` bytes.
+    Raw,
+    /// A compressed image file.
+    Coded(ColorCodec),
+}
+
+/// A command from a client.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Control {
+    /// Start or resume sending.
+    Play,
+    /// Stop sending after the current frame.
+    Pause,
+    /// Send the next frame and pause.
+    Step,
+    /// Continue from this frame index.
+    Seek(u64),
+    /// Replay speed relative to the recorded timestamps; 0 sends as fast as the client reads.
+    Rate(f32),
+    /// Whether to restart at frame 0 after the last one.
+    Loop(bool),
+    /// Switch delivery mode.
+    Delivery(Delivery),
+}
+
+/// What the server tells a client first.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Hello {
+    /// Source name (directory or file name, or device URI).
+    pub source_name: String,
+    /// Frames in the source; `None` for a live device.
+    pub frame_count: Option<u64>,
+    /// Calibration of every frame.
+    pub calibration: RgbdCalibration,
+    /// Whether frames carry ground-truth poses.
+    pub has_ground_truth: bool,
+    /// Delivery mode the session starts in.
+    pub delivery: Delivery,
+}
+
+/// One RGB-D frame, compressed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameMessage {
+    /// Position in this client's stream, from 0, counting dropped frames too (gaps = drops).
+    pub sequence: u64,
+    /// Index of the frame in its source.
+    pub index: u64,
+    /// Depth capture time, nanoseconds.
+    pub depth_timestamp_ns: i64,
+    /// Colour capture time, nanoseconds.
+    pub color_timestamp_ns: i64,
+    /// Ground-truth `world_from_camera` at the depth timestamp, when the source has it.
+    pub ground_truth: Option<Se3>,
+    /// Depth encoding (lossless).
+    pub depth_codec: DepthCodec,
+    /// Depth payload.
+    pub depth_payload: Vec<u8>,
+    /// Colour encoding.
+    pub color: WireColor,
+    /// Colour payload.
+    pub color_payload: Vec<u8>,
+}
+
+/// A session's playback status, sent after every control and at the end.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Status {
+    /// Playback state.
+    pub state: PlaybackState,
+    /// Index of the next frame to send.
+    pub next_index: u64,
+    /// Replay rate (0 = as fast as the client reads).
+    pub rate: f32,
+    /// Whether playback loops.
+    pub looping: bool,
+    /// Delivery mode.
+    pub delivery: Delivery,
+    /// Frames sent to this client.
+    pub frames_sent: u64,
+    /// Frames dropped for this client (live delivery only).
+    pub frames_dropped: u64,
+}
+
+/// Why the server is closing a session.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u16)]
+pub enum ErrorCode {
+    /// The client sent a message the server cannot decode.
+    MalformedMessage = 1,
+    /// The client speaks another protocol version.
+    UnsupportedVersion = 2,
+    /// The source failed (unreadable frame, device gone).
+    SourceFailed = 3,
+    /// A control had an invalid argument (seek past the end, negative rate).
+    InvalidControl = 4,
+}
+
+/// One protocol message.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Message {
+    /// Server → client, first message of a session.
+    Hello(Hello),
+    /// Server → client.
+    Frame(FrameMessage),
+    /// Server → client.
+    Status(Status),
+    /// Server → client; the server closes after it.
+    Error {
+        /// Machine-readable reason.
+        code: ErrorCode,
+        /// Human-readable reason.
+        message: String,
+    },
+    /// Client → server.
+    Control(Control),
+}
+
+impl FrameMessage {
+    /// Decodes the payloads into a frame of `calibration`'s size.
+    pub fn decode_images(&self, calibration: &RgbdCalibration) -> Result<RgbdFrame> {
+        let (w, h) = (calibration.intrinsics.width_px, calibration.intrinsics.height_px);
+        let depth: DepthImage = self.depth_codec.decode(&self.depth_payload, w, h)?;
+        let color = match self.color {
+            WireColor::Raw => ColorImage::new(w, h, self.color_payload.clone())
+                .map_err(|_| protocol_error(format!("raw colour payload has {} bytes, {w}x{h} RGB needs {}", self.color_payload.len(), 3 * w as usize * h as usize)))?,
+            WireColor::Coded(codec) => codec.decode(&self.color_payload, w, h)?,
+        };
+        Ok(RgbdFrame { index: self.index, depth_timestamp_ns: self.depth_timestamp_ns, color_timestamp_ns: self.color_timestamp_ns, depth, color })
+    }
+}
+
+fn protocol_error(message: String) -> Error {
+    Error::Protocol { message }
+}
+
+impl Message {
+    /// Encodes the message as one WebSocket binary payload.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut w = Writer(Vec::with_capacity(self.encoded_len_hint()));
+        w.bytes(&PROTOCOL_MAGIC);
+        w.u8(PROTOCOL_VERSION);
+        match self {
+            Message::Hello(hello) => {
+                w.u8(KIND_HELLO);
+                w.text(&hello.source_name);
+                w.u64(hello.frame_count.unwrap_or(u64::MAX));
+                let k = &hello.calibration.intrinsics;
+                w.u32(k.width_px);
+                w.u32(k.height_px);
+                for v in [k.fx_px, k.fy_px, k.cx_px, k.cy_px, hello.calibration.depth_units_per_metre] {
+                    w.f32(v);
+                }
+                w.u8(u8::from(hello.has_ground_truth));
+                w.u8(delivery_id(hello.delivery));
+            }
+            Message::Frame(frame) => {
+                w.u8(KIND_FRAME);
+                w.u64(frame.sequence);
+                w.u64(frame.index);
+                w.i64(frame.depth_timestamp_ns);
+                w.i64(frame.color_timestamp_ns);
+                match &frame.ground_truth {
+                    None => w.u8(0),
+                    Some(pose) => {
+                        w.u8(1);
+                        let (t, q) = (pose.translation_m, pose.rotation);
+                        for v in [t.x, t.y, t.z, q.x, q.y, q.z, q.w] {
+                            w.f64(v);
+                        }
+                    }
+                }
+                w.u8(frame.depth_codec.id());
+                w.blob(&frame.depth_payload);
+                w.u8(match frame.color {
+                    WireColor::Raw => 0,
+                    WireColor::Coded(codec) => codec.id(),
+                });
+                w.blob(&frame.color_payload);
+            }
+            Message::Status(status) => {
+                w.u8(KIND_STATUS);
+                w.u8(match status.state {
+                    PlaybackState::Paused => 0,
+                    PlaybackState::Playing => 1,
+                    PlaybackState::Ended => 2,
+                });
+                w.u64(status.next_index);
+                w.f32(status.rate);
+                w.u8(u8::from(status.looping));
+                w.u8(delivery_id(status.delivery));
+                w.u64(status.frames_sent);
+                w.u64(status.frames_dropped);
+            }
+            Message::Error { code, message } => {
+                w.u8(KIND_ERROR);
+                w.u16(*code as u16);
+                w.text(message);
+            }
+            Message::Control(control) => {
+                w.u8(KIND_CONTROL);
+                match *control {
+                    Control::Play => w.u8(1),
+                    Control::Pause => w.u8(2),
+                    Control::Step => w.u8(3),
+                    Control::Seek(index) => {
+                        w.u8(4);
+                        w.u64(index);
+                    }
+                    Control::Rate(rate) => {
+                        w.u8(5);
+                        w.f32(rate);
+                    }
+                    Control::Loop(on) => {
+                        w.u8(6);
+                        w.u8(u8::from(on));
+                    }
+                    Control::Delivery(delivery) => {
+                        w.u8(7);
+                        w.u8(delivery_id(delivery));
+                    }
+                }
+            }
+        }
+        w.0
+    }
+
+    fn encoded_len_hint(&self) -> usize {
+        match self {
+            Message::Frame(f) => 128 + f.depth_payload.len() + f.color_payload.len(),
+            _ => 64,
+        }
+    }
+
+    /// Decodes one message; every malformed input is an [`Error::Protocol`] naming the problem.
+    pub fn decode(bytes: &[u8]) -> Result<Message> {
+        let mut r = Reader { bytes, at: 0 };
+        let magic = r.take(2, "magic")?;
+        if magic != PROTOCOL_MAGIC {
+            return Err(protocol_error(format!("not a webfusion message (starts with {magic:02x?}, expected \"WF\")")));
+        }
+        let version = r.u8("version")?;
+        if version != PROTOCOL_VERSION {
+            return Err(Error::ProtocolVersion { got: version, supported: PROTOCOL_VERSION });
+        }
+        let kind = r.u8("kind")?;
+        let message = match kind {
+            KIND_HELLO => {
+                let source_name = r.text("source name")?;
+                let frame_count = match r.u64("frame count")? {
+                    u64::MAX => None,
+                    n => Some(n),
+                };
+                let width_px = r.u32("width")?;
+                let height_px = r.u32("height")?;
+                let [fx_px, fy_px, cx_px, cy_px, depth_units_per_metre] =
+                    [r.f32("fx")?, r.f32("fy")?, r.f32("cx")?, r.f32("cy")?, r.f32("depth units per metre")?];
+                if width_px == 0 || height_px == 0 || width_px > 8192 || height_px > 8192 {
+                    return Err(protocol_error(format!("hello: image size {width_px}x{height_px} out of range")));
+                }
+                if ![fx_px, fy_px, cx_px, cy_px, depth_units_per_metre].iter().all(|v| v.is_finite()) || !(fx_px > 0.0 && fy_px > 0.0 && depth_units_per_metre > 0.0) {
+                    return Err(protocol_error("hello: calibration values must be finite and positive".to_owned()));
+                }
+                let intrinsics = PinholeIntrinsics { fx_px, fy_px, cx_px, cy_px, width_px, height_px };
+                let has_ground_truth = r.bool("ground truth flag")?;
+                let delivery = r.delivery()?;
+                Message::Hello(Hello { source_name, frame_count, calibration: RgbdCalibration { intrinsics, depth_units_per_metre }, has_ground_truth, delivery })
+            }
+            KIND_FRAME => {
+                let sequence = r.u64("sequence")?;
+                let index = r.u64("index")?;
+                let depth_timestamp_ns = r.i64("depth timestamp")?;
+                let color_timestamp_ns = r.i64("colour timestamp")?;
+                let ground_truth = if r.bool("ground truth flag")? {
+                    let mut v = [0.0_f64; 7];
+                    for slot in &mut v {
+                        *slot = r.f64("ground-truth pose")?;
+                    }
+                    let rotation = DQuat::from_xyzw(v[3], v[4], v[5], v[6]);
+                    if !v.iter().all(|x| x.is_finite()) || (rotation.length() - 1.0).abs() > 1e-3 {
+                        return Err(protocol_error("frame: ground-truth pose is not finite or its quaternion is not unit".to_owned()));
+                    }
+                    Some(Se3::new(rotation.normalize(), DVec3::new(v[0], v[1], v[2])))
+                } else {
+                    None
+                };
+                let depth_id = r.u8("depth codec")?;
+                let depth_codec = DepthCodec::from_id(depth_id).ok_or_else(|| protocol_error(format!("frame: unknown depth codec id {depth_id}")))?;
+                let depth_payload = r.blob("depth payload")?.to_vec();
+                let color = match r.u8("colour codec")? {
+                    0 => WireColor::Raw,
+                    id => WireColor::Coded(ColorCodec::from_id(id).ok_or_else(|| protocol_error(format!("frame: unknown colour codec id {id}")))?),
+                };
+                let color_payload = r.blob("colour payload")?.to_vec();
+                Message::Frame(FrameMessage { sequence, index, depth_timestamp_ns, color_timestamp_ns, ground_truth, depth_codec, depth_payload, color, color_payload })
+            }
+            KIND_STATUS => {
+                let state = match r.u8("state")? {
+                    0 => PlaybackState::Paused,
+                    1 => PlaybackState::Playing,
+                    2 => PlaybackState::Ended,
+                    other => return Err(protocol_error(format!("status: unknown playback state {other}"))),
+                };
+                let next_index = r.u64("next index")?;
+                let rate = r.f32("rate")?;
+                let looping = r.bool("loop flag")?;
+                let delivery = r.delivery()?;
+                let frames_sent = r.u64("frames sent")?;
+                let frames_dropped = r.u64("frames dropped")?;
+                Message::Status(Status { state, next_index, rate, looping, delivery, frames_sent, frames_dropped })
+            }
+            KIND_ERROR => {
+                let code = match r.u16("error code")? {
+                    1 => ErrorCode::MalformedMessage,
+                    2 => ErrorCode::UnsupportedVersion,
+                    3 => ErrorCode::SourceFailed,
+                    4 => ErrorCode::InvalidControl,
+                    other => return Err(protocol_error(format!("error: unknown code {other}"))),
+                };
+                Message::Error { code, message: r.text("error message")? }
+            }
+            KIND_CONTROL => {
+                let op = r.u8("control op")?;
+                Message::Control(match op {
+                    1 => Control::Play,
+                    2 => Control::Pause,
+                    3 => Control::Step,
+                    4 => Control::Seek(r.u64("seek index")?),
+                    5 => {
+                        let rate = r.f32("rate")?;
+                        if !(rate.is_finite() && rate >= 0.0 && rate <= 1000.0) {
+                            return Err(protocol_error(format!("control: rate {rate} outside 0..=1000")));
+                        }
+                        Control::Rate(rate)
+                    }
+                    6 => Control::Loop(r.bool("loop flag")?),
+                    7 => Control::Delivery(r.delivery()?),
+                    other => return Err(protocol_error(format!("control: unknown op {other}"))),
+                })
+            }
+            other => return Err(protocol_error(format!("unknown message kind {other}"))),
+        };
+        if r.at != bytes.len() {
+            return Err(protocol_error(format!("{} trailing bytes after the message", bytes.len() - r.at)));
+        }
+        Ok(message)
+    }
+}
+
+fn delivery_id(delivery: Delivery) -> u8 {
+    match delivery {
+        Delivery::Lossless => 0,
+        Delivery::Live => 1,
+    }
+}
+
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn bytes(&mut self, b: &[u8]) {
+        self.0.extend_from_slice(b);
+    }
+    fn u8(&mut self, v: u8) {
+        self.0.push(v);
+    }
+    fn u16(&mut self, v: u16) {
+        self.bytes(&v.to_le_bytes());
+    }
+    fn u32(&mut self, v: u32) {
+        self.bytes(&v.to_le_bytes());
+    }
+    fn u64(&mut self, v: u64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    fn i64(&mut self, v: i64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    fn f32(&mut self, v: f32) {
+        self.bytes(&v.to_le_bytes());
+    }
+    fn f64(&mut self, v: f64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    /// u16 length + UTF-8, cut at [`MAX_TEXT_BYTES`] on a character boundary.
+    fn text(&mut self, s: &str) {
+        let mut end = s.len().min(MAX_TEXT_BYTES);
+        while !s.is_char_boundary(end) {
+            end -= 1;
+        }
+        self.u16(end as u16);
+        self.bytes(&s.as_bytes()[..end]);
+    }
+    /// u32 length + bytes.
+    fn blob(&mut self, b: &[u8]) {
+        self.u32(u32::try_from(b.len()).unwrap_or(u32::MAX));
+        self.bytes(b);
+    }
+}
+
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8]> {
+        let remaining = self.bytes.len() - self.at;
+        if n > remaining {
+            return Err(protocol_error(format!("message truncated in the {what}: needs {n} bytes at offset {}, {remaining} left", self.at)));
+        }
+        let slice = &self.bytes[self.at..self.at + n];
+        self.at += n;
+        Ok(slice)
+    }
+    fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
+        let mut out = [0_u8; N];
+        out.copy_from_slice(self.take(N, what)?);
+        Ok(out)
+    }
+    fn u8(&mut self, what: &str) -> Result<u8> {
+        Ok(self.take(1, what)?[0])
+    }
+    fn bool(&mut self, what: &str) -> Result<bool> {
+        match self.u8(what)? {
+            0 => Ok(false),
+            1 => Ok(true),
+            other => Err(protocol_error(format!("{what} must be 0 or 1, got {other}"))),
+        }
+    }
+    fn u16(&mut self, what: &str) -> Result<u16> {
+        Ok(u16::from_le_bytes(self.array(what)?))
+    }
+    fn u32(&mut self, what: &str) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.array(what)?))
+    }
+    fn u64(&mut self, what: &str) -> Result<u64> {
+        Ok(u64::from_le_bytes(self.array(what)?))
+    }
+    fn i64(&mut self, what: &str) -> Result<i64> {
+        Ok(i64::from_le_bytes(self.array(what)?))
+    }
+    fn f32(&mut self, what: &str) -> Result<f32> {
+        Ok(f32::from_le_bytes(self.array(what)?))
+    }
+    fn f64(&mut self, what: &str) -> Result<f64> {
+        Ok(f64::from_le_bytes(self.array(what)?))
+    }
+    fn text(&mut self, what: &str) -> Result<String> {
+        let len = usize::from(self.u16(what)?);
+        if len > MAX_TEXT_BYTES {
+            return Err(protocol_error(format!("{what} is {len} bytes, more than {MAX_TEXT_BYTES}")));
+        }
+        let bytes = self.take(len, what)?;
+        String::from_utf8(bytes.to_vec()).map_err(|_| protocol_error(format!("{what} is not UTF-8")))
+    }
+    fn blob(&mut self, what: &str) -> Result<&'a [u8]> {
+        let len = self.u32(what)? as usize;
+        self.take(len, what)
+    }
+    fn delivery(&mut self) -> Result<Delivery> {
+        match self.u8("delivery mode")? {
+            0 => Ok(Delivery::Lossless),
+            1 => Ok(Delivery::Live),
+            other => Err(protocol_error(format!("unknown delivery mode {other}"))),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::TUM_FREIBURG1;
+
+    fn calibration() -> RgbdCalibration {
+        RgbdCalibration { intrinsics: TUM_FREIBURG1, depth_units_per_metre: 5000.0 }
+    }
+
+    fn samples() -> Vec<Message> {
+        vec![
+            Message::Hello(Hello { source_name: "fr1_rpy ü".into(), frame_count: Some(100), calibration: calibration(), has_ground_truth: true, delivery: Delivery::Lossless }),
+            Message::Hello(Hello { source_name: String::new(), frame_count: None, calibration: calibration(), has_ground_truth: false, delivery: Delivery::Live }),
+            Message::Frame(FrameMessage {
+                sequence: 7,
+                index: 3,
+                depth_timestamp_ns: 1_305_031_910_765_238_000,
+                color_timestamp_ns: -5,
+                ground_truth: Some(Se3::new(DQuat::from_rotation_y(0.3), DVec3::new(1.0, -2.0, 0.5))),
+                depth_codec: DepthCodec::Rvl,
+                depth_payload: vec![1, 2, 3],
+                color: WireColor::Coded(ColorCodec::Jpeg),
+                color_payload: vec![9; 10],
+            }),
+            Message::Frame(FrameMessage {
+                sequence: 0,
+                index: 0,
+                depth_timestamp_ns: 0,
+                color_timestamp_ns: 0,
+                ground_truth: None,
+                depth_codec: DepthCodec::RvlDeflate,
+                depth_payload: vec![],
+                color: WireColor::Raw,
+                color_payload: vec![],
+            }),
+            Message::Status(Status { state: PlaybackState::Ended, next_index: 100, rate: 1.5, looping: true, delivery: Delivery::Live, frames_sent: 90, frames_dropped: 10 }),
+            Message::Error { code: ErrorCode::MalformedMessage, message: "bad".into() },
+            Message::Control(Control::Play),
+            Message::Control(Control::Pause),
+            Message::Control(Control::Step),
+            Message::Control(Control::Seek(42)),
+            Message::Control(Control::Rate(0.0)),
+            Message::Control(Control::Loop(true)),
+            Message::Control(Control::Delivery(Delivery::Live)),
+        ]
+    }
+
+    #[test]
+    fn every_message_round_trips() {
+        for message in samples() {
+            let bytes = message.encode();
+            assert_eq!(Message::decode(&bytes).expect("decoding"), message, "round trip");
+        }
+    }
+
+    #[test]
+    fn every_truncation_and_extension_is_an_error() {
+        for message in samples() {
+            let bytes = message.encode();
+            for len in 0..bytes.len() {
+                assert!(Message::decode(&bytes[..len]).is_err(), "{message:?} cut to {len} bytes decoded");
+            }
+            let mut longer = bytes.clone();
+            longer.push(0);
+            assert!(Message::decode(&longer).is_err(), "trailing byte accepted");
+        }
+    }
+
+    #[test]
+    fn other_versions_are_rejected_by_name() {
+        let mut bytes = Message::Control(Control::Play).encode();
+        bytes[2] = PROTOCOL_VERSION + 1;
+        let err = Message::decode(&bytes).expect_err("version 2 accepted");
+        assert!(matches!(err, Error::ProtocolVersion { got: 2, supported: 1 }), "{err}");
+        assert!(err.to_string().contains("version 2"), "{err}");
+    }
+
+    #[test]
+    fn invalid_fields_are_rejected() {
+        let mut rate = Message::Control(Control::Rate(1.0)).encode();
+        rate[5..9].copy_from_slice(&(-1.0_f32).to_le_bytes());
+        assert!(Message::decode(&rate).is_err(), "negative rate");
+        rate[5..9].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(Message::decode(&rate).is_err(), "NaN rate");
+        let mut op = Message::Control(Control::Play).encode();
+        op[4] = 99;
+        assert!(Message::decode(&op).is_err(), "unknown op");
+        let mut kind = Message::Control(Control::Play).encode();
+        kind[3] = 200;
+        assert!(Message::decode(&kind).is_err(), "unknown kind");
+        assert!(Message::decode(b"XX\x01\x10\x01").is_err(), "bad magic");
+        // A blob length far beyond the message must fail without allocating it.
+        let mut frame = samples()[3].encode();
+        let depth_len_at = 4 + 8 + 8 + 8 + 8 + 1 + 1;
+        frame[depth_len_at..depth_len_at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(Message::decode(&frame).is_err(), "huge blob length");
+    }
+
+    #[test]
+    fn frame_images_decode_with_the_calibration() {
+        let cal = calibration();
+        let (w, h) = (cal.intrinsics.width_px, cal.intrinsics.height_px);
+        let depth = DepthImage::new(w, h, (0..w * h).map(|i| (i % 7000) as u16).collect()).expect("depth");
+        let color = ColorImage::new(w, h, (0..3 * w * h).map(|i| (i % 251) as u8).collect()).expect("colour");
+        let message = FrameMessage {
+            sequence: 0,
+            index: 5,
+            depth_timestamp_ns: 1,
+            color_timestamp_ns: 2,
+            ground_truth: None,
+            depth_codec: DepthCodec::Rvl,
+            depth_payload: DepthCodec::Rvl.encode(&depth),
+            color: WireColor::Raw,
+            color_payload: color.rgb8.clone(),
+        };
+        let frame = message.decode_images(&cal).expect("decoding");
+        assert_eq!(frame.depth, depth, "depth");
+        assert_eq!(frame.color, color, "colour");
+        let mut short = message.clone();
+        short.color_payload.pop();
+        assert!(matches!(short.decode_images(&cal), Err(Error::Protocol { .. })), "short raw colour");
+    }
+}
