@@ -6,6 +6,7 @@ mod calib;
 mod eval;
 mod reconstruct;
 mod record;
+mod serve;
 mod timing;
 
 use std::path::PathBuf;
@@ -20,7 +21,7 @@ use crate::calib::CalibrationArgs;
 use crate::timing::{StageTimes, Stopwatch};
 
 /// The bundled sample log (TUM fr1/rpy, 100 frames, CC BY 4.0; see data/README.md).
-const DEFAULT_SAMPLE: &str = "data/sample/fr1_rpy.wfr";
+pub(crate) const DEFAULT_SAMPLE: &str = "data/sample/fr1_rpy.wfr";
 
 #[derive(Parser)]
 #[command(name = "webfusion", version, about = "Real-time RGB-D reconstruction on WebGPU/Vulkan: native tools")]
@@ -46,6 +47,8 @@ enum Command {
     Reconstruct(reconstruct::ReconstructArgs),
     /// Convert any source (TUM directory, recording) into a `.wfr` recording.
     Record(record::RecordArgs),
+    /// Serve the web app and stream a source's frames to WebSocket clients on one port.
+    Serve(serve::ServeArgs),
     /// Trajectory error of an estimate against ground truth (TUM files): ATE and RPE as evo computes them.
     Eval(eval::EvalArgs),
 }
@@ -89,12 +92,18 @@ fn main() -> anyhow::Result<()> {
         Command::Bench(args) => bench(&options, &args),
         Command::Record(args) => record::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::Serve(args) => serve::run(args),
         Command::Reconstruct(args) => reconstruct::run(&options, &args),
     }
 }
 
 fn open(source: &std::path::Path, calibration: &CalibrationArgs) -> anyhow::Result<Box<dyn FrameSource>> {
-    open_source(source, calibration.resolve()?).with_context(|| format!("opening source {}", source.display()))
+    open_with(source, calibration.resolve()?)
+}
+
+/// Opens a source with an already resolved calibration override.
+pub(crate) fn open_with(source: &std::path::Path, calibration: Option<webfusion_core::RgbdCalibration>) -> anyhow::Result<Box<dyn FrameSource>> {
+    open_source(source, calibration).with_context(|| format!("opening source {}", source.display()))
 }
 
 fn gpu(options: &GpuOptions) -> anyhow::Result<Gpu> {

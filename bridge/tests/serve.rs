@@ -1,0 +1,351 @@
+// SPDX-License-Identifier: MIT
+//! `webfusion serve` over real WebSocket connections on 127.0.0.1: lossless replay is
+//! bit-identical, seek/pause/step work, live delivery drops only for a slow client, a
+//! malformed client closes alone, and the token, Origin and bind rules hold.
+
+use std::io::BufRead as _;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use futures_util::{SinkExt as _, StreamExt as _};
+use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+use tokio_tungstenite::tungstenite::client::IntoClientRequest as _;
+use tokio_tungstenite::tungstenite::{self, Message as WsMessage};
+use webfusion_core::codec::DepthCodec;
+use webfusion_core::protocol::{Control, Delivery, ErrorCode, FrameMessage, Hello, Message, PlaybackState, Status, WireColor};
+use webfusion_core::recording::RecordingReader;
+use webfusion_core::source::{FrameSource, open_source};
+
+const TUM_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/tum_fr1_rpy_0-99");
+const SAMPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/sample/fr1_rpy.wfr");
+/// Longest wait for any one message; generous for a loaded CI machine.
+const RECV_TIMEOUT: Duration = Duration::from_secs(60);
+
+type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// A running `webfusion serve`, killed on drop.
+struct Server {
+    child: Child,
+    addr: String,
+}
+
+impl Server {
+    fn start(args: &[&str]) -> Server {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_webfusion"))
+            .arg("serve")
+            .args(["--bind", "127.0.0.1:0"])
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("starting webfusion serve");
+        let stdout = child.stdout.take().expect("stdout");
+        let mut line = String::new();
+        std::io::BufReader::new(stdout).read_line(&mut line).expect("reading the URL line");
+        let addr = line.split("http://").nth(1).and_then(|rest| rest.split('/').next()).unwrap_or_else(|| panic!("no URL in {line:?}")).to_owned();
+        Server { child, addr }
+    }
+
+    async fn connect(&self) -> Socket {
+        self.connect_with("", None).await.expect("connecting")
+    }
+
+    async fn connect_with(&self, query: &str, origin: Option<&str>) -> Result<Socket, tungstenite::Error> {
+        let mut request = format!("ws://{}/ws{query}", self.addr).into_client_request()?;
+        if let Some(origin) = origin {
+            request.headers_mut().insert("Origin", origin.parse().expect("origin header"));
+        }
+        let (socket, _) = tokio_tungstenite::connect_async(request).await?;
+        Ok(socket)
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+async fn send(socket: &mut Socket, control: Control) {
+    socket.send(WsMessage::Binary(Message::Control(control).encode().into())).await.expect("sending a control");
+}
+
+/// The next protocol message, or `None` when the server closed.
+async fn recv(socket: &mut Socket) -> Option<Message> {
+    loop {
+        let message = tokio::time::timeout(RECV_TIMEOUT, socket.next()).await.expect("timed out waiting for the server")?;
+        match message.expect("WebSocket error") {
+            WsMessage::Binary(bytes) => return Some(Message::decode(&bytes).expect("server sent a malformed message")),
+            WsMessage::Close(_) => return None,
+            _ => {}
+        }
+    }
+}
+
+/// The session's greeting: hello, then the initial paused status.
+async fn hello(socket: &mut Socket) -> Hello {
+    let hello = match recv(socket).await {
+        Some(Message::Hello(hello)) => hello,
+        other => panic!("expected hello, got {other:?}"),
+    };
+    match recv(socket).await {
+        Some(Message::Status(status)) => assert_eq!((status.state, status.next_index), (PlaybackState::Paused, 0), "initial status"),
+        other => panic!("expected the initial status, got {other:?}"),
+    }
+    hello
+}
+
+async fn next_frame(socket: &mut Socket) -> FrameMessage {
+    loop {
+        match recv(socket).await {
+            Some(Message::Frame(frame)) => return frame,
+            Some(Message::Status(_)) => {}
+            other => panic!("expected a frame, got {other:?}"),
+        }
+    }
+}
+
+/// Reads frames until a status with `state`; returns the frames and that status.
+async fn frames_until(socket: &mut Socket, state: PlaybackState) -> (Vec<FrameMessage>, Status) {
+    let mut frames = Vec::new();
+    loop {
+        match recv(socket).await {
+            Some(Message::Frame(frame)) => frames.push(frame),
+            Some(Message::Status(status)) if status.state == state => return (frames, status),
+            Some(Message::Status(_)) => {}
+            other => panic!("expected frames and a status, got {other:?}"),
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn lossless_replay_of_a_tum_directory_is_bit_identical() {
+    let server = Server::start(&["--source", TUM_DIR, "--color", "raw"]);
+    let mut socket = server.connect().await;
+    let hello = hello(&mut socket).await;
+    let mut dataset = open_source(Path::new(TUM_DIR), None).expect("opening the TUM frames");
+    assert_eq!(hello.frame_count, Some(dataset.frame_count() as u64), "frame count");
+    assert_eq!(hello.calibration, dataset.calibration(), "calibration");
+    assert!(hello.has_ground_truth, "ground truth flag");
+    assert_eq!(hello.delivery, Delivery::Lossless, "default delivery");
+    send(&mut socket, Control::Rate(0.0)).await;
+    send(&mut socket, Control::Play).await;
+    let (frames, status) = frames_until(&mut socket, PlaybackState::Ended).await;
+    assert_eq!(frames.len(), dataset.frame_count(), "every frame arrives");
+    assert_eq!(status.frames_dropped, 0, "lossless drops nothing");
+    for (i, message) in frames.iter().enumerate() {
+        assert_eq!((message.sequence, message.index), (i as u64, i as u64), "in order");
+        assert_eq!((message.depth_codec, message.color), (DepthCodec::Rvl, WireColor::Raw), "wire codecs");
+        let received = message.decode_images(&hello.calibration).expect("decoding a frame");
+        let expected = dataset.read_frame(i).expect("reading the frame from disk");
+        assert_eq!(received, expected, "frame {i} differs from the file");
+    }
+    let with_pose = frames.iter().filter(|f| f.ground_truth.is_some()).count();
+    assert!(with_pose >= 95, "only {with_pose} of 100 frames carry ground truth");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recording_streams_its_own_bytes() {
+    let server = Server::start(&["--source", SAMPLE]);
+    let mut socket = server.connect().await;
+    let hello = hello(&mut socket).await;
+    let mut reader = RecordingReader::open(SAMPLE).expect("opening the sample");
+    assert_eq!(hello.calibration, reader.calibration(), "calibration");
+    for index in [0_u64, 37, 99] {
+        send(&mut socket, Control::Seek(index)).await;
+        send(&mut socket, Control::Step).await;
+        let frame = next_frame(&mut socket).await;
+        let stored = reader.read_encoded_frame(index as usize).expect("reading the stored frame");
+        assert_eq!(frame.index, index, "seeked frame");
+        assert_eq!((frame.depth_codec, frame.color), (reader.depth_codec(), WireColor::Coded(reader.color_codec())), "codecs passed through");
+        assert_eq!((&frame.depth_payload, &frame.color_payload), (&stored.depth_payload, &stored.color_payload), "payload bytes of frame {index}");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn seek_pause_and_step_control_playback() {
+    let server = Server::start(&["--source", SAMPLE]);
+    let mut socket = server.connect().await;
+    hello(&mut socket).await;
+    send(&mut socket, Control::Seek(50)).await;
+    send(&mut socket, Control::Step).await;
+    let (frames, status) = frames_until(&mut socket, PlaybackState::Paused).await;
+    // The first Paused status answers the seek; the step's frame and status follow.
+    assert!(frames.is_empty(), "a frame before the step: {:?}", frames.iter().map(|f| f.index).collect::<Vec<_>>());
+    assert_eq!(status.next_index, 50, "after seek");
+    assert_eq!(next_frame(&mut socket).await.index, 50, "step sends the seeked frame");
+    send(&mut socket, Control::Step).await;
+    assert_eq!(next_frame(&mut socket).await.index, 51, "the next step sends the next frame");
+    // Nothing else arrives while paused.
+    let quiet = tokio::time::timeout(Duration::from_millis(800), async {
+        loop {
+            if let Some(Message::Frame(frame)) = recv(&mut socket).await {
+                return frame.index;
+            }
+        }
+    })
+    .await;
+    assert!(quiet.is_err(), "frame {quiet:?} arrived while paused");
+    // Play as fast as the client reads from 90 to the end, then nothing more.
+    send(&mut socket, Control::Seek(90)).await;
+    send(&mut socket, Control::Rate(0.0)).await;
+    send(&mut socket, Control::Play).await;
+    let (frames, status) = frames_until(&mut socket, PlaybackState::Ended).await;
+    assert_eq!(frames.iter().map(|f| f.index).collect::<Vec<_>>(), (90..100).collect::<Vec<_>>(), "frames 90..100");
+    assert_eq!(status.next_index, 0, "ended rewinds");
+    // Looping plays past the end.
+    send(&mut socket, Control::Seek(98)).await;
+    send(&mut socket, Control::Loop(true)).await;
+    send(&mut socket, Control::Play).await;
+    let indices: Vec<u64> = {
+        let mut v = Vec::new();
+        while v.len() < 4 {
+            v.push(next_frame(&mut socket).await.index);
+        }
+        v
+    };
+    assert_eq!(indices, [98, 99, 0, 1], "looping");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn live_delivery_drops_frames_for_a_slow_client_only() {
+    let server = Server::start(&["--source", SAMPLE]);
+    let mut fast = server.connect().await;
+    let mut slow = server.connect().await;
+    for socket in [&mut fast, &mut slow] {
+        hello(socket).await;
+        send(socket, Control::Delivery(Delivery::Live)).await;
+        // Half the recorded rate (15 frames/s) leaves the fast reader slack on a loaded machine.
+        send(socket, Control::Rate(0.5)).await;
+        send(socket, Control::Play).await;
+    }
+    let fast_task = tokio::spawn(async move { frames_until(&mut fast, PlaybackState::Ended).await });
+    // The slow client takes 300 ms per message for the first 5 s, then drains.
+    let start = tokio::time::Instant::now();
+    let mut slow_frames = Vec::new();
+    let slow_status = loop {
+        match recv(&mut slow).await {
+            Some(Message::Frame(frame)) => slow_frames.push(frame.sequence),
+            Some(Message::Status(status)) if status.state == PlaybackState::Ended => break status,
+            Some(_) => {}
+            None => panic!("server closed the slow client"),
+        }
+        if start.elapsed() < Duration::from_secs(5) {
+            tokio::time::sleep(Duration::from_millis(300)).await;
+        }
+    };
+    let (fast_frames, fast_status) = fast_task.await.expect("fast client task");
+    assert_eq!(fast_frames.len(), 100, "the fast client got every frame (dropped {})", fast_status.frames_dropped);
+    assert_eq!(fast_status.frames_dropped, 0, "fast client drops");
+    assert!(slow_status.frames_dropped > 0, "the slow client dropped nothing; received {}", slow_frames.len());
+    assert_eq!(slow_frames.len() as u64 + slow_status.frames_dropped, 100, "received + dropped = produced");
+    assert!(slow_frames.windows(2).all(|w| w[0] < w[1]), "sequence numbers increase");
+    assert!(slow_frames.windows(2).any(|w| w[1] > w[0] + 1), "gaps in the sequence show the drops");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_malformed_client_is_closed_alone() {
+    let server = Server::start(&["--source", SAMPLE]);
+    let mut good = server.connect().await;
+    hello(&mut good).await;
+    for (bytes, code) in [
+        (b"hello".to_vec(), ErrorCode::MalformedMessage),
+        ({
+            let mut b = Message::Control(Control::Play).encode();
+            b[2] = 9;
+            b
+        }, ErrorCode::UnsupportedVersion),
+        (Message::Control(Control::Seek(100)).encode(), ErrorCode::InvalidControl),
+        (vec![0; 4096], ErrorCode::MalformedMessage),
+    ] {
+        let mut bad = server.connect().await;
+        hello(&mut bad).await;
+        bad.send(WsMessage::Binary(bytes.into())).await.ok();
+        let mut error = None;
+        while let Some(message) = tokio::time::timeout(RECV_TIMEOUT, bad.next()).await.expect("timed out") {
+            match message {
+                Ok(WsMessage::Binary(b)) => {
+                    if let Ok(Message::Error { code, message }) = Message::decode(&b) {
+                        error = Some((code, message));
+                    }
+                }
+                Ok(WsMessage::Close(frame)) => {
+                    let frame = frame.expect("close frame with a reason");
+                    assert!(!frame.reason.is_empty(), "empty close reason");
+                    break;
+                }
+                Ok(_) => {}
+                Err(_) => break,
+            }
+        }
+        if code != ErrorCode::MalformedMessage || error.is_some() {
+            // Oversized messages are cut by the WebSocket layer before the protocol sees them.
+            let (got, text) = error.expect("an error message before the close");
+            assert_eq!(got, code, "error code: {text}");
+        }
+        // The well-behaved client is unaffected.
+        send(&mut good, Control::Step).await;
+        next_frame(&mut good).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn token_and_origin_are_enforced() {
+    let server = Server::start(&["--source", SAMPLE, "--token", "s3cret", "--allow-origin", "https://viewer.example"]);
+    for query in ["", "?token=wrong", "?token=s3cre"] {
+        match server.connect_with(query, None).await {
+            Err(tungstenite::Error::Http(response)) => assert_eq!(response.status(), 401, "query {query:?}"),
+            other => panic!("query {query:?} connected: {:?}", other.map(|_| ())),
+        }
+    }
+    match server.connect_with("?token=s3cret", Some("http://evil.example")).await {
+        Err(tungstenite::Error::Http(response)) => assert_eq!(response.status(), 403, "foreign origin"),
+        other => panic!("foreign origin connected: {:?}", other.map(|_| ())),
+    }
+    let same_origin = format!("http://{}", server.addr);
+    for origin in [None, Some("https://viewer.example"), Some(same_origin.as_str())] {
+        let mut socket = server.connect_with("?token=s3cret", origin).await.unwrap_or_else(|e| panic!("origin {origin:?}: {e}"));
+        hello(&mut socket).await;
+    }
+}
+
+#[test]
+fn binding_beyond_loopback_needs_a_token() {
+    let output = Command::new(env!("CARGO_BIN_EXE_webfusion")).args(["serve", "--source", SAMPLE, "--bind", "0.0.0.0:0"]).output().expect("running");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "served on 0.0.0.0 without a token");
+    assert!(stderr.contains("--token") && !stderr.contains("panicked"), "{stderr}");
+    let output = Command::new(env!("CARGO_BIN_EXE_webfusion")).args(["serve", "--source", "/nonexistent.wfr"]).output().expect("running");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success() && stderr.contains("/nonexistent.wfr") && !stderr.contains("panicked"), "{stderr}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn static_files_are_served_from_the_web_dir_only() {
+    let web_dir = std::env::temp_dir().join(format!("webfusion-serve-web-{}", std::process::id()));
+    std::fs::create_dir_all(&web_dir).expect("web dir");
+    std::fs::write(web_dir.join("index.html"), "<!doctype html><title>webfusion</title>").expect("index");
+    std::fs::write(web_dir.join("app.wasm"), b"\0asm").expect("wasm");
+    let server = Server::start(&["--source", SAMPLE, "--web-dir", web_dir.to_str().expect("utf-8")]);
+    let get = |path: &'static str| {
+        let addr = server.addr.clone();
+        async move {
+            let mut stream = tokio::net::TcpStream::connect(&addr).await.expect("connecting");
+            stream.write_all(format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").as_bytes()).await.expect("request");
+            let mut response = String::new();
+            stream.read_to_string(&mut response).await.expect("response");
+            response
+        }
+    };
+    let index = get("/").await;
+    assert!(index.starts_with("HTTP/1.1 200") && index.contains("<title>webfusion</title>") && index.contains("text/html"), "{index}");
+    let wasm = get("/app.wasm").await;
+    assert!(wasm.starts_with("HTTP/1.1 200") && wasm.contains("application/wasm"), "{wasm}");
+    for path in ["/../Cargo.toml", "/%2e%2e/Cargo.toml", "/.hidden", "/missing.js"] {
+        let response = get(path).await;
+        assert!(response.starts_with("HTTP/1.1 404") || response.starts_with("HTTP/1.1 400"), "{path}: {response}");
+    }
+    let _ = std::fs::remove_dir_all(&web_dir);
+}
