@@ -321,7 +321,7 @@ impl Message {
                 if width_px == 0 || height_px == 0 || width_px > 8192 || height_px > 8192 {
                     return Err(protocol_error(format!("hello: image size {width_px}x{height_px} out of range")));
                 }
-                if ![fx_px, fy_px, cx_px, cy_px, depth_units_per_metre].iter().all(|v| v.is_finite()) || !(fx_px > 0.0 && fy_px > 0.0 && depth_units_per_metre > 0.0) {
+                if !([fx_px, fy_px, cx_px, cy_px, depth_units_per_metre].iter().all(|v| v.is_finite()) && fx_px > 0.0 && fy_px > 0.0 && depth_units_per_metre > 0.0) {
                     return Err(protocol_error("hello: calibration values must be finite and positive".to_owned()));
                 }
                 let intrinsics = PinholeIntrinsics { fx_px, fy_px, cx_px, cy_px, width_px, height_px };
@@ -391,7 +391,7 @@ impl Message {
                     4 => Control::Seek(r.u64("seek index")?),
                     5 => {
                         let rate = r.f32("rate")?;
-                        if !(rate.is_finite() && rate >= 0.0 && rate <= 1000.0) {
+                        if !(0.0..=1000.0).contains(&rate) {
                             return Err(protocol_error(format!("control: rate {rate} outside 0..=1000")));
                         }
                         Control::Rate(rate)
