@@ -2,6 +2,7 @@
 //! `webfusion`: the native command of webfusion: GPU preprocessing of RGB-D logs, benchmarks,
 //! recording conversion (the capture bridge and reconstruction land here as they are built).
 
+mod bench_stream;
 mod calib;
 mod eval;
 mod reconstruct;
@@ -47,6 +48,10 @@ enum Command {
     Reconstruct(reconstruct::ReconstructArgs),
     /// Convert any source (TUM directory, recording) into a `.wfr` recording.
     Record(record::RecordArgs),
+    /// Benchmark depth codecs (RVL, RVL+DEFLATE) against PNG and zstd on the same frames.
+    BenchCodecs(bench_stream::BenchCodecsArgs),
+    /// Benchmark sustained streaming to 1, 4 and 16 WebSocket clients on loopback.
+    BenchClients(bench_stream::BenchClientsArgs),
     /// Serve the web app and stream a source's frames to WebSocket clients on one port.
     Serve(serve::ServeArgs),
     /// Trajectory error of an estimate against ground truth (TUM files): ATE and RPE as evo computes them.
@@ -93,6 +98,8 @@ fn main() -> anyhow::Result<()> {
         Command::Record(args) => record::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Serve(args) => serve::run(args),
+        Command::BenchCodecs(args) => bench_stream::bench_codecs(&args),
+        Command::BenchClients(args) => bench_stream::bench_clients(&args),
         Command::Reconstruct(args) => reconstruct::run(&options, &args),
     }
 }
