@@ -1,16 +1,17 @@
 #!/usr/bin/env bash
-# The main job: build the web app, run the native GPU pipeline over the bundled sample
-# (per-stage timings), then serve the web app, which replays the same sample through the
-# same WGSL kernels on WebGPU, and print its URL. Installs what is missing first.
-#   scripts/run.sh [--port 8080] [--no-serve]
+# The main job: build the web app, reconstruct the bundled sample natively (trajectory, mesh,
+# ATE, per-stage timings), then start the bridge (`webfusion serve`): one port serves the web
+# app and streams the sample's frames over WebSocket. Prints the URL. Installs what is missing.
+#   scripts/run.sh [--port 8080] [--no-serve] [--source PATH]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-port=8080; serve=1
+port=8080; serve=1; source=data/sample/fr1_rpy.wfr
 while [ $# -gt 0 ]; do
   case "$1" in
     --port) port="$2"; shift 2 ;;
     --no-serve) serve=0; shift ;;
-    *) echo "usage: scripts/run.sh [--port N] [--no-serve]" >&2; exit 2 ;;
+    --source) source="$2"; shift 2 ;;
+    *) echo "usage: scripts/run.sh [--port N] [--no-serve] [--source TUM_DIR_OR_WFR]" >&2; exit 2 ;;
   esac
 done
 eval "$(scripts/setup.sh run)"
@@ -26,6 +27,7 @@ cargo run --release -q -p webfusion-bridge -- reconstruct data/sample/fr1_rpy.wf
 
 if [ "$serve" = 1 ]; then
   echo
-  echo "webfusion web app: http://127.0.0.1:${port}/  (WebGPU browser needed; Ctrl-C stops)"
-  exec python3 -m http.server "$port" --bind 127.0.0.1 --directory dist
+  echo "== bridge: web app and frames of ${source} on one port (Ctrl-C stops) =="
+  echo "webfusion web app: http://127.0.0.1:${port}/  (WebGPU browser needed)"
+  exec cargo run --release -q -p webfusion-bridge -- serve --source "$source" --bind "127.0.0.1:${port}" --web-dir dist
 fi
