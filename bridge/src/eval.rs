@@ -106,7 +106,7 @@ pub(crate) fn run(args: &EvalArgs) -> anyhow::Result<()> {
     let rpe_options = RpeOptions { max_difference_ns, delta_frames, all_pairs: args.all_pairs, correct_scale: args.correct_scale };
     let rpe_report = rpe(&gt, &est, &rpe_options).with_context(context)?;
 
-    print_report(args, &gt, &est, &ate_report, &rpe_report);
+    print_report(args, &gt, &est, &ate_report, &rpe_report)?;
     if let Some(path) = &args.json {
         let json = to_json(args, &gt, &est, &ate_report, &rpe_report);
         let text = serde_json::to_string_pretty(&json).context("serialising the report")?;
@@ -138,13 +138,26 @@ fn alignment_label(args: &EvalArgs) -> &'static str {
     }
 }
 
-fn print_report(args: &EvalArgs, gt: &[TimedPose], est: &[TimedPose], ate_report: &AteReport, rpe_report: &RpeReport) {
-    println!("ground truth: {} ({})", args.gt.display(), time_span(gt));
-    println!("estimate:     {} ({})", args.est.display(), time_span(est));
-    println!("associated:   {} pairs (max time difference {} ms)", ate_report.pairs.len(), args.max_difference_ms);
+/// Prints the report; a closed stdout (`| head`) ends the output quietly instead of panicking.
+fn print_report(args: &EvalArgs, gt: &[TimedPose], est: &[TimedPose], ate_report: &AteReport, rpe_report: &RpeReport) -> anyhow::Result<()> {
+    let mut out = String::new();
+    write_report(&mut out, args, gt, est, ate_report, rpe_report)?;
+    use std::io::Write as _;
+    match std::io::stdout().lock().write_all(out.as_bytes()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other?),
+    }
+}
+
+fn write_report(out: &mut String, args: &EvalArgs, gt: &[TimedPose], est: &[TimedPose], ate_report: &AteReport, rpe_report: &RpeReport) -> std::fmt::Result {
+    use std::fmt::Write as _;
+    writeln!(out, "ground truth: {} ({})", args.gt.display(), time_span(gt))?;
+    writeln!(out, "estimate:     {} ({})", args.est.display(), time_span(est))?;
+    writeln!(out, "associated:   {} pairs (max time difference {} ms)", ate_report.pairs.len(), args.max_difference_ms)?;
     let alignment = &ate_report.alignment;
     let t = alignment.gt_from_est.translation_m;
-    println!(
+    writeln!(
+        out,
         "alignment:    {}: gt_from_est rotation {:.4} deg, translation [{:.6}, {:.6}, {:.6}] m, scale {:.6}",
         alignment_label(args),
         alignment.gt_from_est.rotation_angle_rad().to_degrees(),
@@ -152,20 +165,21 @@ fn print_report(args: &EvalArgs, gt: &[TimedPose], est: &[TimedPose], ate_report
         t.y,
         t.z,
         alignment.scale
-    );
-    println!();
-    println!("ATE (translation part, {} pairs)", ate_report.error_m.count);
-    println!("  {:<8} {:>12} {:>12}", "", "m", "cm");
+    )?;
+    writeln!(out)?;
+    writeln!(out, "ATE (translation part, {} pairs)", ate_report.error_m.count)?;
+    writeln!(out, "  {:<8} {:>12} {:>12}", "", "m", "cm")?;
     for (name, value_m) in stats_rows(&ate_report.error_m) {
-        println!("  {name:<8} {value_m:>12.6} {:>12.4}", value_m * CM_PER_M);
+        writeln!(out, "  {name:<8} {value_m:>12.6} {:>12.4}", value_m * CM_PER_M)?;
     }
-    println!();
+    writeln!(out)?;
     let pairing = if args.all_pairs { "all pairs" } else { "consecutive" };
-    println!("RPE (delta {} frame(s), {pairing}, {} relative poses)", args.delta_frames, rpe_report.translation_m.count);
-    println!("  {:<8} {:>12} {:>12} {:>14}", "", "trans m", "trans cm", "rotation deg");
+    writeln!(out, "RPE (delta {} frame(s), {pairing}, {} relative poses)", args.delta_frames, rpe_report.translation_m.count)?;
+    writeln!(out, "  {:<8} {:>12} {:>12} {:>14}", "", "trans m", "trans cm", "rotation deg")?;
     for ((name, value_m), (_, value_deg)) in stats_rows(&rpe_report.translation_m).into_iter().zip(stats_rows(&rpe_report.rotation_deg)) {
-        println!("  {name:<8} {value_m:>12.6} {:>12.4} {value_deg:>14.6}", value_m * CM_PER_M);
+        writeln!(out, "  {name:<8} {value_m:>12.6} {:>12.4} {value_deg:>14.6}", value_m * CM_PER_M)?;
     }
+    Ok(())
 }
 
 fn stats_rows(stats: &ErrorStats) -> [(&'static str, f64); 6] {

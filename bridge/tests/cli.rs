@@ -102,3 +102,22 @@ fn eval_scores_exact_and_offset_trajectories() {
     let o = webfusion(&["eval", "--gt", dir.join("nope.txt").to_str().expect("utf-8"), "--est", est.to_str().expect("utf-8")]);
     assert_clean_failure(&o, "nope.txt");
 }
+
+#[test]
+fn eval_into_a_closed_pipe_ends_quietly_and_still_writes_json() {
+    let dir = scratch("eval-pipe");
+    let (gt, est, json) = (dir.join("gt.txt"), dir.join("est.txt"), dir.join("r.json"));
+    write_trajectory(&gt, 0.0);
+    write_trajectory(&est, 0.1);
+    // Like `webfusion eval ... | head -0`: the reader is gone before the report is written.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_webfusion"))
+        .args(["eval", "--gt", gt.to_str().expect("utf-8"), "--est", est.to_str().expect("utf-8"), "--json", json.to_str().expect("utf-8")])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run webfusion");
+    drop(child.stdout.take());
+    let o = child.wait_with_output().expect("waiting");
+    assert!(o.status.success() && !stderr(&o).contains("panicked"), "{}", stderr(&o));
+    assert!(json.is_file(), "the JSON report was lost");
+}
