@@ -349,3 +349,58 @@ async fn static_files_are_served_from_the_web_dir_only() {
     }
     let _ = std::fs::remove_dir_all(&web_dir);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_corrupt_frame_closes_its_session_with_the_reason_and_the_server_lives_on() {
+    let path = std::env::temp_dir().join(format!("webfusion-serve-corrupt-{}.wfr", std::process::id()));
+    let mut bytes = std::fs::read(SAMPLE).expect("reading the sample");
+    // Past the 64-byte header: inside frame 0's record, so its CRC check fails when read.
+    bytes[300..304].copy_from_slice(&[0xff; 4]);
+    std::fs::write(&path, bytes).expect("writing the corrupt copy");
+    let server = Server::start(&["--source", path.to_str().expect("utf-8")]);
+    let mut socket = server.connect().await;
+    hello(&mut socket).await;
+    send(&mut socket, Control::Step).await;
+    let mut reply = recv(&mut socket).await;
+    while let Some(Message::Status(_)) = reply {
+        reply = recv(&mut socket).await;
+    }
+    match reply {
+        Some(Message::Error { code, message }) => {
+            assert_eq!(code, ErrorCode::SourceFailed, "{message}");
+            assert!(message.contains("frame 0") && message.contains("CRC"), "{message}");
+        }
+        other => panic!("expected an error naming the frame, got {other:?}"),
+    }
+    assert!(recv(&mut socket).await.is_none(), "the session closes after the error");
+    // Other frames of the same file still stream to a new client.
+    let mut other = server.connect().await;
+    hello(&mut other).await;
+    send(&mut other, Control::Seek(1)).await;
+    send(&mut other, Control::Step).await;
+    assert_eq!(next_frame(&mut other).await.index, 1, "frame 1 after the corrupt frame 0");
+    let _ = std::fs::remove_file(&path);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_vanishing_mid_stream_does_not_disturb_the_others() {
+    let server = Server::start(&["--source", SAMPLE]);
+    let mut steady = server.connect().await;
+    hello(&mut steady).await;
+    for _ in 0..3 {
+        let mut leaver = server.connect().await;
+        hello(&mut leaver).await;
+        send(&mut leaver, Control::Rate(0.0)).await;
+        send(&mut leaver, Control::Play).await;
+        next_frame(&mut leaver).await;
+        // Drop the TCP connection without a close handshake while frames are in flight.
+        drop(leaver);
+        send(&mut steady, Control::Step).await;
+        next_frame(&mut steady).await;
+    }
+    send(&mut steady, Control::Rate(0.0)).await;
+    send(&mut steady, Control::Play).await;
+    let (frames, _) = frames_until(&mut steady, PlaybackState::Ended).await;
+    assert_eq!(frames.first().map(|f| f.index), Some(3), "continues after the three steps");
+    assert_eq!(frames.len(), 97, "every remaining frame");
+}
