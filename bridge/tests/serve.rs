@@ -211,7 +211,9 @@ async fn seek_pause_and_step_control_playback() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn live_delivery_drops_frames_for_a_slow_client_only() {
-    let server = Server::start(&["--source", SAMPLE]);
+    // A queue of 8 frames (0.5 s at 15 frames/s) absorbs scheduling stalls of a loaded CI
+    // machine for the fast reader; the slow reader falls seconds behind and must drop.
+    let server = Server::start(&["--source", SAMPLE, "--live-queue", "8"]);
     let mut fast = server.connect().await;
     let mut slow = server.connect().await;
     for socket in [&mut fast, &mut slow] {
