@@ -13,7 +13,8 @@ SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
 log() { printf '\033[1;34m[setup]\033[0m %s\n' "$*" >&2; }
 
 apt_packages=(mesa-vulkan-drivers libvulkan1)
-[ "$what" = test ] && apt_packages+=(chromium chromium-driver)
+# OpenNI2 (.oni recordings, feature `openni2`): the tests build and run it.
+[ "$what" = test ] && apt_packages+=(chromium chromium-driver libopenni2-dev libopenni2-0)
 missing=()
 for p in "${apt_packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

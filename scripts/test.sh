@@ -10,7 +10,7 @@ log=$(mktemp -d)
 
 echo "== native tests (cargo nextest, Vulkan: lavapipe or any adapter) =="
 set +e
-cargo nextest run --workspace --no-fail-fast 2>&1 | tee "$log/native.txt"
+cargo nextest run --workspace --features webfusion-bridge/openni2 --no-fail-fast 2>&1 | tee "$log/native.txt"
 native_rc=${PIPESTATUS[0]}
 
 echo "== browser tests (wasm-bindgen-test, headless Chromium, WebGPU) =="

@@ -5,6 +5,8 @@
 mod bench_stream;
 mod calib;
 mod eval;
+#[cfg(feature = "openni2")]
+mod openni;
 mod reconstruct;
 mod record;
 mod serve;
@@ -52,6 +54,10 @@ enum Command {
     BenchCodecs(bench_stream::BenchCodecsArgs),
     /// Benchmark sustained streaming to 1, 4 and 16 WebSocket clients on loopback.
     BenchClients(bench_stream::BenchClientsArgs),
+    /// Write a test `.oni` recording from OpenNI2's built-in Dummy device (320x240 depth,
+    /// 1 mm units, no colour, no field of view), playable by Debian's OpenNI2 player.
+    #[cfg(feature = "openni2")]
+    OniDummy(OniDummyArgs),
     /// Serve the web app and stream a source's frames to WebSocket clients on one port.
     Serve(serve::ServeArgs),
     /// Trajectory error of an estimate against ground truth (TUM files): ATE and RPE as evo computes them.
@@ -71,6 +77,17 @@ struct PreprocessArgs {
     /// Write per-stage statistics as JSON here.
     #[arg(long)]
     stats_json: Option<PathBuf>,
+}
+
+#[cfg(feature = "openni2")]
+#[derive(clap::Args)]
+struct OniDummyArgs {
+    /// The `.oni` file to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// Frames to record.
+    #[arg(long, default_value_t = 30)]
+    frames: usize,
 }
 
 #[derive(clap::Args)]
@@ -98,6 +115,12 @@ fn main() -> anyhow::Result<()> {
         Command::Record(args) => record::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Serve(args) => serve::run(args),
+        #[cfg(feature = "openni2")]
+        Command::OniDummy(args) => {
+            openni::record_dummy(&args.out, args.frames).with_context(|| format!("writing {}", args.out.display()))?;
+            eprintln!("wrote {} ({} frames; read it with --intrinsics 285,285,159.5,119.5 --depth-scale 1000 --image-size 320x240)", args.out.display(), args.frames);
+            Ok(())
+        }
         Command::BenchCodecs(args) => bench_stream::bench_codecs(&args),
         Command::BenchClients(args) => bench_stream::bench_clients(&args),
         Command::Reconstruct(args) => reconstruct::run(&options, &args),
@@ -110,6 +133,12 @@ fn open(source: &std::path::Path, calibration: &CalibrationArgs) -> anyhow::Resu
 
 /// Opens a source with an already resolved calibration override.
 pub(crate) fn open_with(source: &std::path::Path, calibration: Option<webfusion_core::RgbdCalibration>) -> anyhow::Result<Box<dyn FrameSource>> {
+    if source.extension().is_some_and(|e| e.eq_ignore_ascii_case("oni")) {
+        #[cfg(feature = "openni2")]
+        return Ok(Box::new(openni::OniSource::open(source, calibration).with_context(|| format!("opening source {}", source.display()))?));
+        #[cfg(not(feature = "openni2"))]
+        anyhow::bail!("{}: this webfusion was built without OpenNI2 support; rebuild with `--features openni2` (needs libopenni2-dev)", source.display());
+    }
     open_source(source, calibration).with_context(|| format!("opening source {}", source.display()))
 }
 

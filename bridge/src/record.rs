@@ -52,7 +52,7 @@ pub(crate) struct FrameRange {
 /// Arguments of `webfusion record`.
 #[derive(Clone, Debug, clap::Args)]
 pub(crate) struct RecordArgs {
-    /// TUM RGB-D directory or .wfr recording to read.
+    /// TUM RGB-D directory, .wfr recording or (feature `openni2`) .oni recording to read.
     #[arg(long, value_name = "PATH")]
     pub(crate) source: PathBuf,
 
@@ -90,8 +90,7 @@ pub(crate) struct RecordArgs {
 /// Runs `webfusion record`: progress on stderr, a summary on stdout.
 pub(crate) fn run(args: &RecordArgs) -> anyhow::Result<()> {
     let calibration_override = calibration_override(args)?;
-    let mut source =
-        open_source(&args.source, calibration_override).with_context(|| format!("opening source {}", args.source.display()))?;
+    let mut source = crate::open_with(&args.source, calibration_override)?;
     let frames = resolve_frame_range(args.frames, source.frame_count())?;
     let color_codec = match args.color_codec {
         ColorCodecArg::Jpeg => ColorCodec::Jpeg,
