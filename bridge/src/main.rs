@@ -117,8 +117,8 @@ fn main() -> anyhow::Result<()> {
         Command::Serve(args) => serve::run(args),
         #[cfg(feature = "openni2")]
         Command::OniDummy(args) => {
-            openni::record_dummy(&args.out, args.frames).with_context(|| format!("writing {}", args.out.display()))?;
-            eprintln!("wrote {} ({} frames; read it with --intrinsics 285,285,159.5,119.5 --depth-scale 1000 --image-size 320x240)", args.out.display(), args.frames);
+            let frames = openni::record_dummy(&args.out, args.frames).with_context(|| format!("writing {}", args.out.display()))?;
+            println!("wrote {} ({frames} frames, 320x240 depth, no colour; read it with --intrinsics 285,285,159.5,119.5 --depth-scale 1000)", args.out.display());
             Ok(())
         }
         Command::BenchCodecs(args) => bench_stream::bench_codecs(&args),
