@@ -54,6 +54,9 @@ enum Command {
     BenchCodecs(bench_stream::BenchCodecsArgs),
     /// Benchmark sustained streaming to 1, 4 and 16 WebSocket clients on loopback.
     BenchClients(bench_stream::BenchClientsArgs),
+    /// List the RGB-D devices OpenNI2 sees (Kinect v1 needs libfreenect's OpenNI2 driver).
+    #[cfg(feature = "openni2")]
+    Devices,
     /// Write a test `.oni` recording from OpenNI2's built-in Dummy device (320x240 depth,
     /// 1 mm units, no colour, no field of view), playable by Debian's OpenNI2 player.
     #[cfg(feature = "openni2")]
@@ -115,6 +118,17 @@ fn main() -> anyhow::Result<()> {
         Command::Record(args) => record::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Serve(args) => serve::run(args),
+        #[cfg(feature = "openni2")]
+        Command::Devices => {
+            let devices = openni::list_devices()?;
+            if devices.is_empty() {
+                println!("no OpenNI2 devices found. An Asus Xtion/PrimeSense works with Debian's PS1080 driver; a Kinect v1 needs libfreenect's OpenNI2 driver (libfreenect's OpenNI2-FreenectDriver in the OpenNI2 Drivers folder); check USB permissions (udev rules).");
+            }
+            for d in devices {
+                println!("{}  {} {}  (USB {:04x}:{:04x})", d.uri, d.vendor, d.name, d.usb_id.0, d.usb_id.1);
+            }
+            Ok(())
+        }
         #[cfg(feature = "openni2")]
         Command::OniDummy(args) => {
             let frames = openni::record_dummy(&args.out, args.frames).with_context(|| format!("writing {}", args.out.display()))?;

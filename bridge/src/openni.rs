@@ -292,6 +292,48 @@ impl FrameSource for OniSource {
     }
 }
 
+/// One connected OpenNI2 device.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct DeviceInfo {
+    /// URI to open it with (`openni2:<uri>` once live capture lands).
+    pub(crate) uri: String,
+    /// Vendor name.
+    pub(crate) vendor: String,
+    /// Model name.
+    pub(crate) name: String,
+    /// USB vendor and product id.
+    pub(crate) usb_id: (u16, u16),
+}
+
+/// Lists the devices OpenNI2's drivers see (the Dummy device is never listed).
+pub(crate) fn list_devices() -> Result<Vec<DeviceInfo>> {
+    initialise(Path::new("openni2"))?;
+    let mut list: *mut oni::OniDeviceInfo = std::ptr::null_mut();
+    let mut count: c_int = 0;
+    // SAFETY: valid out-pointers; the list is released below.
+    if unsafe { oni::oniGetDeviceList(&mut list, &mut count) } != oni::ONI_STATUS_OK {
+        return Err(oni_error(Path::new("openni2"), "cannot list devices"));
+    }
+    let text = |chars: &[std::ffi::c_char]| {
+        let bytes: Vec<u8> = chars.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
+        String::from_utf8_lossy(&bytes).into_owned()
+    };
+    let devices = if list.is_null() || count <= 0 {
+        Vec::new()
+    } else {
+        // SAFETY: OpenNI2 returned `count` entries at `list`.
+        unsafe { std::slice::from_raw_parts(list, count as usize) }
+            .iter()
+            .map(|d| DeviceInfo { uri: text(&d.uri), vendor: text(&d.vendor), name: text(&d.name), usb_id: (d.usbVendorId, d.usbProductId) })
+            .collect()
+    };
+    if !list.is_null() {
+        // SAFETY: the list came from oniGetDeviceList and is released once.
+        unsafe { oni::oniReleaseDeviceList(list) };
+    }
+    Ok(devices)
+}
+
 /// Records about `frames` depth frames of OpenNI2's built-in "Dummy" device (320x240, 1 mm)
 /// into `path`, then makes the file playable (see [`add_cropping_property`]). Returns the
 /// frames the file holds: the recorder runs on its own thread, so on a loaded machine it can
