@@ -17,6 +17,7 @@ use webfusion_core::codec::{png, rvl};
 use webfusion_core::protocol::{Control, Message};
 
 use crate::calib::CalibrationArgs;
+use crate::timing::summarize;
 
 #[derive(clap::Args)]
 pub(crate) struct BenchCodecsArgs {
@@ -86,17 +87,13 @@ pub(crate) fn bench_codecs(args: &BenchCodecsArgs) -> anyhow::Result<()> {
             anyhow::ensure!(units == depth.units, "{name} is not lossless");
             sizes.push(bytes.len() as f64);
         }
-        let (enc, dec, size) = (median(&mut enc_ms), median(&mut dec_ms), median(&mut sizes));
+        let median = |samples: &[f64]| summarize(samples).median_ms;
+        let (enc, dec, size) = (median(&enc_ms), median(&dec_ms), median(&sizes));
         let total = enc + dec;
         let base = *rvl_total_ms.get_or_insert(total);
         println!("{name:<20} {enc:>10.2} {dec:>10.2} {:>10.1} {:>8.2} {:>13.2}x", size / 1024.0, raw_bytes / size, total / base);
     }
     Ok(())
-}
-
-fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    values[values.len() / 2]
 }
 
 /// CPU seconds (user + system) and resident KiB of a process, from /proc.

@@ -25,8 +25,8 @@ use tokio::sync::Notify;
 use tokio::time::Instant;
 use webfusion_core::codec::{ColorCodec, DepthCodec};
 use webfusion_core::protocol::{Control, Delivery, ErrorCode, FrameMessage, Hello, MAX_CLIENT_MESSAGE_BYTES, Message, PlaybackState, Status, WireColor};
-use webfusion_core::recording::{RECORDING_MAGIC, RecordingReader};
-use webfusion_core::source::{FrameSource, TimedPose};
+use webfusion_core::recording::RecordingReader;
+use webfusion_core::source::{FrameSource, TimedPose, is_recording, open_recording};
 use webfusion_core::{RgbdCalibration, Se3};
 
 use crate::calib::CalibrationArgs;
@@ -203,13 +203,8 @@ enum SessionSource {
 
 impl SessionSource {
     fn open(path: &Path, calibration_override: Option<RgbdCalibration>) -> anyhow::Result<Self> {
-        let is_recording = path.is_file() && std::fs::read(path).map(|b| b.starts_with(&RECORDING_MAGIC)).unwrap_or(false);
-        if is_recording {
-            let mut reader = RecordingReader::open(path)?;
-            if let Some(calibration) = calibration_override {
-                reader.override_calibration(calibration)?;
-            }
-            return Ok(Self::Recording(reader));
+        if path.is_file() && is_recording(path)? {
+            return Ok(Self::Recording(open_recording(path, calibration_override)?));
         }
         Ok(Self::Decoded(crate::open_with(path, calibration_override)?))
     }

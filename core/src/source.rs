@@ -37,21 +37,31 @@ pub fn open_source(path: &Path, calibration_override: Option<RgbdCalibration>) -
     if metadata.is_dir() {
         return Ok(Box::new(TumDataset::open(path, calibration_override)?));
     }
-    let mut magic = [0_u8; RECORDING_MAGIC.len()];
-    let magic_len = std::fs::File::open(path)
-        .and_then(|mut file| read_up_to(&mut file, &mut magic))
-        .map_err(|source| Error::Io { path: path.to_owned(), source })?;
-    if magic[..magic_len] != RECORDING_MAGIC[..] {
+    if !is_recording(path)? {
         return Err(Error::Dataset {
             path: path.to_owned(),
             message: "neither a TUM RGB-D directory nor a webfusion recording (.wfr)".to_owned(),
         });
     }
+    Ok(Box::new(open_recording(path, calibration_override)?))
+}
+
+/// Whether the file at `path` starts with the recording magic (reads only those bytes).
+pub fn is_recording(path: &Path) -> Result<bool> {
+    let mut magic = [0_u8; RECORDING_MAGIC.len()];
+    let magic_len = std::fs::File::open(path)
+        .and_then(|mut file| read_up_to(&mut file, &mut magic))
+        .map_err(|source| Error::Io { path: path.to_owned(), source })?;
+    Ok(magic[..magic_len] == RECORDING_MAGIC[..])
+}
+
+/// Opens a `.wfr` recording, with `calibration_override` (same image size) replacing its own.
+pub fn open_recording(path: &Path, calibration_override: Option<RgbdCalibration>) -> Result<RecordingReader> {
     let mut recording = RecordingReader::open(path)?;
     if let Some(calibration) = calibration_override {
         recording.override_calibration(calibration)?;
     }
-    Ok(Box::new(recording))
+    Ok(recording)
 }
 
 /// Fills `buffer` as far as the reader allows; returns the number of bytes read.
