@@ -10,8 +10,9 @@ use webfusion_core::{PinholeIntrinsics, RgbdCalibration};
 /// from a directory name); if it has none the command stops and asks for `--intrinsics`.
 #[derive(clap::Args, Clone, Debug, Default)]
 pub(crate) struct CalibrationArgs {
-    /// Override the intrinsics: `fx,fy,cx,cy` in pixels.
-    #[arg(long, value_name = "FX,FY,CX,CY")]
+    /// Override the intrinsics: `fx,fy,cx,cy` in pixels, optionally followed by `width,height`
+    /// (as `record` takes them; or give the size with --image-size).
+    #[arg(long, value_name = "FX,FY,CX,CY[,W,H]")]
     pub(crate) intrinsics: Option<String>,
     /// Raw depth units per metre (5000 for TUM, 1000 for OpenNI millimetres).
     #[arg(long, value_name = "UNITS_PER_METRE")]
@@ -32,11 +33,16 @@ impl CalibrationArgs {
             .split(',')
             .map(|s| s.trim().parse::<f32>().with_context(|| format!("--intrinsics {spec:?}: {s:?} is not a number")))
             .collect::<anyhow::Result<_>>()?;
-        anyhow::ensure!(v.len() == 4 && v.iter().all(|x| x.is_finite()), "--intrinsics {spec:?}: expected four numbers fx,fy,cx,cy");
+        anyhow::ensure!((v.len() == 4 || v.len() == 6) && v.iter().all(|x| x.is_finite()), "--intrinsics {spec:?}: expected four numbers fx,fy,cx,cy (or six, with width,height)");
         anyhow::ensure!(v[0] > 0.0 && v[1] > 0.0, "--intrinsics {spec:?}: focal lengths must be positive");
-        let (width_px, height_px) = match &self.image_size {
-            None => (640, 480),
-            Some(s) => {
+        let (width_px, height_px) = match (&self.image_size, v.get(4..6)) {
+            (Some(_), Some(_)) => anyhow::bail!("--intrinsics {spec:?} gives the image size, so --image-size is one too many"),
+            (None, Some(&[w, h])) => {
+                anyhow::ensure!(w >= 1.0 && h >= 1.0 && w.fract() == 0.0 && h.fract() == 0.0, "--intrinsics {spec:?}: width and height must be whole pixels");
+                (w as u32, h as u32)
+            }
+            (None, _) => (640, 480),
+            (Some(s), _) => {
                 let (w, h) = s.split_once('x').with_context(|| format!("--image-size {s:?}: expected WxH"))?;
                 (w.parse().with_context(|| format!("--image-size width {w:?}"))?, h.parse().with_context(|| format!("--image-size height {h:?}"))?)
             }

@@ -17,7 +17,7 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
-use webfusion_core::source::{FrameSource, open_source};
+use webfusion_core::source::{FrameSource, LiveSource, open_source};
 use webfusion_core::{Gpu, GpuOptions};
 
 use crate::calib::CalibrationArgs;
@@ -154,6 +154,67 @@ pub(crate) fn open_with(source: &std::path::Path, calibration: Option<webfusion_
         anyhow::bail!("{}: this webfusion was built without OpenNI2 support; rebuild with `--features openni2` (needs libopenni2-dev)", source.display());
     }
     open_source(source, calibration).with_context(|| format!("opening source {}", source.display()))
+}
+
+/// `Some(uri)` when `source` names a live OpenNI2 camera: `openni2` (the first one, `uri`
+/// `None`) or `openni2:<uri>`.
+pub(crate) fn live_spec(source: &std::path::Path) -> Option<Option<&str>> {
+    let text = source.to_str()?;
+    match text.strip_prefix("openni2") {
+        Some("") => Some(None),
+        Some(rest) => rest.strip_prefix(':').map(Some),
+        None => None,
+    }
+}
+
+/// Opens a live camera named by [`live_spec`].
+pub(crate) fn open_live(uri: Option<&str>, calibration: Option<webfusion_core::RgbdCalibration>) -> anyhow::Result<Box<dyn LiveSource>> {
+    #[cfg(feature = "openni2")]
+    return Ok(Box::new(openni::LiveDevice::open(uri, calibration).with_context(|| format!("opening the live camera openni2{}", uri.map(|u| format!(":{u}")).unwrap_or_default()))?));
+    #[cfg(not(feature = "openni2"))]
+    {
+        let _ = (uri, calibration);
+        anyhow::bail!("live cameras need OpenNI2: rebuild webfusion with `--features openni2` (needs libopenni2-dev)");
+    }
+}
+
+/// The first frames of a live source as a [`FrameSource`] read forwards only (for `record`).
+pub(crate) struct LiveTake {
+    live: Box<dyn LiveSource>,
+    count: usize,
+    next: usize,
+}
+
+impl LiveTake {
+    pub(crate) fn new(live: Box<dyn LiveSource>, count: usize) -> Self {
+        Self { live, count, next: 0 }
+    }
+}
+
+impl FrameSource for LiveTake {
+    fn name(&self) -> String {
+        self.live.name()
+    }
+    fn calibration(&self) -> webfusion_core::RgbdCalibration {
+        self.live.calibration()
+    }
+    fn frame_count(&self) -> usize {
+        self.count
+    }
+    fn read_frame(&mut self, index: usize) -> webfusion_core::Result<webfusion_core::RgbdFrame> {
+        if index < self.next || index >= self.count {
+            return Err(webfusion_core::Error::InvalidConfig(format!("a live source is read forwards: asked for frame {index}, next is {} of {}", self.next, self.count)));
+        }
+        while self.next < index {
+            self.live.next_frame()?;
+            self.next += 1;
+        }
+        self.next += 1;
+        self.live.next_frame()
+    }
+    fn ground_truth(&self) -> Option<&[webfusion_core::source::TimedPose]> {
+        None
+    }
 }
 
 fn gpu(options: &GpuOptions) -> anyhow::Result<Gpu> {

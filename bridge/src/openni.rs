@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
-//! OpenNI2 `.oni` recordings as a [`FrameSource`] (cargo feature `openni2`, which links
-//! Debian's `libopenni2-dev`), and a generator of test `.oni` files from OpenNI2's built-in
+//! OpenNI2 `.oni` recordings as a [`FrameSource`] and live cameras as a [`LiveSource`] (cargo
+//! feature `openni2`, which links Debian's `libopenni2-dev`), and a generator of test `.oni` files from OpenNI2's built-in
 //! "Dummy" device so CI exercises this path without hardware.
 //!
 //! Two defects of Debian's OpenNI 2.2.0.33 file player shape this code:
@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use openni2_sys as oni;
-use webfusion_core::source::{FrameSource, TimedPose};
+use webfusion_core::source::{FrameSource, LiveSource, TimedPose};
 use webfusion_core::{ColorImage, DepthImage, Error, PinholeIntrinsics, Result, RgbdCalibration, RgbdFrame};
 
 /// `ONI_API_VERSION` of OpenNI 2.2 (`major * 1000 + minor`).
@@ -121,12 +121,17 @@ impl Player {
 
     /// Reads the next frame of `stream`: its bytes, size, pixel format and timestamp (µs).
     fn read(path: &Path, stream: oni::OniStreamHandle) -> Result<(Vec<u8>, i32, i32, i32, u64)> {
+        Self::read_within(path, stream, FRAME_TIMEOUT_MS)
+    }
+
+    /// [`Self::read`], waiting at most `timeout_ms`.
+    fn read_within(path: &Path, stream: oni::OniStreamHandle, timeout_ms: c_int) -> Result<(Vec<u8>, i32, i32, i32, u64)> {
         let mut streams = [stream];
         let mut ready: c_int = -1;
         // SAFETY: one valid stream handle and a valid out-pointer.
-        let status = unsafe { oni::oniWaitForAnyStream(streams.as_mut_ptr(), 1, &mut ready, FRAME_TIMEOUT_MS) };
+        let status = unsafe { oni::oniWaitForAnyStream(streams.as_mut_ptr(), 1, &mut ready, timeout_ms) };
         if status == oni::ONI_STATUS_TIME_OUT {
-            return Err(Error::Dataset { path: path.to_owned(), message: format!("OpenNI2: no frame within {FRAME_TIMEOUT_MS} ms (truncated or unplayable recording)") });
+            return Err(Error::Dataset { path: path.to_owned(), message: format!("OpenNI2: no frame within {timeout_ms} ms (truncated or unplayable recording)") });
         }
         if status != oni::ONI_STATUS_OK {
             return Err(oni_error(path, "waiting for a frame failed"));
@@ -292,10 +297,214 @@ impl FrameSource for OniSource {
     }
 }
 
+/// Longest wait for a frame from a live camera before it counts as gone.
+const LIVE_FRAME_TIMEOUT_MS: c_int = 2000;
+
+/// The video modes a device's sensor supports (empty when it does not say).
+fn supported_modes(device: oni::OniDeviceHandle, sensor: oni::OniSensorType) -> Vec<oni::OniVideoMode> {
+    // SAFETY: the device is open; the returned info (or null) is owned by OpenNI2 and read here only.
+    unsafe {
+        let info = oni::oniDeviceGetSensorInfo(device, sensor);
+        if info.is_null() || (*info).pSupportedVideoModes.is_null() || (*info).numSupportedVideoModes <= 0 {
+            return Vec::new();
+        }
+        std::slice::from_raw_parts((*info).pSupportedVideoModes, (*info).numSupportedVideoModes as usize).to_vec()
+    }
+}
+
+/// Picks the mode of `pixel_format` at `size` (any size when `None`), preferring 640x480
+/// and then the fps nearest 30.
+fn pick_mode(modes: &[oni::OniVideoMode], pixel_format: oni::OniPixelFormat, size: Option<(i32, i32)>) -> Option<oni::OniVideoMode> {
+    modes
+        .iter()
+        .filter(|m| m.pixelFormat == pixel_format && size.is_none_or(|s| (m.resolutionX, m.resolutionY) == s))
+        .min_by_key(|m| ((m.resolutionX, m.resolutionY) != (640, 480), (m.fps - 30).abs()))
+        .copied()
+}
+
+/// Sets `stream`'s video mode unless it is already `mode` (some drivers refuse any set).
+fn set_mode(stream: oni::OniStreamHandle, mode: &oni::OniVideoMode) -> bool {
+    if Player::video_mode(stream).is_some_and(|current| (current.pixelFormat, current.resolutionX, current.resolutionY, current.fps) == (mode.pixelFormat, mode.resolutionX, mode.resolutionY, mode.fps)) {
+        return true;
+    }
+    // SAFETY: the stream is valid and `mode` has the size given.
+    unsafe { oni::oniStreamSetProperty(stream, oni::ONI_STREAM_PROPERTY_VIDEO_MODE, (mode as *const oni::OniVideoMode).cast::<c_void>(), std::mem::size_of::<oni::OniVideoMode>() as c_int) == oni::ONI_STATUS_OK }
+}
+
+/// "vendor model (uri)" of an open device, if the driver says.
+fn device_name(device: oni::OniDeviceHandle) -> Option<String> {
+    // SAFETY: all-zero is a valid OniDeviceInfo (arrays of chars and integers).
+    let mut info: oni::OniDeviceInfo = unsafe { std::mem::zeroed() };
+    // SAFETY: the device is open and `info` a valid out-pointer.
+    if unsafe { oni::oniDeviceGetInfo(device, &mut info) } != oni::ONI_STATUS_OK {
+        return None;
+    }
+    let (vendor, name, uri) = (c_text(&info.vendor), c_text(&info.name), c_text(&info.uri));
+    Some(format!("{} ({uri})", format!("{vendor} {name}").trim()))
+}
+
+/// A fixed-size C string field as text.
+fn c_text(chars: &[std::ffi::c_char]) -> String {
+    let bytes: Vec<u8> = chars.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
+    String::from_utf8_lossy(&bytes).into_owned()
+}
+
+/// A live OpenNI2 camera (Kinect v1, Xtion, or the built-in "Dummy" device): depth in 1 mm
+/// units registered to the colour camera, depth/colour pairs synchronised by the driver.
+pub(crate) struct LiveDevice {
+    /// What errors name: `openni2` or `openni2:<uri>`.
+    label: PathBuf,
+    name: String,
+    calibration: RgbdCalibration,
+    streams: Player,
+    next_index: u64,
+    /// Timestamp of the last depth frame handed out (µs).
+    last_depth_us: Option<u64>,
+}
+
+impl LiveDevice {
+    /// Opens the device at `uri` (the first one when `None`). The calibration comes from the
+    /// device's field of view unless `calibration_override` is given; its image size must be
+    /// the depth stream's and its depth scale 1000 units per metre.
+    pub(crate) fn open(uri: Option<&str>, calibration_override: Option<RgbdCalibration>) -> Result<Self> {
+        let label = PathBuf::from(uri.map_or_else(|| "openni2".to_owned(), |u| format!("openni2:{u}")));
+        initialise(&label)?;
+        let c_uri = uri.map(CString::new).transpose().map_err(|_| Error::Dataset { path: label.clone(), message: "the URI contains a NUL byte".to_owned() })?;
+        let mut device: oni::OniDeviceHandle = std::ptr::null_mut();
+        // SAFETY: a NUL-terminated URI or null (any device), and a valid out-pointer.
+        if unsafe { oni::oniDeviceOpen(c_uri.as_ref().map_or(std::ptr::null(), |u| u.as_ptr()), &mut device) } != oni::ONI_STATUS_OK || device.is_null() {
+            let hint = "; `webfusion devices` lists what OpenNI2 sees (a Kinect v1 needs libfreenect's OpenNI2 driver)";
+            return Err(Error::Dataset { path: label.clone(), message: format!("{}{hint}", oni_error(&label, "cannot open the device")) });
+        }
+        let mut streams = Player { device, depth: std::ptr::null_mut(), color: None };
+        streams.depth = streams.create_stream(oni::ONI_SENSOR_DEPTH).ok_or_else(|| oni_error(&label, "the device has no depth stream"))?;
+        if let Some(mode) = pick_mode(&supported_modes(device, oni::ONI_SENSOR_DEPTH), oni::ONI_PIXEL_FORMAT_DEPTH_1_MM, None)
+            && !set_mode(streams.depth, &mode)
+        {
+            return Err(oni_error(&label, "cannot set the depth mode"));
+        }
+        let depth_mode = Player::video_mode(streams.depth).ok_or_else(|| oni_error(&label, "the depth stream has no video mode"))?;
+        if depth_mode.pixelFormat != oni::ONI_PIXEL_FORMAT_DEPTH_1_MM {
+            return Err(Error::Dataset { path: label, message: format!("OpenNI2: the depth stream has pixel format {} and offers no 1 mm mode", depth_mode.pixelFormat) });
+        }
+        let size = (depth_mode.resolutionX, depth_mode.resolutionY);
+        // The Dummy device crashes OpenNI2 when asked about a colour sensor it lacks.
+        let wants_color = uri != Some("Dummy");
+        if wants_color && let Some(color) = streams.create_stream(oni::ONI_SENSOR_COLOR) {
+            streams.color = Some(color);
+            let mode = pick_mode(&supported_modes(device, oni::ONI_SENSOR_COLOR), oni::ONI_PIXEL_FORMAT_RGB888, Some(size))
+                .ok_or_else(|| Error::Dataset { path: label.clone(), message: format!("OpenNI2: the colour camera has no RGB888 mode at the depth size {}x{}", size.0, size.1) })?;
+            if !set_mode(color, &mode) {
+                return Err(oni_error(&label, "cannot set the colour mode"));
+            }
+            // SAFETY: the device is open; the property value outlives the call.
+            let registered = unsafe {
+                let mode = oni::ONI_IMAGE_REGISTRATION_DEPTH_TO_COLOR;
+                oni::oniDeviceIsImageRegistrationModeSupported(device, mode) != 0
+                    && oni::oniDeviceSetProperty(device, oni::ONI_DEVICE_PROPERTY_IMAGE_REGISTRATION, (&raw const mode).cast::<c_void>(), std::mem::size_of_val(&mode) as c_int) == oni::ONI_STATUS_OK
+            };
+            if !registered {
+                eprintln!("warning: {}: the driver cannot register depth to colour; colour will be offset from depth", label.display());
+            }
+            // SAFETY: the device is open. Failure only means unsynchronised pairs.
+            unsafe { oni::oniDeviceEnableDepthColorSync(device) };
+        }
+        let (width_px, height_px) = (u32::try_from(size.0).unwrap_or(0), u32::try_from(size.1).unwrap_or(0));
+        let name = device_name(device).unwrap_or_else(|| label.display().to_string());
+        let calibration = match calibration_override {
+            Some(calibration) => {
+                let k = &calibration.intrinsics;
+                if (k.width_px, k.height_px) != (width_px, height_px) {
+                    return Err(Error::InvalidConfig(format!("{}: depth is {width_px}x{height_px} but the calibration is for {}x{} (--image-size)", label.display(), k.width_px, k.height_px)));
+                }
+                if calibration.depth_units_per_metre != 1000.0 {
+                    return Err(Error::InvalidConfig(format!("{}: live depth is in millimetres but the calibration says {} units per metre (pass --depth-scale 1000)", label.display(), calibration.depth_units_per_metre)));
+                }
+                calibration
+            }
+            None => {
+                // Registered depth lives in the colour camera, so its field of view applies.
+                let fov_stream = streams.color.unwrap_or(streams.depth);
+                let (Some(hfov), Some(vfov)) = (Player::float_property(fov_stream, oni::ONI_STREAM_PROPERTY_HORIZONTAL_FOV), Player::float_property(fov_stream, oni::ONI_STREAM_PROPERTY_VERTICAL_FOV)) else {
+                    return Err(Error::UnknownCalibration { source_name: label.display().to_string() });
+                };
+                let fx_px = width_px as f32 / (2.0 * (hfov / 2.0).tan());
+                let fy_px = height_px as f32 / (2.0 * (vfov / 2.0).tan());
+                let intrinsics = PinholeIntrinsics { fx_px, fy_px, cx_px: (width_px as f32 - 1.0) / 2.0, cy_px: (height_px as f32 - 1.0) / 2.0, width_px, height_px };
+                RgbdCalibration { intrinsics, depth_units_per_metre: 1000.0 }
+            }
+        };
+        // Started last: an error above closes streams that never ran.
+        for stream in std::iter::once(streams.depth).chain(streams.color) {
+            // SAFETY: the stream was created on this device.
+            if unsafe { oni::oniStreamStart(stream) } != oni::ONI_STATUS_OK {
+                return Err(oni_error(&label, "cannot start a stream"));
+            }
+        }
+        Ok(Self { label, name, calibration, streams, next_index: 0, last_depth_us: None })
+    }
+}
+
+impl LiveSource for LiveDevice {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn calibration(&self) -> RgbdCalibration {
+        self.calibration
+    }
+
+    fn next_frame(&mut self) -> Result<RgbdFrame> {
+        let (w, h) = (self.calibration.intrinsics.width_px, self.calibration.intrinsics.height_px);
+        let gone = |label: &Path, e: Error| match e {
+            Error::Dataset { message, .. } if message.contains("no frame within") => {
+                Error::Dataset { path: label.to_owned(), message: format!("OpenNI2: no frame within {LIVE_FRAME_TIMEOUT_MS} ms (device unplugged or stalled?)") }
+            }
+            other => other,
+        };
+        // Some drivers (the Dummy device among them) hand the same frame out again; wait for a newer one.
+        let deadline = std::time::Instant::now() + std::time::Duration::from_millis(LIVE_FRAME_TIMEOUT_MS as u64);
+        let (bytes, fw, fh, depth_us) = loop {
+            let (bytes, fw, fh, _, depth_us) = Player::read_within(&self.label, self.streams.depth, LIVE_FRAME_TIMEOUT_MS).map_err(|e| gone(&self.label, e))?;
+            if self.last_depth_us.is_none_or(|last| depth_us > last) {
+                break (bytes, fw, fh, depth_us);
+            }
+            if std::time::Instant::now() > deadline {
+                return Err(gone(&self.label, Error::Dataset { path: self.label.clone(), message: "no frame within".to_owned() }));
+            }
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        };
+        self.last_depth_us = Some(depth_us);
+        if (fw, fh) != (w as i32, h as i32) || bytes.len() != 2 * (w * h) as usize {
+            return Err(Error::Dataset { path: self.label.clone(), message: format!("OpenNI2: depth frame {} is {fw}x{fh} ({} bytes), expected {w}x{h}", self.next_index, bytes.len()) });
+        }
+        let units = bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
+        let (rgb8, color_us) = match self.streams.color {
+            None => (vec![GREY; 3 * (w * h) as usize], depth_us),
+            Some(stream) => {
+                let (bytes, cw, ch, format, color_us) = Player::read_within(&self.label, stream, LIVE_FRAME_TIMEOUT_MS).map_err(|e| gone(&self.label, e))?;
+                if format != oni::ONI_PIXEL_FORMAT_RGB888 || (cw, ch) != (w as i32, h as i32) || bytes.len() != 3 * (w * h) as usize {
+                    return Err(Error::Dataset { path: self.label.clone(), message: format!("OpenNI2: colour frame {} is {cw}x{ch} in pixel format {format}, expected RGB888 {w}x{h}", self.next_index) });
+                }
+                (bytes, color_us)
+            }
+        };
+        let index = self.next_index;
+        self.next_index += 1;
+        Ok(RgbdFrame {
+            index,
+            depth_timestamp_ns: (depth_us as i64).saturating_mul(1000),
+            color_timestamp_ns: (color_us as i64).saturating_mul(1000),
+            depth: DepthImage::new(w, h, units)?,
+            color: ColorImage::new(w, h, rgb8)?,
+        })
+    }
+}
+
 /// One connected OpenNI2 device.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(crate) struct DeviceInfo {
-    /// URI to open it with (`openni2:<uri>` once live capture lands).
+    /// URI to open it with (`--source openni2:<uri>`).
     pub(crate) uri: String,
     /// Vendor name.
     pub(crate) vendor: String,
@@ -314,17 +523,13 @@ pub(crate) fn list_devices() -> Result<Vec<DeviceInfo>> {
     if unsafe { oni::oniGetDeviceList(&mut list, &mut count) } != oni::ONI_STATUS_OK {
         return Err(oni_error(Path::new("openni2"), "cannot list devices"));
     }
-    let text = |chars: &[std::ffi::c_char]| {
-        let bytes: Vec<u8> = chars.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
-        String::from_utf8_lossy(&bytes).into_owned()
-    };
     let devices = if list.is_null() || count <= 0 {
         Vec::new()
     } else {
         // SAFETY: OpenNI2 returned `count` entries at `list`.
         unsafe { std::slice::from_raw_parts(list, count as usize) }
             .iter()
-            .map(|d| DeviceInfo { uri: text(&d.uri), vendor: text(&d.vendor), name: text(&d.name), usb_id: (d.usbVendorId, d.usbProductId) })
+            .map(|d| DeviceInfo { uri: c_text(&d.uri), vendor: c_text(&d.vendor), name: c_text(&d.name), usb_id: (d.usbVendorId, d.usbProductId) })
             .collect()
     };
     if !list.is_null() {
@@ -488,12 +693,38 @@ mod tests {
         let mut source = OniSource::open(&path, Some(calibration(1000.0))).expect("opening");
         assert_eq!(source.frame_count(), count, "frames");
         let frames: Vec<RgbdFrame> = (0..count).map(|i| source.read_frame(i).expect("reading")).collect();
-        assert!(frames.windows(2).all(|w| w[1].depth_timestamp_ns > w[0].depth_timestamp_ns), "timestamps increase");
+        let stamps: Vec<i64> = frames.iter().map(|f| f.depth_timestamp_ns).collect();
+        assert!(stamps.windows(2).all(|w| w[1] > w[0]), "timestamps increase: {stamps:?}");
         assert!(frames.iter().all(|f| f.color.rgb8.iter().all(|&v| v == GREY)), "depth-only recording: grey colour");
         let again = source.read_frame(5).expect("reading backwards");
         assert_eq!(again, frames[5], "frame 5 after reopening");
         assert!(source.read_frame(count).is_err(), "past the end");
         let _ = std::fs::remove_file(&path);
+    }
+
+    #[test]
+    fn the_dummy_device_streams_live_frames_in_order() {
+        let k = PinholeIntrinsics { fx_px: 285.0, fy_px: 285.0, cx_px: 159.5, cy_px: 119.5, width_px: 320, height_px: 240 };
+        let calibration = RgbdCalibration { intrinsics: k, depth_units_per_metre: 1000.0 };
+        match LiveDevice::open(Some("Dummy"), None) {
+            Err(Error::UnknownCalibration { source_name }) => assert_eq!(source_name, "openni2:Dummy", "names the source"),
+            Err(other) => panic!("expected UnknownCalibration without a field of view, got {other}"),
+            Ok(_) => panic!("the Dummy device reports no field of view"),
+        }
+        let wrong_scale = RgbdCalibration { depth_units_per_metre: 5000.0, ..calibration };
+        let error = LiveDevice::open(Some("Dummy"), Some(wrong_scale)).err().expect("live depth is in mm").to_string();
+        assert!(error.contains("--depth-scale 1000"), "{error}");
+        let mut device = LiveDevice::open(Some("Dummy"), Some(calibration)).expect("opening the Dummy device");
+        assert!(device.name().contains("Dummy"), "{}", device.name());
+        let frames: Vec<RgbdFrame> = (0..5).map(|_| device.next_frame().expect("a live frame")).collect();
+        for (i, frame) in frames.iter().enumerate() {
+            assert_eq!(frame.index, i as u64, "numbered in order");
+            assert_eq!((frame.depth.width_px, frame.depth.height_px, frame.color.width_px), (320, 240, 320), "frame {i} size");
+        }
+        let stamps: Vec<i64> = frames.iter().map(|f| f.depth_timestamp_ns).collect();
+        assert!(stamps.windows(2).all(|w| w[1] > w[0]), "timestamps increase: {stamps:?}");
+        let missing = LiveDevice::open(Some("no-such-device://0"), Some(calibration)).err().expect("no such device").to_string();
+        assert!(missing.contains("webfusion devices"), "{missing}");
     }
 
     #[test]

@@ -52,7 +52,8 @@ pub(crate) struct FrameRange {
 /// Arguments of `webfusion record`.
 #[derive(Clone, Debug, clap::Args)]
 pub(crate) struct RecordArgs {
-    /// TUM RGB-D directory, .wfr recording or (feature `openni2`) .oni recording to read.
+    /// TUM RGB-D directory, .wfr recording, or (feature `openni2`) .oni recording or live
+    /// camera: `openni2` (the first) or `openni2:<uri>` (see `webfusion devices`).
     #[arg(long, value_name = "PATH")]
     pub(crate) source: PathBuf,
 
@@ -90,8 +91,20 @@ pub(crate) struct RecordArgs {
 /// Runs `webfusion record`: progress on stderr, a summary on stdout.
 pub(crate) fn run(args: &RecordArgs) -> anyhow::Result<()> {
     let calibration_override = calibration_override(args)?;
-    let mut source = crate::open_with(&args.source, calibration_override)?;
-    let frames = resolve_frame_range(args.frames, source.frame_count())?;
+    let (mut source, frames) = match crate::live_spec(&args.source) {
+        Some(uri) => {
+            let Some(FrameRange { start, end: Some(end) }) = args.frames else {
+                bail!("recording a live camera needs --frames ..N (how many frames to record)");
+            };
+            let source: Box<dyn FrameSource> = Box::new(crate::LiveTake::new(crate::open_live(uri, calibration_override)?, end));
+            (source, resolve_frame_range(Some(FrameRange { start, end: Some(end) }), end)?)
+        }
+        None => {
+            let source = crate::open_with(&args.source, calibration_override)?;
+            let frames = resolve_frame_range(args.frames, source.frame_count())?;
+            (source, frames)
+        }
+    };
     let color_codec = match args.color_codec {
         ColorCodecArg::Jpeg => ColorCodec::Jpeg,
         ColorCodecArg::Png => ColorCodec::Png,

@@ -6,27 +6,33 @@
 //! ([`OutQueue`]). In lossless delivery the session waits for the client (every frame, in
 //! order); in live delivery the queue keeps only the newest frames and counts what it drops.
 //! A malformed message closes only the client that sent it, with the reason.
+//!
+//! A live camera (`--source openni2[:<uri>]`) is read by one capture thread that encodes each
+//! frame once and broadcasts it ([`LiveHub`]); every client subscribes, plays or pauses on its
+//! own, and a client that falls behind the camera loses the oldest frames, counted as drops.
 
 use std::collections::{HashMap, VecDeque};
 use std::net::SocketAddr;
 use std::path::{Component, Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::Context as _;
 use axum::Router;
+use axum::body::Bytes;
 use axum::extract::ws::{CloseFrame, Message as WsMessage, WebSocket, WebSocketUpgrade};
 use axum::extract::{Query, State};
 use axum::http::{HeaderMap, StatusCode, Uri, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use futures_util::{SinkExt as _, StreamExt as _};
-use tokio::sync::Notify;
+use tokio::sync::{Notify, broadcast};
 use tokio::time::Instant;
 use webfusion_core::codec::{ColorCodec, DepthCodec};
 use webfusion_core::protocol::{Control, Delivery, ErrorCode, FrameMessage, Hello, MAX_CLIENT_MESSAGE_BYTES, Message, PlaybackState, Status, WireColor};
 use webfusion_core::recording::RecordingReader;
-use webfusion_core::source::{FrameSource, TimedPose, is_recording, open_recording};
+use webfusion_core::source::{FrameSource, LiveSource, TimedPose, is_recording, open_recording};
 use webfusion_core::{RgbdCalibration, Se3};
 
 use crate::calib::CalibrationArgs;
@@ -49,7 +55,8 @@ pub(crate) enum ColorArg {
 
 #[derive(clap::Args)]
 pub(crate) struct ServeArgs {
-    /// TUM RGB-D directory or `.wfr` recording.
+    /// TUM RGB-D directory, `.wfr` recording, `.oni` recording, or live camera: `openni2`
+    /// (the first) or `openni2:<uri>` (see `webfusion devices`); the last two need feature `openni2`.
     #[arg(long, default_value = crate::DEFAULT_SAMPLE)]
     source: PathBuf,
     /// Address to listen on. Anything but loopback needs --token or --insecure. Port 0 picks a free port.
@@ -90,6 +97,79 @@ struct Shared {
     color: ColorArg,
     jpeg_quality: u8,
     live_queue: usize,
+    /// The capture of a live camera; `None` for logs.
+    live: Option<LiveHub>,
+}
+
+/// Frames a client may fall behind a live camera before it loses the oldest.
+const LIVE_BROADCAST_FRAMES: usize = 4;
+
+/// One live camera shared by every client: a capture thread encodes each frame once and
+/// broadcasts it.
+struct LiveHub {
+    name: String,
+    calibration: RgbdCalibration,
+    frames: broadcast::Sender<LiveItem>,
+    /// Frames captured so far.
+    captured: Arc<AtomicU64>,
+    /// Why the capture stopped, once it has.
+    failure: Arc<Mutex<Option<String>>>,
+}
+
+#[derive(Clone)]
+enum LiveItem {
+    /// An encoded frame message.
+    Frame(Bytes),
+    /// The camera stopped; the reason.
+    Failed(Arc<str>),
+}
+
+impl LiveHub {
+    /// Starts the capture thread of `live`.
+    fn start(mut live: Box<dyn LiveSource>, color: ColorArg, jpeg_quality: u8) -> Self {
+        let (frames, _) = broadcast::channel(LIVE_BROADCAST_FRAMES);
+        let captured = Arc::new(AtomicU64::new(0));
+        let failure = Arc::new(Mutex::new(None));
+        let hub = Self { name: live.name(), calibration: live.calibration(), frames: frames.clone(), captured: Arc::clone(&captured), failure: Arc::clone(&failure) };
+        std::thread::Builder::new()
+            .name("webfusion-capture".to_owned())
+            .spawn(move || {
+                loop {
+                    let encoded = live.next_frame().and_then(|frame| {
+                        let (color, color_payload) = encode_color(&frame.color, color, jpeg_quality)?;
+                        Ok(Message::Frame(FrameMessage {
+                            // The camera's own frame number: gaps at a client are its drops.
+                            sequence: frame.index,
+                            index: frame.index,
+                            depth_timestamp_ns: frame.depth_timestamp_ns,
+                            color_timestamp_ns: frame.color_timestamp_ns,
+                            ground_truth: None,
+                            depth_codec: DepthCodec::Rvl,
+                            depth_payload: DepthCodec::Rvl.encode(&frame.depth),
+                            color,
+                            color_payload,
+                        })
+                        .encode())
+                    });
+                    match encoded {
+                        Ok(bytes) => {
+                            captured.fetch_add(1, Ordering::Relaxed);
+                            // No subscriber is not an error: frames are for whoever listens.
+                            let _ = frames.send(LiveItem::Frame(bytes.into()));
+                        }
+                        Err(e) => {
+                            let reason: Arc<str> = format!("live camera stopped: {e}").into();
+                            eprintln!("{reason}");
+                            *failure.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = Some(reason.to_string());
+                            let _ = frames.send(LiveItem::Failed(reason));
+                            return;
+                        }
+                    }
+                }
+            })
+            .expect("spawning the capture thread");
+        hub
+    }
 }
 
 pub(crate) fn run(args: ServeArgs) -> anyhow::Result<()> {
@@ -101,9 +181,19 @@ pub(crate) fn run(args: ServeArgs) -> anyhow::Result<()> {
     anyhow::ensure!((1..=100).contains(&args.jpeg_quality), "--jpeg-quality must be in 1..=100");
     anyhow::ensure!(args.live_queue >= 1, "--live-queue must be at least 1");
     let calibration_override = args.calibration.resolve()?;
-    // Open once up front so a bad source fails here, not at the first client.
-    let probe = SessionSource::open(&args.source, calibration_override)?;
-    eprintln!("source: {} ({} frames, {}x{})", probe.name(), probe.frame_count(), probe.calibration().intrinsics.width_px, probe.calibration().intrinsics.height_px);
+    let live = match crate::live_spec(&args.source) {
+        Some(uri) => {
+            let hub = LiveHub::start(crate::open_live(uri, calibration_override)?, args.color, args.jpeg_quality);
+            eprintln!("source: live camera {} ({}x{})", hub.name, hub.calibration.intrinsics.width_px, hub.calibration.intrinsics.height_px);
+            Some(hub)
+        }
+        None => {
+            // Open once up front so a bad source fails here, not at the first client.
+            let probe = SessionSource::open(&args.source, calibration_override)?;
+            eprintln!("source: {} ({} frames, {}x{})", probe.name(), probe.frame_count(), probe.calibration().intrinsics.width_px, probe.calibration().intrinsics.height_px);
+            None
+        }
+    };
     if !args.web_dir.join("index.html").is_file() {
         eprintln!("note: {} has no index.html; the WebSocket works but the page is not built (scripts/run.sh builds it)", args.web_dir.display());
     }
@@ -116,6 +206,7 @@ pub(crate) fn run(args: ServeArgs) -> anyhow::Result<()> {
         color: args.color,
         jpeg_quality: args.jpeg_quality,
         live_queue: args.live_queue,
+        live,
     });
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
     runtime.block_on(async move {
@@ -319,7 +410,7 @@ impl OutQueue {
 
     /// Queues a frame. Lossless: waits for room. Live: drops the oldest queued frame when full.
     /// Returns false once the client is gone.
-    async fn push_frame(&self, bytes: Vec<u8>, delivery: Delivery) -> bool {
+    async fn push_frame(&self, bytes: Bytes, delivery: Delivery) -> bool {
         loop {
             let notified = self.changed.notified();
             {
@@ -335,7 +426,7 @@ impl OutQueue {
                         state.frames_queued -= 1;
                         state.frames_dropped += 1;
                     }
-                    state.items.push_back((WsMessage::Binary(bytes.into()), true));
+                    state.items.push_back((WsMessage::Binary(bytes), true));
                     state.frames_queued += 1;
                     drop(state);
                     self.changed.notify_waiters();
@@ -367,6 +458,11 @@ impl OutQueue {
             }
             notified.await;
         }
+    }
+
+    /// Counts frames lost before they reached this queue (a client behind a live camera).
+    fn add_dropped(&self, frames: u64) {
+        self.lock().frames_dropped += frames;
     }
 
     fn close(&self) {
@@ -410,7 +506,10 @@ async fn session(socket: WebSocket, shared: Arc<Shared>) {
         sink.close().await.ok();
     });
 
-    let outcome = drive_session(&mut stream, &shared, &queue).await;
+    let outcome = match &shared.live {
+        Some(hub) => drive_live_session(&mut stream, hub, &queue).await,
+        None => drive_session(&mut stream, &shared, &queue).await,
+    };
     if let Err((code, reason)) = outcome {
         queue.reply(WsMessage::Binary(Message::Error { code, message: reason.clone() }.encode().into()));
         let close_code = if code == ErrorCode::SourceFailed { 1011 } else { 1008 };
@@ -484,26 +583,15 @@ async fn drive_session(stream: &mut futures_util::stream::SplitStream<WebSocket>
         let due = pending.as_ref().map(|(_, due)| *due);
         tokio::select! {
             incoming = stream.next() => {
-                let bytes = match incoming {
-                    None | Some(Ok(WsMessage::Close(_))) => return Ok(()),
-                    Some(Err(e)) => return Err((ErrorCode::MalformedMessage, format!("WebSocket error: {e}"))),
-                    Some(Ok(WsMessage::Binary(bytes))) => bytes,
-                    Some(Ok(WsMessage::Ping(_) | WsMessage::Pong(_))) => continue,
-                    Some(Ok(WsMessage::Text(_))) => return Err((ErrorCode::MalformedMessage, "text messages are not part of the protocol; send binary control messages".to_owned())),
-                };
-                let control = match Message::decode(&bytes) {
-                    Ok(Message::Control(control)) => control,
-                    Ok(other) => return Err((ErrorCode::MalformedMessage, format!("clients may only send control messages, got {}", kind_name(&other)))),
-                    Err(e @ webfusion_core::Error::ProtocolVersion { .. }) => return Err((ErrorCode::UnsupportedVersion, e.to_string())),
-                    Err(e) => return Err((ErrorCode::MalformedMessage, e.to_string())),
-                };
+                let Some(control) = client_control(incoming)? else { return Ok(()) };
+                let Some(control) = control else { continue };
                 apply_control(&mut playback, control, frame_count).map_err(|reason| (ErrorCode::InvalidControl, reason))?;
                 pending = None;
                 queue.reply(status(&playback));
             }
             () = sleep_until_or_forever(due) => {
                 let Some((frame, _)) = pending.take() else { continue };
-                if !queue.push_frame(Message::Frame(frame).encode(), playback.delivery).await {
+                if !queue.push_frame(Message::Frame(frame).encode().into(), playback.delivery).await {
                     return Ok(());
                 }
                 sequence += 1;
@@ -527,6 +615,96 @@ async fn drive_session(stream: &mut futures_util::stream::SplitStream<WebSocket>
             }
         }
     }
+}
+
+/// The control in a client's WebSocket message: `Ok(None)` when the client left,
+/// `Ok(Some(None))` for a ping or pong, an error (the close reason) for anything malformed.
+#[allow(clippy::option_option, reason = "left / nothing to do / a control are three distinct outcomes")]
+fn client_control(incoming: Option<Result<WsMessage, axum::Error>>) -> Result<Option<Option<Control>>, (ErrorCode, String)> {
+    let bytes = match incoming {
+        None | Some(Ok(WsMessage::Close(_))) => return Ok(None),
+        Some(Err(e)) => return Err((ErrorCode::MalformedMessage, format!("WebSocket error: {e}"))),
+        Some(Ok(WsMessage::Binary(bytes))) => bytes,
+        Some(Ok(WsMessage::Ping(_) | WsMessage::Pong(_))) => return Ok(Some(None)),
+        Some(Ok(WsMessage::Text(_))) => return Err((ErrorCode::MalformedMessage, "text messages are not part of the protocol; send binary control messages".to_owned())),
+    };
+    match Message::decode(&bytes) {
+        Ok(Message::Control(control)) => Ok(Some(Some(control))),
+        Ok(other) => Err((ErrorCode::MalformedMessage, format!("clients may only send control messages, got {}", kind_name(&other)))),
+        Err(e @ webfusion_core::Error::ProtocolVersion { .. }) => Err((ErrorCode::UnsupportedVersion, e.to_string())),
+        Err(e) => Err((ErrorCode::MalformedMessage, e.to_string())),
+    }
+}
+
+/// Runs a client of a live camera: frames flow while it plays, from the newest on.
+async fn drive_live_session(stream: &mut futures_util::stream::SplitStream<WebSocket>, hub: &LiveHub, queue: &OutQueue) -> Result<(), (ErrorCode, String)> {
+    let mut frames = hub.frames.subscribe();
+    if let Some(reason) = hub.failure.lock().unwrap_or_else(std::sync::PoisonError::into_inner).clone() {
+        return Err((ErrorCode::SourceFailed, reason));
+    }
+    queue.reply(WsMessage::Binary(
+        Message::Hello(Hello { source_name: hub.name.clone(), frame_count: None, calibration: hub.calibration, has_ground_truth: false, delivery: Delivery::Live }).encode().into(),
+    ));
+    let mut playback = Playback { state: PlaybackState::Paused, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Live, stepping: false, anchor: None };
+    let status = |playback: &Playback| {
+        let (frames_sent, frames_dropped) = queue.counts();
+        let next_index = hub.captured.load(Ordering::Relaxed);
+        WsMessage::Binary(Message::Status(Status { state: playback.state, next_index, rate: playback.rate, looping: false, delivery: playback.delivery, frames_sent, frames_dropped }).encode().into())
+    };
+    queue.reply(status(&playback));
+    loop {
+        tokio::select! {
+            incoming = stream.next() => {
+                let Some(control) = client_control(incoming)? else { return Ok(()) };
+                let Some(control) = control else { continue };
+                apply_live_control(&mut playback, control).map_err(|reason| (ErrorCode::InvalidControl, reason))?;
+                queue.reply(status(&playback));
+            }
+            item = frames.recv() => {
+                let active = playback.state == PlaybackState::Playing || playback.stepping;
+                match item {
+                    Ok(LiveItem::Frame(bytes)) if active => {
+                        if !queue.push_frame(bytes, playback.delivery).await {
+                            return Ok(());
+                        }
+                        if playback.stepping {
+                            playback.stepping = false;
+                            queue.reply(status(&playback));
+                        }
+                    }
+                    Ok(LiveItem::Frame(_)) => {}
+                    Ok(LiveItem::Failed(reason)) => return Err((ErrorCode::SourceFailed, reason.to_string())),
+                    Err(broadcast::error::RecvError::Lagged(missed)) => {
+                        if active {
+                            queue.add_dropped(missed);
+                        }
+                    }
+                    Err(broadcast::error::RecvError::Closed) => return Err((ErrorCode::SourceFailed, "the live capture ended".to_owned())),
+                }
+            }
+        }
+    }
+}
+
+/// Applies a control to a live session: play, pause, step and delivery; a camera cannot
+/// seek, loop or change its rate.
+fn apply_live_control(playback: &mut Playback, control: Control) -> Result<(), String> {
+    match control {
+        Control::Play => playback.state = PlaybackState::Playing,
+        Control::Pause => {
+            playback.state = PlaybackState::Paused;
+            playback.stepping = false;
+        }
+        Control::Step => {
+            playback.state = PlaybackState::Paused;
+            playback.stepping = true;
+        }
+        Control::Delivery(delivery) => playback.delivery = delivery,
+        Control::Seek(_) => return Err("the source is a live camera: it cannot seek".to_owned()),
+        Control::Rate(_) => return Err("the source is a live camera: it runs at its own rate".to_owned()),
+        Control::Loop(_) => return Err("the source is a live camera: there is nothing to loop".to_owned()),
+    }
+    Ok(())
 }
 
 async fn sleep_until_or_forever(due: Option<Instant>) {

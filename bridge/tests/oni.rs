@@ -58,3 +58,20 @@ fn devices_lists_what_openni2_sees_or_says_how_to_get_a_driver() {
     let listed = !stdout.trim().is_empty() && stdout.lines().all(|l| l.contains("(USB "));
     assert!((stdout.contains("no OpenNI2 devices found") && stdout.contains("libfreenect")) || listed, "{stdout}");
 }
+
+#[test]
+fn a_live_camera_records_the_frames_asked_for() {
+    let dir = scratch("live");
+    let wfr = dir.join("live.wfr");
+    let o = webfusion(&["record", "--source", "openni2:Dummy", "--out", wfr.to_str().expect("utf-8")]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("--frames ..N"), "a camera has no end: {stderr}");
+    let mut args = vec!["record", "--source", "openni2:Dummy", "--out", wfr.to_str().expect("utf-8"), "--frames", "..9"];
+    args.extend(CALIBRATION);
+    let o = webfusion(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut recording = RecordingReader::open(&wfr).expect("opening the live recording");
+    assert_eq!(recording.frame_count(), 9, "the frames asked for");
+    let stamps: Vec<i64> = (0..9).map(|i| recording.read_frame(i).expect("reading").depth_timestamp_ns).collect();
+    assert!(stamps.windows(2).all(|w| w[1] > w[0]), "one frame each, in order: {stamps:?}");
+}

@@ -406,3 +406,85 @@ async fn a_client_vanishing_mid_stream_does_not_disturb_the_others() {
     assert_eq!(frames.first().map(|f| f.index), Some(3), "continues after the three steps");
     assert_eq!(frames.len(), 97, "every remaining frame");
 }
+
+/// `serve`'s calibration flags for OpenNI2's Dummy device (it reports no field of view).
+#[cfg(feature = "openni2")]
+const DUMMY_CALIBRATION: [&str; 4] = ["--intrinsics", "285,285,159.5,119.5,320,240", "--depth-scale", "1000"];
+
+/// A live camera (OpenNI2's Dummy device, no hardware needed) streams to every playing client
+/// from the newest frame on, with the camera's own frame numbers; it refuses to seek.
+#[cfg(feature = "openni2")]
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_live_camera_streams_to_each_playing_client() {
+    let mut args = vec!["--source", "openni2:Dummy"];
+    args.extend(DUMMY_CALIBRATION);
+    let server = Server::start(&args);
+    let (mut a, mut b) = (server.connect().await, server.connect().await);
+    for socket in [&mut a, &mut b] {
+        match recv(socket).await {
+            Some(Message::Hello(hello)) => {
+                assert_eq!(hello.frame_count, None, "a camera has no end");
+                assert_eq!(hello.delivery, Delivery::Live, "live by default");
+                assert_eq!((hello.calibration.intrinsics.width_px, hello.calibration.intrinsics.height_px), (320, 240), "Dummy size");
+                assert!(hello.source_name.contains("Dummy"), "{}", hello.source_name);
+            }
+            other => panic!("expected hello, got {other:?}"),
+        }
+        assert!(matches!(recv(socket).await, Some(Message::Status(Status { state: PlaybackState::Paused, .. }))), "starts paused");
+    }
+    send(&mut a, Control::Play).await;
+    let frames: Vec<FrameMessage> = {
+        let mut frames = Vec::new();
+        while frames.len() < 6 {
+            frames.push(next_frame(&mut a).await);
+        }
+        frames
+    };
+    for pair in frames.windows(2) {
+        assert!(pair[1].sequence > pair[0].sequence, "camera frame numbers increase");
+        assert!(pair[1].depth_timestamp_ns > pair[0].depth_timestamp_ns, "timestamps increase");
+    }
+    let hello_calibration = webfusion_core::RgbdCalibration {
+        intrinsics: webfusion_core::PinholeIntrinsics { fx_px: 285.0, fy_px: 285.0, cx_px: 159.5, cy_px: 119.5, width_px: 320, height_px: 240 },
+        depth_units_per_metre: 1000.0,
+    };
+    let decoded = frames[0].decode_images(&hello_calibration).expect("a live frame decodes");
+    assert_eq!((decoded.depth.width_px, decoded.color.width_px, decoded.depth.units.len()), (320, 320, 320 * 240), "decoded sizes");
+    // b never pressed play: it got nothing but may still step one frame.
+    send(&mut b, Control::Step).await;
+    let stepped = loop {
+        match recv(&mut b).await {
+            Some(Message::Frame(frame)) => break frame,
+            Some(Message::Status(_)) => {}
+            other => panic!("expected a stepped frame, got {other:?}"),
+        }
+    };
+    assert!(stepped.sequence > frames[0].sequence, "a step delivers a current frame, not an old one");
+    // Seeking a camera is refused with the reason, and closes only that client.
+    send(&mut b, Control::Seek(0)).await;
+    let refused = loop {
+        match recv(&mut b).await {
+            Some(Message::Error { code, message }) => break (code, message),
+            Some(Message::Frame(_) | Message::Status(_)) => {}
+            other => panic!("expected an error, got {other:?}"),
+        }
+    };
+    assert_eq!(refused.0, ErrorCode::InvalidControl, "{}", refused.1);
+    assert!(refused.1.contains("cannot seek"), "{}", refused.1);
+    let after = next_frame(&mut a).await;
+    assert!(after.sequence > frames[5].sequence, "a keeps streaming");
+}
+
+/// A missing camera fails at start-up with what to check, not at the first client.
+#[cfg(feature = "openni2")]
+#[test]
+fn a_missing_camera_is_a_clear_start_up_error() {
+    let output = Command::new(env!("CARGO_BIN_EXE_webfusion"))
+        .args(["serve", "--bind", "127.0.0.1:0", "--source", "openni2:no-such-camera"])
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("running webfusion serve");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "serve must not start: {stderr}");
+    assert!(stderr.contains("openni2:no-such-camera") && stderr.contains("webfusion devices") && !stderr.contains("panicked"), "{stderr}");
+}

@@ -27,6 +27,22 @@ pub trait FrameSource: Send {
     fn ground_truth(&self) -> Option<&[TimedPose]>;
 }
 
+/// A live camera: an endless stream of frames, read in order, with one calibration.
+///
+/// Unlike a [`FrameSource`] it cannot seek and has no frame count; frames that nobody reads
+/// in time are the driver's to drop.
+pub trait LiveSource: Send {
+    /// Human-readable name (the device's vendor and model, or its URI).
+    fn name(&self) -> String;
+
+    /// Calibration of every frame.
+    fn calibration(&self) -> RgbdCalibration;
+
+    /// Blocks until the device delivers its next frame. Frames are numbered from 0 in the
+    /// order read; an error means the device stopped (unplugged, timed out).
+    fn next_frame(&mut self) -> Result<RgbdFrame>;
+}
+
 /// Opens `path` as a frame source: a directory is read as a TUM RGB-D sequence, a file
 /// starting with the recording magic as a `.wfr` recording.
 ///
