@@ -28,6 +28,7 @@ cargo run --release -q -p webfusion-bridge -- reconstruct data/sample/fr1_rpy.wf
 if [ "$serve" = 1 ]; then
   echo
   echo "== bridge: web app and frames of ${source} on one port (Ctrl-C stops) =="
-  echo "webfusion web app: http://127.0.0.1:${port}/  (WebGPU browser needed)"
+  # The page connects to this bridge by itself; the query sets up the volume for fr1/rpy.
+  echo "webfusion web app: http://127.0.0.1:${port}/?voxel_mm=20&centred=1&autoplay=1  (WebGPU browser needed)"
   exec cargo run --release -q -p webfusion-bridge -- serve --source "$source" --bind "127.0.0.1:${port}" --web-dir dist
 fi

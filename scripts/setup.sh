@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Installs what webfusion needs on a fresh Debian 12 machine, idempotently: each tool is
 # checked first and installed only when missing or at the wrong version.
-#   scripts/setup.sh test   # what the test command needs
-#   scripts/setup.sh run    # what the main command needs (adds trunk)
+#   scripts/setup.sh test   # what the test command needs (adds Chromium, Node, playwright-core, OpenNI2)
+#   scripts/setup.sh run    # what the main command needs
 # Versions are pinned to what ../shared/TOOLCHAIN.md verified.
 set -euo pipefail
 what="${1:-test}"
@@ -14,7 +14,7 @@ log() { printf '\033[1;34m[setup]\033[0m %s\n' "$*" >&2; }
 
 apt_packages=(mesa-vulkan-drivers libvulkan1)
 # OpenNI2 (.oni recordings, feature `openni2`): the tests build and run it.
-[ "$what" = test ] && apt_packages+=(chromium chromium-driver libopenni2-dev libopenni2-0)
+[ "$what" = test ] && apt_packages+=(chromium chromium-driver libopenni2-dev libopenni2-0 nodejs npm)
 missing=()
 for p in "${apt_packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -40,9 +40,16 @@ if ! command -v cargo-nextest >/dev/null; then
   cargo install cargo-nextest --locked
 fi
 
-if [ "$what" = run ] && [ "$(trunk --version 2>/dev/null | awk '{print $2}')" != "$TRUNK_VERSION" ]; then
+# Both commands build the web app with trunk (the test command for the end-to-end test).
+if [ "$(trunk --version 2>/dev/null | awk '{print $2}')" != "$TRUNK_VERSION" ]; then
   log "cargo install trunk $TRUNK_VERSION (about 9 minutes, once)"
   cargo install trunk --locked --version "$TRUNK_VERSION" --force
+fi
+
+# playwright-core drives Debian's Chromium; it downloads no browser.
+if [ "$what" = test ] && [ ! -d tests/browser/node_modules/playwright-core ]; then
+  log "npm ci (tests/browser: playwright-core)"
+  (cd tests/browser && npm ci --no-audit --no-fund --loglevel=error >&2)
 fi
 
 # wgpu/Mesa warn on stderr when XDG_RUNTIME_DIR is unset or invalid; give them a private one.

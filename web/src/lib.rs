@@ -1,11 +1,13 @@
 // SPDX-License-Identifier: MIT
-//! The webfusion browser app: the core crate's kernels on WebGPU.
-//!
-//! Today it replays the bundled sample recording through the GPU preprocessing (the same WGSL
-//! the native build runs on Vulkan) and shows the level-0 normal map and per-stage timings.
-//! Status is published as JSON on `window.webfusion.status` for automated tests.
+//! The webfusion browser app: connects to a `webfusion serve` bridge over WebSocket and runs
+//! the full KinectFusion pipeline (the same core crate and WGSL as the native build) on
+//! WebGPU, with colour, depth, normal, model and free 3D views, playback controls, settings
+//! and exports. Status and the trajectory are published on `window.webfusion` for tests.
 #![cfg(target_arch = "wasm32")]
 
 mod app;
+mod link;
+mod ui;
+mod view;
 
 pub use app::start;

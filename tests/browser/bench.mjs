@@ -1,0 +1,65 @@
+// SPDX-License-Identifier: MIT
+// Benchmark (not a test): the same KinectFusion pipeline on the same frames, natively
+// (`webfusion reconstruct`, Vulkan: lavapipe or a GPU) and in headless Chromium (WebGPU:
+// SwiftShader), printed side by side as per-stage medians and frames/s, plus the wasm size
+// (gzip) and the time from page load to the first fused frame.
+//
+// usage: node tests/browser/bench.mjs [--webfusion target/release/webfusion] [--dist dist]
+//          [--sample data/sample/fr1_rpy.wfr] [--volume 256] [--voxel-mm 20] [--out out/bench-web]
+import { spawnSync } from 'node:child_process';
+import { mkdirSync, readFileSync, readdirSync, statSync } from 'node:fs';
+import { join, resolve } from 'node:path';
+import { gzipSync } from 'node:zlib';
+import { launchChromium, startBridge, waitFor } from './lib.mjs';
+
+const args = Object.fromEntries(process.argv.slice(2).reduce((pairs, a, i, all) => (a.startsWith('--') ? [...pairs, [a.slice(2), all[i + 1]]] : pairs), []));
+const webfusion = resolve(args.webfusion ?? 'target/release/webfusion');
+const dist = resolve(args.dist ?? 'dist');
+const sample = resolve(args.sample ?? 'data/sample/fr1_rpy.wfr');
+const out = resolve(args.out ?? 'out/bench-web');
+const volume = Number(args.volume ?? 256);
+const voxelMm = Number(args['voxel-mm'] ?? 20);
+mkdirSync(out, { recursive: true });
+
+const wasm = readdirSync(dist).filter((f) => f.endsWith('.wasm')).map((f) => join(dist, f));
+if (wasm.length !== 1) throw new Error(`expected one .wasm in ${dist}, found ${wasm.length}`);
+const wasmBytes = readFileSync(wasm[0]);
+
+const t0 = Date.now();
+const native = spawnSync(webfusion, ['reconstruct', sample, '--out', join(out, 'native'), '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh'], { encoding: 'utf8' });
+if (native.status !== 0) throw new Error(`webfusion reconstruct failed: ${native.stderr}`);
+const nativeWallS = (Date.now() - t0) / 1000;
+const stats = JSON.parse(readFileSync(join(out, 'native', 'stats.json'), 'utf8'));
+
+const bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0');
+const browser = await launchChromium();
+let done, firstMs, browserWallS;
+try {
+  const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+  const tLoad = Date.now();
+  await page.goto(`http://${bridge.addr}/?volume=${volume}&voxel_mm=${voxelMm}&centred=1&autoplay=1`);
+  const first = await waitFor(page, 'the first frame', (s) => s.frames_done >= 1, 300_000);
+  firstMs = Date.now() - tLoad;
+  const tFirst = Date.now();
+  done = await waitFor(page, 'every frame', (s) => s.frames_done >= first.frames_total && s.state === 'ended', 3_600_000);
+  browserWallS = (Date.now() - tFirst) / 1000;
+} finally {
+  await browser.close();
+  bridge.child.kill('SIGKILL');
+}
+
+const frames = stats.frames;
+const row = (name, nat, web) => console.log(`${name.padEnd(28)}${nat.padStart(14)}${web.padStart(16)}${(typeof nat === 'string' && nat.endsWith('ms') && web.endsWith('ms') ? `${(parseFloat(web) / parseFloat(nat)).toFixed(2)}x`.padStart(10) : '')}`);
+console.log(`\n${frames} frames of ${sample}, ${volume}^3 voxels of ${voxelMm} mm`);
+console.log(`native: ${stats.adapter}\nbrowser: ${done.adapter}\n`);
+row('', 'native', 'browser');
+const med = (stage) => stats.stages_ms[stage]?.median;
+for (const [nativeStage, webStage] of [['preprocess', 'preprocess'], ['track', 'track'], ['integrate', 'integrate'], ['raycast', 'raycast']]) {
+  row(`${webStage} (median)`, `${med(nativeStage)?.toFixed(1)} ms`, `${done.stages_ms[webStage].toFixed(1)} ms`);
+}
+row('frame (median)', `${med('frame')?.toFixed(1)} ms`, `${(done.stages_ms.preprocess + done.stages_ms.track + done.stages_ms.integrate + done.stages_ms.raycast).toFixed(1)} ms`);
+row('decode + views (browser)', '-', `${(done.stages_ms.decode + done.stages_ms.views).toFixed(1)} ms`);
+row('frames/s (whole run)', (frames / nativeWallS).toFixed(2), ((done.frames_done - 1) / browserWallS).toFixed(2));
+console.log(`\nwasm: ${(wasmBytes.length / 1024).toFixed(0)} KiB, ${(gzipSync(wasmBytes, { level: 9 }).length / 1024).toFixed(0)} KiB gzip (${wasm[0]})`);
+console.log(`time to first fused frame: ${firstMs} ms from page load (${done.time_to_first_frame_ms?.toFixed(0)} ms from connecting)`);
+console.log(`native wall time includes start-up and reading; browser frames/s counts from the first frame. ATE vs ground truth: native ${stats.ate ? (stats.ate.rmse_m * 100).toFixed(2) + ' cm' : 'n/a'}, browser ${done.ate_rmse_m === null ? 'n/a' : (done.ate_rmse_m * 100).toFixed(2) + ' cm'}`);

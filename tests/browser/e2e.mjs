@@ -1,0 +1,113 @@
+// SPDX-License-Identifier: MIT
+// End-to-end test of the web app in real headless Chromium on WebGPU (SwiftShader):
+//   1. the native `webfusion reconstruct` fuses the bundled sample (the reference trajectory);
+//   2. `webfusion serve` serves the built app (dist/) and the sample's frames;
+//   3. the page connects, fuses every frame on WebGPU; midway the bridge is killed and started
+//      again on the same port, and the page must carry on by itself (no reload);
+//   4. the browser's trajectory must match the native one (same world frame, so no alignment:
+//      RMSE and max position difference < 5 mm), and a screenshot of the free 3D view must
+//      show a model (decoded PNG pixels, not just a file).
+// Prints one line per check and a closing "e2e: N passed, M failed"; exits non-zero on failure.
+//
+// usage: node tests/browser/e2e.mjs [--webfusion target/release/webfusion] [--dist dist]
+//          [--sample data/sample/fr1_rpy.wfr] [--out out/e2e] [--volume 128] [--voxel-mm 40]
+import { spawnSync } from 'node:child_process';
+import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
+import { join, resolve } from 'node:path';
+import { decodePng, launchChromium, parseTum, startBridge, waitFor } from './lib.mjs';
+
+const args = Object.fromEntries(process.argv.slice(2).reduce((pairs, a, i, all) => (a.startsWith('--') ? [...pairs, [a.slice(2), all[i + 1]]] : pairs), []));
+const webfusion = resolve(args.webfusion ?? 'target/release/webfusion');
+const dist = resolve(args.dist ?? 'dist');
+const sample = resolve(args.sample ?? 'data/sample/fr1_rpy.wfr');
+const out = resolve(args.out ?? 'out/e2e');
+const volume = Number(args.volume ?? 128);
+const voxelMm = Number(args['voxel-mm'] ?? 40);
+const TOLERANCE_M = 0.005;
+const FRAME_TIMEOUT_MS = 120_000;
+mkdirSync(out, { recursive: true });
+
+const results = [];
+function check(name, ok, detail) {
+  results.push({ name, ok });
+  console.log(`${ok ? 'PASS' : 'FAIL'} ${name}: ${detail}`);
+}
+
+let bridge = null;
+let browser = null;
+try {
+  // 1. The native reference on the same frames and settings.
+  const native = join(out, 'native');
+  const t0 = Date.now();
+  const run = spawnSync(webfusion, ['reconstruct', sample, '--out', native, '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh'], { encoding: 'utf8' });
+  if (run.status !== 0) throw new Error(`webfusion reconstruct failed: ${run.stderr}`);
+  const nativeTrajectory = parseTum(readFileSync(join(native, 'trajectory.txt'), 'utf8'));
+  console.log(`native reference: ${nativeTrajectory.length} frames in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
+
+  // 2. The bridge and the page.
+  bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0');
+  const port = bridge.addr.split(':')[1];
+  browser = await launchChromium();
+  const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+  const consoleErrors = [];
+  // Chromium logs each refused reconnect attempt itself; those are expected while the bridge is down.
+  page.on('console', (m) => { if (m.type() === 'error' && !m.text().includes('WebSocket connection to')) consoleErrors.push(m.text()); });
+  page.on('pageerror', (e) => consoleErrors.push(String(e)));
+  const url = `http://${bridge.addr}/?volume=${volume}&voxel_mm=${voxelMm}&centred=1&autoplay=1`;
+  const tOpen = Date.now();
+  await page.goto(url);
+  const first = await waitFor(page, 'the first frame', (s) => s.frames_done >= 1, FRAME_TIMEOUT_MS);
+  console.log(`page: ${first.adapter}; first frame after ${((Date.now() - tOpen) / 1000).toFixed(1)} s (from connect: ${first.time_to_first_frame_ms?.toFixed(0)} ms)`);
+  const total = first.frames_total;
+
+  // 3. Kill the bridge midway; start it again on the same port.
+  const midway = Math.floor(total / 3);
+  await waitFor(page, `frame ${midway}`, (s) => s.frames_done >= midway, FRAME_TIMEOUT_MS * midway);
+  bridge.child.kill('SIGKILL');
+  const dropped = await waitFor(page, 'the page to notice the dropped bridge', (s) => s.link !== 'connected', 30_000);
+  await new Promise((r) => setTimeout(r, 1500));
+  bridge = await startBridge(webfusion, sample, dist, `127.0.0.1:${port}`);
+  const resumed = await waitFor(page, 'the page to reconnect', (s) => s.reconnects >= 1 && s.link === 'connected' && s.frames_done > dropped.frames_done, 60_000);
+  check('reconnect', true, `bridge killed at frame ${dropped.frames_done}; the page reconnected by itself (${resumed.reconnects} reconnect(s)) and fused frame ${resumed.frames_done}`);
+
+  // 4. All frames, then compare with the native trajectory.
+  const tRun = Date.now();
+  const done = await waitFor(page, 'every frame', (s) => s.frames_done >= total && s.state === 'ended', FRAME_TIMEOUT_MS * total);
+  console.log(`browser: ${done.frames_done} frames, ${done.fps.toFixed(2)} fps over the last frames; stages (mean ms) ${JSON.stringify(done.stages_ms)}; lost ${done.lost_frames}; ATE vs ground truth ${done.ate_rmse_m === null ? 'n/a' : (done.ate_rmse_m * 100).toFixed(2) + ' cm'}; ${((Date.now() - tRun) / 1000).toFixed(0)} s after the reconnect`);
+  const browserTum = await page.evaluate(() => window.webfusion.trajectory_tum);
+  writeFileSync(join(out, 'browser_trajectory.txt'), browserTum);
+  const browserTrajectory = parseTum(browserTum);
+  const byTime = new Map(nativeTrajectory.map((p) => [p.t.toFixed(6), p.p]));
+  let sumSq = 0, max = 0, pairs = 0;
+  for (const { t, p } of browserTrajectory) {
+    const q = byTime.get(t.toFixed(6));
+    if (!q) continue;
+    const d = Math.hypot(p[0] - q[0], p[1] - q[1], p[2] - q[2]);
+    sumSq += d * d; max = Math.max(max, d); pairs++;
+  }
+  const rmse = Math.sqrt(sumSq / Math.max(pairs, 1));
+  check('trajectory matches native', pairs === nativeTrajectory.length && browserTrajectory.length === nativeTrajectory.length && rmse < TOLERANCE_M && max < TOLERANCE_M,
+    `${pairs} of ${nativeTrajectory.length} poses paired; browser vs native RMSE ${(rmse * 1000).toFixed(3)} mm, max ${(max * 1000).toFixed(3)} mm (limit ${TOLERANCE_M * 1000} mm, no alignment)`);
+
+  // 5. The free 3D view shows the model.
+  const shot = await page.locator('#view-free').screenshot({ path: join(out, 'free_view.png') });
+  const png = decodePng(shot);
+  let lit = 0;
+  const greys = new Set();
+  for (let i = 0; i < png.width * png.height; i++) {
+    const [r, g, b] = [png.pixels[i * png.channels], png.pixels[i * png.channels + 1], png.pixels[i * png.channels + 2]];
+    if (r + g + b > 60) lit++;
+    greys.add(r >> 3);
+  }
+  const fraction = lit / (png.width * png.height);
+  check('screenshot shows the model', fraction > 0.15 && greys.size > 8, `${(fraction * 100).toFixed(1)} % of ${png.width}x${png.height} pixels lit, ${greys.size} distinct shades (saved ${join(out, 'free_view.png')})`);
+  check('no page errors', consoleErrors.length === 0 && done.message === '', consoleErrors.length ? consoleErrors.join(' | ') : `status message "${done.message}"`);
+} catch (error) {
+  check('e2e run', false, error.stack ?? String(error));
+} finally {
+  if (browser) await browser.close().catch(() => {});
+  if (bridge) bridge.child.kill('SIGKILL');
+}
+const failed = results.filter((r) => !r.ok).length;
+console.log(`e2e: ${results.length - failed} passed, ${failed} failed`);
+process.exit(failed ? 1 : 0);

@@ -1,0 +1,84 @@
+// SPDX-License-Identifier: MIT
+// Helpers shared by the end-to-end test and the browser benchmark: the bridge process,
+// Chromium with WebGPU, the page's status hook, TUM trajectories and PNG pixels.
+import { spawn } from 'node:child_process';
+import { inflateSync } from 'node:zlib';
+import { chromium } from 'playwright-core';
+
+/** Chromium flags that give WebGPU (SwiftShader) and a visible canvas, headless (see ../shared/TOOLCHAIN.md). */
+export const CHROMIUM_ARGS = ['--no-sandbox', '--enable-unsafe-webgpu', '--use-angle=swiftshader', '--use-webgpu-adapter=opengles', '--ignore-gpu-blocklist',
+  '--disable-background-networking', '--disable-component-update', '--disable-sync', '--no-first-run', '--disable-quic'];
+
+export function launchChromium() {
+  return chromium.launch({ executablePath: process.env.CHROMIUM ?? '/usr/bin/chromium', headless: true, args: CHROMIUM_ARGS });
+}
+
+/** Starts `webfusion serve` on `bind` and resolves with its address once it prints its URL. */
+export function startBridge(webfusion, sample, dist, bind) {
+  const child = spawn(webfusion, ['serve', '--source', sample, '--bind', bind, '--web-dir', dist], { stdio: ['ignore', 'pipe', 'inherit'] });
+  return new Promise((resolveAddr, reject) => {
+    let text = '';
+    child.stdout.on('data', (chunk) => {
+      text += chunk;
+      const m = text.match(/http:\/\/([^/\s]+)\//);
+      if (m) resolveAddr({ child, addr: m[1] });
+    });
+    child.on('exit', (code) => reject(new Error(`webfusion serve exited (${code}) before printing its URL`)));
+  });
+}
+
+/** TUM trajectory text -> [{t, p: [x, y, z]}]. */
+export function parseTum(text) {
+  return text.split('\n').filter((l) => l.trim() && !l.startsWith('#')).map((l) => {
+    const v = l.trim().split(/\s+/).map(Number);
+    return { t: v[0], p: [v[1], v[2], v[3]] };
+  });
+}
+
+/** Decodes an 8-bit RGB/RGBA, non-interlaced PNG (what Chromium writes) to {width, height, channels, pixels}. */
+export function decodePng(buffer) {
+  let offset = 8;
+  let width = 0, height = 0, channels = 0;
+  const idat = [];
+  while (offset < buffer.length) {
+    const length = buffer.readUInt32BE(offset);
+    const type = buffer.toString('ascii', offset + 4, offset + 8);
+    const data = buffer.subarray(offset + 8, offset + 8 + length);
+    if (type === 'IHDR') {
+      width = data.readUInt32BE(0); height = data.readUInt32BE(4);
+      const [depth, colour, , , interlace] = [data[8], data[9], data[10], data[11], data[12]];
+      if (depth !== 8 || interlace !== 0 || (colour !== 2 && colour !== 6)) throw new Error(`unsupported PNG (depth ${depth}, colour type ${colour}, interlace ${interlace})`);
+      channels = colour === 6 ? 4 : 3;
+    } else if (type === 'IDAT') idat.push(data);
+    offset += 12 + length;
+  }
+  const raw = inflateSync(Buffer.concat(idat));
+  const stride = width * channels;
+  const pixels = Buffer.alloc(stride * height);
+  for (let y = 0; y < height; y++) {
+    const filter = raw[y * (stride + 1)];
+    for (let x = 0; x < stride; x++) {
+      const cur = raw[y * (stride + 1) + 1 + x];
+      const a = x >= channels ? pixels[y * stride + x - channels] : 0;
+      const b = y > 0 ? pixels[(y - 1) * stride + x] : 0;
+      const c = x >= channels && y > 0 ? pixels[(y - 1) * stride + x - channels] : 0;
+      const p = a + b - c, pa = Math.abs(p - a), pb = Math.abs(p - b), pc = Math.abs(p - c);
+      const paeth = pa <= pb && pa <= pc ? a : pb <= pc ? b : c;
+      const predictor = [0, a, b, (a + b) >> 1, paeth][filter];
+      pixels[y * stride + x] = (cur + predictor) & 0xff;
+    }
+  }
+  return { width, height, channels, pixels };
+}
+
+export async function waitFor(page, what, predicate, timeoutMs) {
+  const deadline = Date.now() + timeoutMs;
+  for (;;) {
+    const status = await page.evaluate(() => window.webfusion?.status ?? null);
+    if (status && predicate(status)) return status;
+    if (status?.state === 'error') throw new Error(`the page reported an error while waiting for ${what}: ${status.message}`);
+    if (Date.now() > deadline) throw new Error(`timed out waiting for ${what}; last status ${JSON.stringify(status)}`);
+    await new Promise((r) => setTimeout(r, 250));
+  }
+}
+

@@ -1,0 +1,148 @@
+// SPDX-License-Identifier: MIT
+//! Pixels for the views: colour-mapped depth, normals as colour, the free viewer's camera
+//! and the trajectory drawn over the raycast model.
+
+use glam::{DMat3, DQuat, DVec3};
+use wasm_bindgen::prelude::*;
+use webfusion_core::{PinholeIntrinsics, Se3};
+
+/// Depth shown at the warm end of the colour map, metres.
+pub(crate) const DEPTH_VIEW_MAX_M: f32 = 4.5;
+
+/// Packed RGB8 as RGBA8.
+pub(crate) fn rgba_from_rgb(rgb8: &[u8]) -> Vec<u8> {
+    rgb8.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect()
+}
+
+/// Depth in metres (0 or NaN: invalid, black) through a perceptual blue-to-yellow map.
+pub(crate) fn rgba_from_depth_m(depth_m: impl Iterator<Item = f32>) -> Vec<u8> {
+    depth_m
+        .flat_map(|d| {
+            if !(d > 0.0) {
+                return [0, 0, 0, 255];
+            }
+            let t = (d / DEPTH_VIEW_MAX_M).clamp(0.0, 1.0);
+            // A compact approximation of viridis: dark blue, teal, green, yellow.
+            let r = (255.0 * (0.27 + t * (-0.6 + t * 1.33)).clamp(0.0, 1.0)) as u8;
+            let g = (255.0 * (0.0 + t * 0.9).clamp(0.0, 1.0)) as u8;
+            let b = (255.0 * (0.33 + t * (1.2 - t * 1.45)).clamp(0.0, 1.0)) as u8;
+            [r, g, b, 255]
+        })
+        .collect()
+}
+
+/// Unit normals (x, y, z, _) in the camera frame as colour (NaN: black).
+pub(crate) fn rgba_from_normals(normals: &[[f32; 4]]) -> Vec<u8> {
+    normals
+        .iter()
+        .flat_map(|n| {
+            if n[0].is_nan() {
+                [0, 0, 0, 255]
+            } else {
+                [((0.5 - 0.5 * n[0]) * 255.0) as u8, ((0.5 - 0.5 * n[1]) * 255.0) as u8, ((0.5 - 0.5 * n[2]) * 255.0) as u8, 255]
+            }
+        })
+        .collect()
+}
+
+/// RGBA8 packed in u32 (little-endian, as the raycast kernel writes it).
+pub(crate) fn rgba_from_packed(packed: &[u32]) -> Vec<u8> {
+    packed.iter().flat_map(|p| p.to_le_bytes()).collect()
+}
+
+/// Puts RGBA8 pixels of `width`x`height` on a canvas, resizing it to fit.
+pub(crate) fn draw_rgba(canvas: &web_sys::HtmlCanvasElement, width: u32, height: u32, rgba: &[u8]) -> Result<web_sys::CanvasRenderingContext2d, JsValue> {
+    if canvas.width() != width || canvas.height() != height {
+        canvas.set_width(width);
+        canvas.set_height(height);
+    }
+    let ctx: web_sys::CanvasRenderingContext2d = canvas.get_context("2d")?.ok_or("no 2d context")?.dyn_into()?;
+    let image = web_sys::ImageData::new_with_u8_clamped_array_and_sh(wasm_bindgen::Clamped(rgba), width, height)?;
+    ctx.put_image_data(&image, 0.0, 0.0)?;
+    Ok(ctx)
+}
+
+/// The free viewer: it orbits a target point, in the world frame of the first camera
+/// (x right, y down, z forward).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Orbit {
+    pub(crate) target_in_world: DVec3,
+    pub(crate) distance_m: f64,
+    /// Turn about the world's up axis, radians (0: looking along +z like the first camera).
+    pub(crate) yaw_rad: f64,
+    /// Elevation, radians (positive: looking down from above).
+    pub(crate) pitch_rad: f64,
+}
+
+impl Orbit {
+    /// Looks at `target_in_world` from behind and above the first camera.
+    pub(crate) fn looking_at(target_in_world: DVec3, distance_m: f64) -> Self {
+        Self { target_in_world, distance_m, yaw_rad: 0.5, pitch_rad: 0.45 }
+    }
+
+    /// The viewer's pose: camera z towards the target, camera y towards world down.
+    pub(crate) fn world_from_viewer(&self) -> Se3 {
+        let (sy, cy) = self.yaw_rad.sin_cos();
+        let (sp, cp) = self.pitch_rad.sin_cos();
+        let eye = self.target_in_world + self.distance_m * DVec3::new(sy * cp, -sp, -cy * cp);
+        let z = (self.target_in_world - eye).normalize();
+        let up = DVec3::new(0.0, -1.0, 0.0);
+        let x = z.cross(up).normalize();
+        let y = z.cross(x);
+        Se3::new(DQuat::from_mat3(&DMat3::from_cols(x, y, z)), eye)
+    }
+
+    pub(crate) fn orbit(&mut self, dx_px: f32, dy_px: f32) {
+        self.yaw_rad += f64::from(dx_px) * 0.01;
+        self.pitch_rad = (self.pitch_rad + f64::from(dy_px) * 0.01).clamp(-1.5, 1.5);
+    }
+
+    /// Moves the target in the view plane, by pixels at the target's distance.
+    pub(crate) fn pan(&mut self, dx_px: f32, dy_px: f32, focal_px: f32) {
+        let pose = self.world_from_viewer();
+        let scale = self.distance_m / f64::from(focal_px);
+        let right = pose.rotation * DVec3::X;
+        let down = pose.rotation * DVec3::Y;
+        self.target_in_world -= scale * (f64::from(dx_px) * right + f64::from(dy_px) * down);
+    }
+
+    pub(crate) fn zoom(&mut self, factor: f32) {
+        self.distance_m = (self.distance_m * f64::from(factor)).clamp(0.1, 50.0);
+    }
+}
+
+/// Pixel of a world point seen by a camera at `world_from_camera`, if in front of it.
+pub(crate) fn project(k: &PinholeIntrinsics, world_from_camera: &Se3, point_in_world: DVec3) -> Option<(f64, f64)> {
+    let p = world_from_camera.inverse().transform_point(point_in_world);
+    (p.z > 0.05).then(|| (f64::from(k.fx_px) * p.x / p.z + f64::from(k.cx_px), f64::from(k.fy_px) * p.y / p.z + f64::from(k.cy_px)))
+}
+
+/// Draws a polyline of world points (`None` breaks it) on `ctx`, as seen from the viewer.
+pub(crate) fn draw_path(ctx: &web_sys::CanvasRenderingContext2d, k: &PinholeIntrinsics, world_from_viewer: &Se3, points: impl Iterator<Item = DVec3>, colour: &str) {
+    ctx.set_stroke_style_str(colour);
+    ctx.set_line_width(2.0);
+    ctx.begin_path();
+    let mut drawing = false;
+    for point in points {
+        match project(k, world_from_viewer, point) {
+            Some((u, v)) if drawing => ctx.line_to(u, v),
+            Some((u, v)) => {
+                ctx.move_to(u, v);
+                drawing = true;
+            }
+            None => drawing = false,
+        }
+    }
+    ctx.stroke();
+}
+
+/// Draws the current camera as a small frustum.
+pub(crate) fn draw_camera(ctx: &web_sys::CanvasRenderingContext2d, k: &PinholeIntrinsics, world_from_viewer: &Se3, world_from_camera: &Se3, colour: &str) {
+    let s = 0.12;
+    let corners = [DVec3::new(-s, -0.75 * s, s), DVec3::new(s, -0.75 * s, s), DVec3::new(s, 0.75 * s, s), DVec3::new(-s, 0.75 * s, s)].map(|c| world_from_camera.transform_point(c));
+    let centre = world_from_camera.translation_m;
+    for c in corners {
+        draw_path(ctx, k, world_from_viewer, [centre, c].into_iter(), colour);
+    }
+    draw_path(ctx, k, world_from_viewer, corners.into_iter().chain(std::iter::once(corners[0])), colour);
+}
