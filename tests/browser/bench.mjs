@@ -7,19 +7,12 @@
 // usage: node tests/browser/bench.mjs [--webfusion target/release/webfusion] [--dist dist]
 //          [--sample data/sample/fr1_rpy.wfr] [--volume 256] [--voxel-mm 20] [--out out/bench-web]
 import { spawnSync } from 'node:child_process';
-import { mkdirSync, readFileSync, readdirSync, statSync } from 'node:fs';
-import { join, resolve } from 'node:path';
+import { readFileSync, readdirSync } from 'node:fs';
+import { join } from 'node:path';
 import { gzipSync } from 'node:zlib';
-import { launchChromium, startBridge, waitFor } from './lib.mjs';
+import { launchChromium, options, startBridge, waitFor } from './lib.mjs';
 
-const args = Object.fromEntries(process.argv.slice(2).reduce((pairs, a, i, all) => (a.startsWith('--') ? [...pairs, [a.slice(2), all[i + 1]]] : pairs), []));
-const webfusion = resolve(args.webfusion ?? 'target/release/webfusion');
-const dist = resolve(args.dist ?? 'dist');
-const sample = resolve(args.sample ?? 'data/sample/fr1_rpy.wfr');
-const out = resolve(args.out ?? 'out/bench-web');
-const volume = Number(args.volume ?? 256);
-const voxelMm = Number(args['voxel-mm'] ?? 20);
-mkdirSync(out, { recursive: true });
+const { webfusion, dist, sample, out, volume, voxelMm } = options({ out: 'out/bench-web', volume: 256, 'voxel-mm': 20 });
 
 const wasm = readdirSync(dist).filter((f) => f.endsWith('.wasm')).map((f) => join(dist, f));
 if (wasm.length !== 1) throw new Error(`expected one .wasm in ${dist}, found ${wasm.length}`);

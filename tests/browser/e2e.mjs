@@ -6,26 +6,20 @@
 //      again on the same port, and the page must carry on by itself (no reload);
 //   4. the browser's trajectory must match the native one (same world frame, so no alignment:
 //      RMSE and max position difference < 5 mm), and a screenshot of the free 3D view must
-//      show a model (decoded PNG pixels, not just a file).
+//      show a model (decoded PNG pixels, not just a file);
+//   5. the mesh and trajectory exports arrive as downloads with the right contents.
 // Prints one line per check and a closing "e2e: N passed, M failed"; exits non-zero on failure.
 //
 // usage: node tests/browser/e2e.mjs [--webfusion target/release/webfusion] [--dist dist]
 //          [--sample data/sample/fr1_rpy.wfr] [--out out/e2e] [--volume 128] [--voxel-mm 40]
 import { spawnSync } from 'node:child_process';
-import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
-import { join, resolve } from 'node:path';
-import { decodePng, launchChromium, parseTum, startBridge, waitFor } from './lib.mjs';
+import { readFileSync, writeFileSync } from 'node:fs';
+import { join } from 'node:path';
+import { decodePng, launchChromium, options, parseTum, startBridge, waitFor } from './lib.mjs';
 
-const args = Object.fromEntries(process.argv.slice(2).reduce((pairs, a, i, all) => (a.startsWith('--') ? [...pairs, [a.slice(2), all[i + 1]]] : pairs), []));
-const webfusion = resolve(args.webfusion ?? 'target/release/webfusion');
-const dist = resolve(args.dist ?? 'dist');
-const sample = resolve(args.sample ?? 'data/sample/fr1_rpy.wfr');
-const out = resolve(args.out ?? 'out/e2e');
-const volume = Number(args.volume ?? 128);
-const voxelMm = Number(args['voxel-mm'] ?? 40);
+const { webfusion, dist, sample, out, volume, voxelMm } = options({ out: 'out/e2e', volume: 128, 'voxel-mm': 40 });
 const TOLERANCE_M = 0.005;
 const FRAME_TIMEOUT_MS = 120_000;
-mkdirSync(out, { recursive: true });
 
 const results = [];
 function check(name, ok, detail) {
@@ -73,7 +67,7 @@ try {
   // 4. All frames, then compare with the native trajectory.
   const tRun = Date.now();
   const done = await waitFor(page, 'every frame', (s) => s.frames_done >= total && s.state === 'ended', FRAME_TIMEOUT_MS * total);
-  console.log(`browser: ${done.frames_done} frames, ${done.fps.toFixed(2)} fps over the last frames; stages (mean ms) ${JSON.stringify(done.stages_ms)}; lost ${done.lost_frames}; ATE vs ground truth ${done.ate_rmse_m === null ? 'n/a' : (done.ate_rmse_m * 100).toFixed(2) + ' cm'}; ${((Date.now() - tRun) / 1000).toFixed(0)} s after the reconnect`);
+  console.log(`browser: ${done.frames_done} frames, ${done.fps.toFixed(2)} fps over the last frames; stages (median ms) ${JSON.stringify(done.stages_ms)}; lost ${done.lost_frames}; ATE vs ground truth ${done.ate_rmse_m === null ? 'n/a' : (done.ate_rmse_m * 100).toFixed(2) + ' cm'}; ${((Date.now() - tRun) / 1000).toFixed(0)} s after the reconnect`);
   const browserTum = await page.evaluate(() => window.webfusion.trajectory_tum);
   writeFileSync(join(out, 'browser_trajectory.txt'), browserTum);
   const browserTrajectory = parseTum(browserTum);
@@ -101,7 +95,22 @@ try {
   }
   const fraction = lit / (png.width * png.height);
   check('screenshot shows the model', fraction > 0.15 && greys.size > 8, `${(fraction * 100).toFixed(1)} % of ${png.width}x${png.height} pixels lit, ${greys.size} distinct shades (saved ${join(out, 'free_view.png')})`);
-  check('no page errors', consoleErrors.length === 0 && done.message === '', consoleErrors.length ? consoleErrors.join(' | ') : `status message "${done.message}"`);
+  // 6. The exports arrive as downloads: a binary PLY with a real mesh, and the trajectory.
+  const [plyDownload] = await Promise.all([page.waitForEvent('download', { timeout: 300_000 }), page.click('#export-ply')]);
+  const plyPath = join(out, 'browser_mesh.ply');
+  await plyDownload.saveAs(plyPath);
+  const ply = readFileSync(plyPath);
+  const header = ply.subarray(0, 1024).toString('latin1');
+  const vertices = Number(header.match(/element vertex (\d+)/)?.[1] ?? 0);
+  const faces = Number(header.match(/element face (\d+)/)?.[1] ?? 0);
+  const headerEnd = header.indexOf('end_header\n') + 'end_header\n'.length;
+  const plyBytes = headerEnd + vertices * (6 * 4 + 3) + faces * (1 + 3 * 4);
+  const [tumDownload] = await Promise.all([page.waitForEvent('download', { timeout: 60_000 }), page.click('#export-trajectory')]);
+  const tumText = readFileSync(await tumDownload.path(), 'utf8');
+  check('exports', header.startsWith('ply\nformat binary_little_endian') && vertices > 1000 && faces > 1000 && ply.length === plyBytes && tumText === browserTum,
+    `mesh.ply ${vertices} vertices, ${faces} triangles, ${ply.length} bytes (expected ${plyBytes}); trajectory.txt ${tumText === browserTum ? 'equals' : 'DIFFERS from'} the hook's`);
+  const final = await page.evaluate(() => window.webfusion.status);
+  check('no page errors', consoleErrors.length === 0 && final.message === '', consoleErrors.length ? consoleErrors.join(' | ') : `status message "${final.message}"`);
 } catch (error) {
   check('e2e run', false, error.stack ?? String(error));
 } finally {

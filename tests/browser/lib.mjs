@@ -2,8 +2,22 @@
 // Helpers shared by the end-to-end test and the browser benchmark: the bridge process,
 // Chromium with WebGPU, the page's status hook, TUM trajectories and PNG pixels.
 import { spawn } from 'node:child_process';
+import { mkdirSync } from 'node:fs';
+import { resolve } from 'node:path';
 import { inflateSync } from 'node:zlib';
 import { chromium } from 'playwright-core';
+
+/**
+ * The scripts' command line: `--webfusion`, `--dist`, `--sample`, `--out`, `--volume`,
+ * `--voxel-mm`, with the given defaults; paths resolved, `out` created.
+ */
+export function options(defaults) {
+  const given = Object.fromEntries(process.argv.slice(2).reduce((pairs, a, i, all) => (a.startsWith('--') ? [...pairs, [a.slice(2), all[i + 1]]] : pairs), []));
+  const o = { webfusion: 'target/release/webfusion', dist: 'dist', sample: 'data/sample/fr1_rpy.wfr', ...defaults, ...given };
+  const out = resolve(o.out);
+  mkdirSync(out, { recursive: true });
+  return { webfusion: resolve(o.webfusion), dist: resolve(o.dist), sample: resolve(o.sample), out, volume: Number(o.volume), voxelMm: Number(o['voxel-mm']) };
+}
 
 /** Chromium flags that give WebGPU (SwiftShader) and a visible canvas, headless (see ../shared/TOOLCHAIN.md). */
 export const CHROMIUM_ARGS = ['--no-sandbox', '--enable-unsafe-webgpu', '--use-angle=swiftshader', '--use-webgpu-adapter=opengles', '--ignore-gpu-blocklist',
