@@ -413,7 +413,7 @@ impl App {
                 self.link = None;
                 self.link_state = LinkState::Disconnected;
             }
-            Ui::Play => {
+            Ui::Playback(Control::Play) => {
                 if self.server.as_ref().is_some_and(|s| s.state == PlaybackState::Ended) || self.last_index.is_some_and(|i| Some(i + 1) == self.source.as_ref().and_then(|s| s.frame_count)) {
                     // Play after the end starts a new pass.
                     self.reset_run();
@@ -421,16 +421,16 @@ impl App {
                 }
                 self.start_playing();
             }
-            Ui::Pause => {
+            Ui::Playback(Control::Pause) => {
                 self.playing = false;
                 self.send(Control::Pause);
             }
-            Ui::Step => {
+            Ui::Playback(Control::Step) => {
                 self.playing = false;
                 self.send(Control::Delivery(Delivery::Lossless));
                 self.send(Control::Step);
             }
-            Ui::Seek(index) => {
+            Ui::Playback(Control::Seek(index)) => {
                 // A jump in time is a new reconstruction from that frame.
                 self.reset_run();
                 self.send(Control::Seek(index));
@@ -439,16 +439,18 @@ impl App {
                     self.start_playing();
                 }
             }
-            Ui::Rate(rate) => {
+            Ui::Playback(Control::Rate(rate)) => {
                 self.rate = rate.clamp(0.0, 1000.0);
                 if !self.every_frame {
                     self.send(Control::Rate(self.rate));
                 }
             }
-            Ui::Loop(on) => {
+            Ui::Playback(Control::Loop(on)) => {
                 self.looping = on;
                 self.send(Control::Loop(on));
             }
+            // Delivery follows the every-frame setting.
+            Ui::Playback(Control::Delivery(_)) => {}
             Ui::EveryFrame(on) => {
                 self.every_frame = on;
                 if self.playing {

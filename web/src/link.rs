@@ -10,6 +10,7 @@ use std::collections::VecDeque;
 use std::rc::Rc;
 
 use wasm_bindgen::prelude::*;
+use webfusion_core::protocol::Control;
 
 /// Something the app loop must handle.
 #[derive(Debug)]
@@ -31,12 +32,8 @@ pub(crate) enum Event {
 pub(crate) enum Ui {
     Connect,
     Disconnect,
-    Play,
-    Pause,
-    Step,
-    Seek(u64),
-    Rate(f32),
-    Loop(bool),
+    /// Play, pause, step, seek, rate or loop; the app decides what reaches the bridge.
+    Playback(Control),
     EveryFrame(bool),
     ApplySettings,
     Reset,

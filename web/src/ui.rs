@@ -7,6 +7,7 @@ use std::collections::HashMap;
 use std::rc::Rc;
 
 use wasm_bindgen::prelude::*;
+use webfusion_core::protocol::Control;
 
 use crate::link::{Event, Inbox, Ui};
 
@@ -111,9 +112,9 @@ pub(crate) fn bind_controls(inbox: &Rc<Inbox>) {
     for (id, ui) in [
         ("connect", Ui::Connect),
         ("disconnect", Ui::Disconnect),
-        ("play", Ui::Play),
-        ("pause", Ui::Pause),
-        ("step", Ui::Step),
+        ("play", Ui::Playback(Control::Play)),
+        ("pause", Ui::Playback(Control::Pause)),
+        ("step", Ui::Playback(Control::Step)),
         ("apply", Ui::ApplySettings),
         ("reset", Ui::Reset),
         ("export-ply", Ui::ExportPly),
@@ -122,9 +123,9 @@ pub(crate) fn bind_controls(inbox: &Rc<Inbox>) {
     ] {
         on(inbox, id, "click", move || Some(ui.clone()));
     }
-    on(inbox, "seek", "change", || value("seek").parse().ok().map(Ui::Seek));
-    on(inbox, "rate", "change", || value("rate").parse().ok().map(Ui::Rate));
-    on(inbox, "loop", "change", || Some(Ui::Loop(!value("loop").is_empty())));
+    on(inbox, "seek", "change", || value("seek").parse().ok().map(|i| Ui::Playback(Control::Seek(i))));
+    on(inbox, "rate", "change", || value("rate").parse().ok().map(|r| Ui::Playback(Control::Rate(r))));
+    on(inbox, "loop", "change", || Some(Ui::Playback(Control::Loop(!value("loop").is_empty()))));
     on(inbox, "every-frame", "change", || Some(Ui::EveryFrame(!value("every-frame").is_empty())));
     on(inbox, "free-colour", "change", || Some(Ui::ViewColour(!value("free-colour").is_empty())));
 }
