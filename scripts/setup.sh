@@ -14,7 +14,12 @@ log() { printf '\033[1;34m[setup]\033[0m %s\n' "$*" >&2; }
 
 apt_packages=(mesa-vulkan-drivers libvulkan1)
 # OpenNI2 (.oni recordings, feature `openni2`): the tests build and run it.
-[ "$what" = test ] && apt_packages+=(chromium chromium-driver libopenni2-dev libopenni2-0 nodejs npm)
+[ "$what" = test ] && apt_packages+=(chromium chromium-driver libopenni2-dev libopenni2-0)
+# Node for the end-to-end test: only when none is installed (a NodeSource nodejs bundles npm
+# and conflicts with Debian's npm package). playwright-core wants Node 20+.
+if [ "$what" = test ] && ! { command -v node && command -v npm; } >/dev/null; then
+  apt_packages+=(nodejs npm)
+fi
 missing=()
 for p in "${apt_packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
