@@ -172,7 +172,9 @@ async fn run() -> Result<(), String> {
         return Err("this browser has no WebGPU (navigator.gpu is missing). Use Chrome or Edge 113+ (on Linux: chrome://flags/#enable-unsafe-webgpu, or start Chromium with --enable-unsafe-webgpu), Firefox 141+ on Windows, or Safari 26+. The native `webfusion reconstruct` runs the same pipeline without a browser.".into());
     }
     ui::set_text("status", "requesting a WebGPU adapter…");
-    let gpu = Gpu::new(&GpuOptions::default()).await.map_err(|e| e.to_string())?;
+    let gpu = Gpu::new(&GpuOptions::default())
+        .await
+        .map_err(|e| format!("this browser has WebGPU but gave no usable adapter ({e}). On Linux, Chrome/Chromium needs --enable-unsafe-webgpu (and --ignore-gpu-blocklist on blocklisted GPUs); check chrome://gpu."))?;
     // Browsers keep the adapter's name to themselves; say what is known.
     let adapter = if gpu.adapter_info.name.is_empty() { format!("browser WebGPU, {:?} adapter", gpu.adapter_info.device_type) } else { gpu.adapter_summary() };
     ui::set_text("adapter", &adapter);
