@@ -11,3 +11,6 @@ mod ui;
 mod view;
 
 pub use app::start;
+
+#[cfg(test)]
+wasm_bindgen_test::wasm_bindgen_test_configure!(run_in_browser);

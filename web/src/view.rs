@@ -146,3 +146,55 @@ pub(crate) fn draw_camera(ctx: &web_sys::CanvasRenderingContext2d, k: &PinholeIn
     }
     draw_path(ctx, k, world_from_viewer, corners.into_iter().chain(std::iter::once(corners[0])), colour);
 }
+
+#[cfg(test)]
+mod tests {
+    use wasm_bindgen_test::wasm_bindgen_test;
+
+    use super::*;
+
+    const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 420.0, fy_px: 420.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 };
+
+    fn assert_near(a: (f64, f64), b: (f64, f64), what: &str) {
+        assert!((a.0 - b.0).abs() < 1e-6 && (a.1 - b.1).abs() < 1e-6, "{what}: {a:?} vs {b:?}");
+    }
+
+    #[wasm_bindgen_test]
+    fn the_orbit_camera_keeps_its_target_centred_at_its_distance() {
+        let target = DVec3::new(0.3, -0.2, 1.5);
+        let mut orbit = Orbit::looking_at(target, 3.0);
+        for (dx, dy) in [(0.0, 0.0), (120.0, -40.0), (-300.0, 500.0)] {
+            orbit.orbit(dx, dy);
+            let pose = orbit.world_from_viewer();
+            assert_near(project(&K, &pose, target).expect("target in front"), (319.5, 239.5), "target at the principal point");
+            assert!((pose.translation_m.distance(target) - 3.0).abs() < 1e-9, "distance kept");
+            // The viewer's y axis points down the world (y down), so "up" stays up on screen.
+            assert!((pose.rotation * DVec3::Y).y >= 0.0, "no upside-down view");
+        }
+        assert!(orbit.pitch_rad <= 1.5, "pitch clamped short of the pole");
+    }
+
+    #[wasm_bindgen_test]
+    fn panning_moves_the_old_target_by_the_dragged_pixels() {
+        let target = DVec3::new(0.0, 0.0, 2.0);
+        let mut orbit = Orbit::looking_at(target, 2.0);
+        orbit.pan(40.0, -25.0, K.fx_px);
+        let pose = orbit.world_from_viewer();
+        // The scene follows the pointer: the old target moves by the drag.
+        assert_near(project(&K, &pose, target).expect("in front"), (319.5 + 40.0, 239.5 - 25.0), "old target follows the drag");
+        orbit.zoom(0.5);
+        assert!((orbit.distance_m - 1.0).abs() < 1e-12, "zoom scales the distance");
+    }
+
+    #[wasm_bindgen_test]
+    fn points_behind_the_viewer_are_not_drawn_and_invalid_depth_is_black() {
+        let orbit = Orbit::looking_at(DVec3::new(0.0, 0.0, 2.0), 2.0);
+        let pose = orbit.world_from_viewer();
+        let behind = pose.transform_point(DVec3::new(0.0, 0.0, -1.0));
+        assert_eq!(project(&K, &pose, behind), None, "behind the viewer");
+        let rgba = rgba_from_depth_m([0.0, f32::NAN, 1.0, 10.0].into_iter());
+        assert_eq!(&rgba[..8], &[0, 0, 0, 255, 0, 0, 0, 255], "invalid depth is black");
+        assert_ne!(&rgba[8..12], &rgba[12..16], "near and far differ");
+        assert_eq!(rgba_from_normals(&[[f32::NAN; 4], [0.0, 0.0, -1.0, 0.0]]), vec![0, 0, 0, 255, 127, 127, 255, 255], "normals: NaN black, facing the camera blue");
+    }
+}
