@@ -14,7 +14,9 @@ while [ $# -gt 0 ]; do
     *) echo "usage: scripts/run.sh [--port N] [--no-serve] [--source TUM_DIR_OR_WFR]" >&2; exit 2 ;;
   esac
 done
-eval "$(scripts/setup.sh run)"
+# A failing set-up stops here (an eval of a failed substitution would carry on).
+setup_env=$(scripts/setup.sh run)
+eval "$setup_env"
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp/webfusion-xdg-$(id -u)}"
 mkdir -p -m 0700 "$XDG_RUNTIME_DIR"
 
