@@ -48,6 +48,79 @@ fn initialise(path: &Path) -> Result<()> {
     result.clone().map_err(|message| Error::Dataset { path: path.to_owned(), message })
 }
 
+/// Why a recording's player stops delivering frames.
+const RECORDING_TIMEOUT_CAUSE: &str = "truncated or unplayable recording";
+/// Why a live camera stops delivering frames.
+const LIVE_TIMEOUT_CAUSE: &str = "device unplugged or stalled?";
+
+fn no_frame_within(path: &Path, timeout_ms: c_int, cause: &str) -> Error {
+    Error::Dataset { path: path.to_owned(), message: format!("OpenNI2: no frame within {timeout_ms} ms ({cause})") }
+}
+
+/// One frame as OpenNI2 delivered it, copied out of the driver's buffer.
+struct RawFrame {
+    bytes: Vec<u8>,
+    width: i32,
+    height: i32,
+    pixel_format: oni::OniPixelFormat,
+    timestamp_us: u64,
+}
+
+/// Checks a depth frame (16-bit) and, when the source has colour, its RGB888 partner against
+/// the calibration's size, and builds frame `index`; without colour the image is mid-grey.
+fn rgbd_frame(path: &Path, index: u64, calibration: &RgbdCalibration, depth: RawFrame, color: Option<RawFrame>) -> Result<RgbdFrame> {
+    let (w, h) = (calibration.intrinsics.width_px, calibration.intrinsics.height_px);
+    if (depth.width, depth.height) != (w as i32, h as i32) || depth.bytes.len() != 2 * (w * h) as usize {
+        return Err(Error::Dataset { path: path.to_owned(), message: format!("OpenNI2: depth frame {index} is {}x{} ({} bytes), expected {w}x{h}", depth.width, depth.height, depth.bytes.len()) });
+    }
+    let units = depth.bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
+    let (rgb8, color_us) = match color {
+        None => (vec![GREY; 3 * (w * h) as usize], depth.timestamp_us),
+        Some(c) => {
+            if c.pixel_format != oni::ONI_PIXEL_FORMAT_RGB888 || (c.width, c.height) != (w as i32, h as i32) || c.bytes.len() != 3 * (w * h) as usize {
+                return Err(Error::Dataset {
+                    path: path.to_owned(),
+                    message: format!("OpenNI2: colour frame {index} is {}x{} in pixel format {}; need RGB888 at the depth size, {w}x{h} (registration on)", c.width, c.height, c.pixel_format),
+                });
+            }
+            (c.bytes, c.timestamp_us)
+        }
+    };
+    Ok(RgbdFrame {
+        index,
+        depth_timestamp_ns: (depth.timestamp_us as i64).saturating_mul(1000),
+        color_timestamp_ns: (color_us as i64).saturating_mul(1000),
+        depth: DepthImage::new(w, h, units)?,
+        color: ColorImage::new(w, h, rgb8)?,
+    })
+}
+
+/// The calibration of a `width_px`x`height_px` depth stream stored in `depth_units_per_metre`:
+/// `calibration_override` when given (its size and depth scale must match), else pinhole
+/// intrinsics from `fov_stream`'s field of view. `name` is what errors call the source.
+fn resolve_calibration(name: &str, calibration_override: Option<RgbdCalibration>, (width_px, height_px): (u32, u32), depth_units_per_metre: f32, fov_stream: oni::OniStreamHandle) -> Result<RgbdCalibration> {
+    if let Some(calibration) = calibration_override {
+        let k = &calibration.intrinsics;
+        if (k.width_px, k.height_px) != (width_px, height_px) {
+            return Err(Error::InvalidConfig(format!("{name}: depth is {width_px}x{height_px} but the calibration is for {}x{} (--image-size)", k.width_px, k.height_px)));
+        }
+        if calibration.depth_units_per_metre != depth_units_per_metre {
+            return Err(Error::InvalidConfig(format!(
+                "{name}: the depth is stored as {depth_units_per_metre} units per metre but the calibration says {} (pass --depth-scale {depth_units_per_metre})",
+                calibration.depth_units_per_metre
+            )));
+        }
+        return Ok(calibration);
+    }
+    let (Some(hfov), Some(vfov)) = (Player::float_property(fov_stream, oni::ONI_STREAM_PROPERTY_HORIZONTAL_FOV), Player::float_property(fov_stream, oni::ONI_STREAM_PROPERTY_VERTICAL_FOV)) else {
+        return Err(Error::UnknownCalibration { source_name: name.to_owned() });
+    };
+    let fx_px = width_px as f32 / (2.0 * (hfov / 2.0).tan());
+    let fy_px = height_px as f32 / (2.0 * (vfov / 2.0).tan());
+    let intrinsics = PinholeIntrinsics { fx_px, fy_px, cx_px: (width_px as f32 - 1.0) / 2.0, cy_px: (height_px as f32 - 1.0) / 2.0, width_px, height_px };
+    Ok(RgbdCalibration { intrinsics, depth_units_per_metre })
+}
+
 /// An opened file player with its depth (and, when recorded, colour) stream started.
 struct Player {
     device: oni::OniDeviceHandle,
@@ -120,18 +193,18 @@ impl Player {
     }
 
     /// Reads the next frame of `stream`: its bytes, size, pixel format and timestamp (µs).
-    fn read(path: &Path, stream: oni::OniStreamHandle) -> Result<(Vec<u8>, i32, i32, i32, u64)> {
-        Self::read_within(path, stream, FRAME_TIMEOUT_MS)
+    fn read(path: &Path, stream: oni::OniStreamHandle) -> Result<RawFrame> {
+        Self::read_within(path, stream, FRAME_TIMEOUT_MS, RECORDING_TIMEOUT_CAUSE)
     }
 
-    /// [`Self::read`], waiting at most `timeout_ms`.
-    fn read_within(path: &Path, stream: oni::OniStreamHandle, timeout_ms: c_int) -> Result<(Vec<u8>, i32, i32, i32, u64)> {
+    /// [`Self::read`], waiting at most `timeout_ms`; a timeout's error names `cause`.
+    fn read_within(path: &Path, stream: oni::OniStreamHandle, timeout_ms: c_int, cause: &str) -> Result<RawFrame> {
         let mut streams = [stream];
         let mut ready: c_int = -1;
         // SAFETY: one valid stream handle and a valid out-pointer.
         let status = unsafe { oni::oniWaitForAnyStream(streams.as_mut_ptr(), 1, &mut ready, timeout_ms) };
         if status == oni::ONI_STATUS_TIME_OUT {
-            return Err(Error::Dataset { path: path.to_owned(), message: format!("OpenNI2: no frame within {timeout_ms} ms (truncated or unplayable recording)") });
+            return Err(no_frame_within(path, timeout_ms, cause));
         }
         if status != oni::ONI_STATUS_OK {
             return Err(oni_error(path, "waiting for a frame failed"));
@@ -145,7 +218,7 @@ impl Player {
         let copied = unsafe {
             let f = &*frame;
             let bytes = if f.data.is_null() || f.dataSize <= 0 { Vec::new() } else { std::slice::from_raw_parts(f.data.cast::<u8>(), f.dataSize as usize).to_vec() };
-            let result = (bytes, f.width, f.height, f.videoMode.pixelFormat, f.timestamp);
+            let result = RawFrame { bytes, width: f.width, height: f.height, pixel_format: f.videoMode.pixelFormat, timestamp_us: f.timestamp };
             oni::oniFrameRelease(frame);
             result
         };
@@ -199,68 +272,22 @@ impl OniSource {
             return Err(Error::Dataset { path: path.to_owned(), message: format!("OpenNI2: depth resolution {}x{}", mode.resolutionX, mode.resolutionY) });
         }
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let calibration = match calibration_override {
-            Some(calibration) => {
-                let k = &calibration.intrinsics;
-                if (k.width_px, k.height_px) != (width_px, height_px) {
-                    return Err(Error::InvalidConfig(format!("{name}: depth is {width_px}x{height_px} but the calibration is for {}x{} (--image-size)", k.width_px, k.height_px)));
-                }
-                if calibration.depth_units_per_metre != depth_units_per_metre {
-                    return Err(Error::InvalidConfig(format!(
-                        "{name}: the recording stores {depth_units_per_metre} depth units per metre but the calibration says {} (pass --depth-scale {depth_units_per_metre})",
-                        calibration.depth_units_per_metre
-                    )));
-                }
-                calibration
-            }
-            None => {
-                let (Some(hfov), Some(vfov)) = (Player::float_property(player.depth, oni::ONI_STREAM_PROPERTY_HORIZONTAL_FOV), Player::float_property(player.depth, oni::ONI_STREAM_PROPERTY_VERTICAL_FOV)) else {
-                    return Err(Error::UnknownCalibration { source_name: name });
-                };
-                let fx_px = width_px as f32 / (2.0 * (hfov / 2.0).tan());
-                let fy_px = height_px as f32 / (2.0 * (vfov / 2.0).tan());
-                let intrinsics = PinholeIntrinsics { fx_px, fy_px, cx_px: (width_px as f32 - 1.0) / 2.0, cy_px: (height_px as f32 - 1.0) / 2.0, width_px, height_px };
-                RgbdCalibration { intrinsics, depth_units_per_metre }
-            }
-        };
+        let calibration = resolve_calibration(&name, calibration_override, (width_px, height_px), depth_units_per_metre, player.depth)?;
         Ok(Self { path: path.to_owned(), calibration, frame_count, player: Some(player), next_index: 0 })
     }
 
     /// Reads the player's next frame (depth, then colour when recorded).
     fn read_next(&mut self) -> Result<RgbdFrame> {
-        let (w, h) = (self.calibration.intrinsics.width_px, self.calibration.intrinsics.height_px);
         let player = match &self.player {
             Some(player) => player,
             None => self.player.insert(Player::open(&self.path)?),
         };
         let (depth, color) = (player.depth, player.color);
-        let (bytes, fw, fh, _, depth_us) = Player::read(&self.path, depth)?;
-        if (fw, fh) != (w as i32, h as i32) || bytes.len() != 2 * (w * h) as usize {
-            return Err(Error::Dataset { path: self.path.clone(), message: format!("OpenNI2: depth frame {} is {fw}x{fh} ({} bytes), expected {w}x{h}", self.next_index, bytes.len()) });
-        }
-        let units = bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
-        let (rgb8, color_us) = match color {
-            None => (vec![GREY; 3 * (w * h) as usize], depth_us),
-            Some(stream) => {
-                let (bytes, cw, ch, format, color_us) = Player::read(&self.path, stream)?;
-                if format != oni::ONI_PIXEL_FORMAT_RGB888 || (cw, ch) != (w as i32, h as i32) || bytes.len() != 3 * (w * h) as usize {
-                    return Err(Error::Dataset {
-                        path: self.path.clone(),
-                        message: format!("OpenNI2: colour frame {} is {cw}x{ch} in pixel format {format}; need RGB888 at the depth size (record with registration on)", self.next_index),
-                    });
-                }
-                (bytes, color_us)
-            }
-        };
-        let index = self.next_index;
+        let depth = Player::read(&self.path, depth)?;
+        let color = color.map(|stream| Player::read(&self.path, stream)).transpose()?;
+        let frame = rgbd_frame(&self.path, self.next_index as u64, &self.calibration, depth, color)?;
         self.next_index += 1;
-        Ok(RgbdFrame {
-            index: index as u64,
-            depth_timestamp_ns: (depth_us as i64).saturating_mul(1000),
-            color_timestamp_ns: (color_us as i64).saturating_mul(1000),
-            depth: DepthImage::new(w, h, units)?,
-            color: ColorImage::new(w, h, rgb8)?,
-        })
+        Ok(frame)
     }
 }
 
@@ -411,29 +438,9 @@ impl LiveDevice {
         }
         let (width_px, height_px) = (u32::try_from(size.0).unwrap_or(0), u32::try_from(size.1).unwrap_or(0));
         let name = device_name(device).unwrap_or_else(|| label.display().to_string());
-        let calibration = match calibration_override {
-            Some(calibration) => {
-                let k = &calibration.intrinsics;
-                if (k.width_px, k.height_px) != (width_px, height_px) {
-                    return Err(Error::InvalidConfig(format!("{}: depth is {width_px}x{height_px} but the calibration is for {}x{} (--image-size)", label.display(), k.width_px, k.height_px)));
-                }
-                if calibration.depth_units_per_metre != 1000.0 {
-                    return Err(Error::InvalidConfig(format!("{}: live depth is in millimetres but the calibration says {} units per metre (pass --depth-scale 1000)", label.display(), calibration.depth_units_per_metre)));
-                }
-                calibration
-            }
-            None => {
-                // Registered depth lives in the colour camera, so its field of view applies.
-                let fov_stream = streams.color.unwrap_or(streams.depth);
-                let (Some(hfov), Some(vfov)) = (Player::float_property(fov_stream, oni::ONI_STREAM_PROPERTY_HORIZONTAL_FOV), Player::float_property(fov_stream, oni::ONI_STREAM_PROPERTY_VERTICAL_FOV)) else {
-                    return Err(Error::UnknownCalibration { source_name: label.display().to_string() });
-                };
-                let fx_px = width_px as f32 / (2.0 * (hfov / 2.0).tan());
-                let fy_px = height_px as f32 / (2.0 * (vfov / 2.0).tan());
-                let intrinsics = PinholeIntrinsics { fx_px, fy_px, cx_px: (width_px as f32 - 1.0) / 2.0, cy_px: (height_px as f32 - 1.0) / 2.0, width_px, height_px };
-                RgbdCalibration { intrinsics, depth_units_per_metre: 1000.0 }
-            }
-        };
+        // Registered depth lives in the colour camera, so its field of view applies.
+        let fov_stream = streams.color.unwrap_or(streams.depth);
+        let calibration = resolve_calibration(&label.display().to_string(), calibration_override, (width_px, height_px), 1000.0, fov_stream)?;
         // Started last: an error above closes streams that never ran.
         for stream in std::iter::once(streams.depth).chain(streams.color) {
             // SAFETY: the stream was created on this device.
@@ -455,49 +462,23 @@ impl LiveSource for LiveDevice {
     }
 
     fn next_frame(&mut self) -> Result<RgbdFrame> {
-        let (w, h) = (self.calibration.intrinsics.width_px, self.calibration.intrinsics.height_px);
-        let gone = |label: &Path, e: Error| match e {
-            Error::Dataset { message, .. } if message.contains("no frame within") => {
-                Error::Dataset { path: label.to_owned(), message: format!("OpenNI2: no frame within {LIVE_FRAME_TIMEOUT_MS} ms (device unplugged or stalled?)") }
-            }
-            other => other,
-        };
         // Some drivers (the Dummy device among them) hand the same frame out again; wait for a newer one.
         let deadline = std::time::Instant::now() + std::time::Duration::from_millis(LIVE_FRAME_TIMEOUT_MS as u64);
-        let (bytes, fw, fh, depth_us) = loop {
-            let (bytes, fw, fh, _, depth_us) = Player::read_within(&self.label, self.streams.depth, LIVE_FRAME_TIMEOUT_MS).map_err(|e| gone(&self.label, e))?;
-            if self.last_depth_us.is_none_or(|last| depth_us > last) {
-                break (bytes, fw, fh, depth_us);
+        let depth = loop {
+            let depth = Player::read_within(&self.label, self.streams.depth, LIVE_FRAME_TIMEOUT_MS, LIVE_TIMEOUT_CAUSE)?;
+            if self.last_depth_us.is_none_or(|last| depth.timestamp_us > last) {
+                break depth;
             }
             if std::time::Instant::now() > deadline {
-                return Err(gone(&self.label, Error::Dataset { path: self.label.clone(), message: "no frame within".to_owned() }));
+                return Err(no_frame_within(&self.label, LIVE_FRAME_TIMEOUT_MS, LIVE_TIMEOUT_CAUSE));
             }
             std::thread::sleep(std::time::Duration::from_millis(2));
         };
-        self.last_depth_us = Some(depth_us);
-        if (fw, fh) != (w as i32, h as i32) || bytes.len() != 2 * (w * h) as usize {
-            return Err(Error::Dataset { path: self.label.clone(), message: format!("OpenNI2: depth frame {} is {fw}x{fh} ({} bytes), expected {w}x{h}", self.next_index, bytes.len()) });
-        }
-        let units = bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
-        let (rgb8, color_us) = match self.streams.color {
-            None => (vec![GREY; 3 * (w * h) as usize], depth_us),
-            Some(stream) => {
-                let (bytes, cw, ch, format, color_us) = Player::read_within(&self.label, stream, LIVE_FRAME_TIMEOUT_MS).map_err(|e| gone(&self.label, e))?;
-                if format != oni::ONI_PIXEL_FORMAT_RGB888 || (cw, ch) != (w as i32, h as i32) || bytes.len() != 3 * (w * h) as usize {
-                    return Err(Error::Dataset { path: self.label.clone(), message: format!("OpenNI2: colour frame {} is {cw}x{ch} in pixel format {format}, expected RGB888 {w}x{h}", self.next_index) });
-                }
-                (bytes, color_us)
-            }
-        };
-        let index = self.next_index;
+        self.last_depth_us = Some(depth.timestamp_us);
+        let color = self.streams.color.map(|stream| Player::read_within(&self.label, stream, LIVE_FRAME_TIMEOUT_MS, LIVE_TIMEOUT_CAUSE)).transpose()?;
+        let frame = rgbd_frame(&self.label, self.next_index, &self.calibration, depth, color)?;
         self.next_index += 1;
-        Ok(RgbdFrame {
-            index,
-            depth_timestamp_ns: (depth_us as i64).saturating_mul(1000),
-            color_timestamp_ns: (color_us as i64).saturating_mul(1000),
-            depth: DepthImage::new(w, h, units)?,
-            color: ColorImage::new(w, h, rgb8)?,
-        })
+        Ok(frame)
     }
 }
 
