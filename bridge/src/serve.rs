@@ -135,22 +135,8 @@ impl LiveHub {
             .name("webfusion-capture".to_owned())
             .spawn(move || {
                 loop {
-                    let encoded = live.next_frame().and_then(|frame| {
-                        let (color, color_payload) = encode_color(&frame.color, color, jpeg_quality)?;
-                        Ok(Message::Frame(FrameMessage {
-                            // The camera's own frame number: gaps at a client are its drops.
-                            sequence: frame.index,
-                            index: frame.index,
-                            depth_timestamp_ns: frame.depth_timestamp_ns,
-                            color_timestamp_ns: frame.color_timestamp_ns,
-                            ground_truth: None,
-                            depth_codec: DepthCodec::Rvl,
-                            depth_payload: DepthCodec::Rvl.encode(&frame.depth),
-                            color,
-                            color_payload,
-                        })
-                        .encode())
-                    });
+                    // The camera's own frame number is the sequence: gaps at a client are its drops.
+                    let encoded = live.next_frame().and_then(|frame| encode_frame(&frame, frame.index, color, jpeg_quality)).map(|message| Message::Frame(message).encode());
                     match encoded {
                         Ok(bytes) => {
                             captured.fetch_add(1, Ordering::Relaxed);
@@ -321,38 +307,50 @@ impl SessionSource {
     fn frame_message(&mut self, index: usize, sequence: u64, color: ColorArg, jpeg_quality: u8) -> webfusion_core::Result<FrameMessage> {
         let calibration = self.calibration();
         let (w, h) = (calibration.intrinsics.width_px, calibration.intrinsics.height_px);
-        let (depth_ts, color_ts, depth_codec, depth_payload, wire_color, color_payload) = match self {
+        let mut message = match self {
             Self::Recording(reader) => {
                 let encoded = reader.read_encoded_frame(index)?;
                 let recorded = reader.color_codec();
-                let (wire, bytes) = match color {
+                let (wire_color, color_payload) = match color {
                     ColorArg::Auto => (WireColor::Coded(recorded), encoded.color_payload),
                     other => {
                         let image = recorded.decode(&encoded.color_payload, w, h)?;
                         encode_color(&image, other, jpeg_quality)?
                     }
                 };
-                (encoded.depth_timestamp_ns, encoded.color_timestamp_ns, reader.depth_codec(), encoded.depth_payload, wire, bytes)
+                FrameMessage {
+                    sequence,
+                    index: index as u64,
+                    depth_timestamp_ns: encoded.depth_timestamp_ns,
+                    color_timestamp_ns: encoded.color_timestamp_ns,
+                    ground_truth: None,
+                    depth_codec: reader.depth_codec(),
+                    depth_payload: encoded.depth_payload,
+                    color: wire_color,
+                    color_payload,
+                }
             }
-            Self::Decoded(source) => {
-                let frame = source.read_frame(index)?;
-                let (wire, bytes) = encode_color(&frame.color, color, jpeg_quality)?;
-                (frame.depth_timestamp_ns, frame.color_timestamp_ns, DepthCodec::Rvl, DepthCodec::Rvl.encode(&frame.depth), wire, bytes)
-            }
+            Self::Decoded(source) => FrameMessage { index: index as u64, ..encode_frame(&source.read_frame(index)?, sequence, color, jpeg_quality)? },
         };
-        let ground_truth = self.source().ground_truth().and_then(|poses| pose_near(poses, depth_ts));
-        Ok(FrameMessage {
-            sequence,
-            index: index as u64,
-            depth_timestamp_ns: depth_ts,
-            color_timestamp_ns: color_ts,
-            ground_truth,
-            depth_codec,
-            depth_payload,
-            color: wire_color,
-            color_payload,
-        })
+        message.ground_truth = self.source().ground_truth().and_then(|poses| pose_near(poses, message.depth_timestamp_ns));
+        Ok(message)
     }
+}
+
+/// A decoded frame as a frame message: RVL depth and `color` colour, no ground truth.
+fn encode_frame(frame: &webfusion_core::RgbdFrame, sequence: u64, color: ColorArg, jpeg_quality: u8) -> webfusion_core::Result<FrameMessage> {
+    let (wire_color, color_payload) = encode_color(&frame.color, color, jpeg_quality)?;
+    Ok(FrameMessage {
+        sequence,
+        index: frame.index,
+        depth_timestamp_ns: frame.depth_timestamp_ns,
+        color_timestamp_ns: frame.color_timestamp_ns,
+        ground_truth: None,
+        depth_codec: DepthCodec::Rvl,
+        depth_payload: DepthCodec::Rvl.encode(&frame.depth),
+        color: wire_color,
+        color_payload,
+    })
 }
 
 fn encode_color(image: &webfusion_core::ColorImage, color: ColorArg, jpeg_quality: u8) -> webfusion_core::Result<(WireColor, Vec<u8>)> {
@@ -491,6 +489,23 @@ struct Playback {
     anchor: Option<(Instant, i64)>,
 }
 
+impl Playback {
+    /// This session's status as a message, with the queue's frame counts.
+    fn status(&self, queue: &OutQueue) -> WsMessage {
+        let (frames_sent, frames_dropped) = queue.counts();
+        let status = Status {
+            state: self.state,
+            next_index: self.next_index as u64,
+            rate: self.rate,
+            looping: self.looping,
+            delivery: self.delivery,
+            frames_sent,
+            frames_dropped,
+        };
+        WsMessage::Binary(Message::Status(status).encode().into())
+    }
+}
+
 async fn session(socket: WebSocket, shared: Arc<Shared>) {
     let (mut sink, mut stream) = socket.split();
     let queue = Arc::new(OutQueue::new(shared.live_queue));
@@ -542,22 +557,7 @@ async fn drive_session(stream: &mut futures_util::stream::SplitStream<WebSocket>
     ));
     let mut playback = Playback { state: PlaybackState::Paused, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Lossless, stepping: false, anchor: None };
     let mut sequence = 0_u64;
-    let status = |playback: &Playback| {
-        let (frames_sent, frames_dropped) = queue.counts();
-        WsMessage::Binary(
-            Message::Status(Status {
-                state: playback.state,
-                next_index: playback.next_index as u64,
-                rate: playback.rate,
-                looping: playback.looping,
-                delivery: playback.delivery,
-                frames_sent,
-                frames_dropped,
-            })
-            .encode()
-            .into(),
-        )
-    };
+    let status = |playback: &Playback| playback.status(queue);
     queue.reply(status(&playback));
     // The frame read ahead and the instant it is due.
     let mut pending: Option<(FrameMessage, Instant)> = None;
@@ -646,19 +646,19 @@ async fn drive_live_session(stream: &mut futures_util::stream::SplitStream<WebSo
         Message::Hello(Hello { source_name: hub.name.clone(), frame_count: None, calibration: hub.calibration, has_ground_truth: false, delivery: Delivery::Live }).encode().into(),
     ));
     let mut playback = Playback { state: PlaybackState::Paused, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Live, stepping: false, anchor: None };
-    let status = |playback: &Playback| {
-        let (frames_sent, frames_dropped) = queue.counts();
-        let next_index = hub.captured.load(Ordering::Relaxed);
-        WsMessage::Binary(Message::Status(Status { state: playback.state, next_index, rate: playback.rate, looping: false, delivery: playback.delivery, frames_sent, frames_dropped }).encode().into())
+    // A camera's "next index" is the number of frames it has captured.
+    let status = |playback: &mut Playback| {
+        playback.next_index = hub.captured.load(Ordering::Relaxed) as usize;
+        playback.status(queue)
     };
-    queue.reply(status(&playback));
+    queue.reply(status(&mut playback));
     loop {
         tokio::select! {
             incoming = stream.next() => {
                 let Some(control) = client_control(incoming)? else { return Ok(()) };
                 let Some(control) = control else { continue };
                 apply_live_control(&mut playback, control).map_err(|reason| (ErrorCode::InvalidControl, reason))?;
-                queue.reply(status(&playback));
+                queue.reply(status(&mut playback));
             }
             item = frames.recv() => {
                 let active = playback.state == PlaybackState::Playing || playback.stepping;
@@ -669,7 +669,7 @@ async fn drive_live_session(stream: &mut futures_util::stream::SplitStream<WebSo
                         }
                         if playback.stepping {
                             playback.stepping = false;
-                            queue.reply(status(&playback));
+                            queue.reply(status(&mut playback));
                         }
                     }
                     Ok(LiveItem::Frame(_)) => {}
