@@ -93,11 +93,11 @@ pub(crate) fn run(args: &RecordArgs) -> anyhow::Result<()> {
     let calibration_override = calibration_override(args)?;
     let (mut source, frames) = match crate::live_spec(&args.source) {
         Some(uri) => {
-            let Some(FrameRange { start, end: Some(end) }) = args.frames else {
+            let Some(end) = args.frames.and_then(|f| f.end) else {
                 bail!("recording a live camera needs --frames ..N (how many frames to record)");
             };
             let source: Box<dyn FrameSource> = Box::new(crate::LiveTake::new(crate::open_live(uri, calibration_override)?, end));
-            (source, resolve_frame_range(Some(FrameRange { start, end: Some(end) }), end)?)
+            (source, resolve_frame_range(args.frames, end)?)
         }
         None => {
             let source = crate::open_with(&args.source, calibration_override)?;
