@@ -469,12 +469,8 @@ impl App {
                 }
                 Err(message) => self.last_error = Some(format!("settings: {message}")),
             },
-            Ui::Reset => {
-                if let Some(fusion) = &mut self.fusion {
-                    fusion.reset(&self.gpu);
-                }
-                self.reset_run();
-            }
+            // reset_run also clears the volume.
+            Ui::Reset => self.reset_run(),
             Ui::ExportPly | Ui::ExportGlb => {
                 let glb = event == Ui::ExportGlb;
                 if let Err(message) = self.export_mesh(glb).await {
