@@ -5,11 +5,10 @@
 #   scripts/bench_web.sh [--volume 256] [--voxel-mm 20]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-# A failing set-up stops here (an eval of a failed substitution would carry on).
+# Set-up installs what is missing and prints the environment (XDG_RUNTIME_DIR for wgpu/Mesa);
+# a failing set-up stops here (an eval of a failed substitution would carry on).
 setup_env=$(scripts/setup.sh test)
 eval "$setup_env"
-export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp/webfusion-xdg-$(id -u)}"
-mkdir -p -m 0700 "$XDG_RUNTIME_DIR"
 trunk build index.html --release
 cargo build --release -q -p webfusion-bridge
 node tests/browser/bench.mjs --webfusion target/release/webfusion --dist dist "$@"

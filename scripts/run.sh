@@ -14,11 +14,10 @@ while [ $# -gt 0 ]; do
     *) echo "usage: scripts/run.sh [--port N] [--no-serve] [--source TUM_DIR_OR_WFR]" >&2; exit 2 ;;
   esac
 done
-# A failing set-up stops here (an eval of a failed substitution would carry on).
+# Set-up installs what is missing and prints the environment (XDG_RUNTIME_DIR for wgpu/Mesa);
+# a failing set-up stops here (an eval of a failed substitution would carry on).
 setup_env=$(scripts/setup.sh run)
 eval "$setup_env"
-export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp/webfusion-xdg-$(id -u)}"
-mkdir -p -m 0700 "$XDG_RUNTIME_DIR"
 
 echo "== building the web app (trunk) =="
 trunk build index.html --release

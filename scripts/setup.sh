@@ -59,5 +59,6 @@ fi
 
 # wgpu/Mesa warn on stderr when XDG_RUNTIME_DIR is unset or invalid; give them a private one.
 if [ -z "${XDG_RUNTIME_DIR:-}" ] || [ ! -d "${XDG_RUNTIME_DIR}" ]; then
+  mkdir -p -m 0700 "/tmp/webfusion-xdg-$(id -u)"
   echo "export XDG_RUNTIME_DIR=/tmp/webfusion-xdg-$(id -u)"
 fi

@@ -4,11 +4,10 @@
 # `webfusion serve`, in headless Chromium via playwright-core). Installs what is missing first.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-# A failing set-up stops here (an eval of a failed substitution would carry on).
+# Set-up installs what is missing and prints the environment (XDG_RUNTIME_DIR for wgpu/Mesa);
+# a failing set-up stops here (an eval of a failed substitution would carry on).
 setup_env=$(scripts/setup.sh test)
 eval "$setup_env"
-export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp/webfusion-xdg-$(id -u)}"
-mkdir -p -m 0700 "$XDG_RUNTIME_DIR"
 log=$(mktemp -d)
 
 echo "== native tests (cargo nextest, Vulkan: lavapipe or any adapter) =="
