@@ -151,7 +151,7 @@ pub fn run_kernel<P: bytemuck::Pod>(gpu: &Gpu, pipeline: &KernelPipeline, params
     let mut all = vec![&params_buffer];
     all.extend(input_buffers.iter());
     all.extend(output_buffers.iter());
-    let bind_group = pipeline.bind_group(&gpu.device, &all);
+    let bind_group = bind_in_order(gpu, pipeline, &all);
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.run_kernel") });
     pipeline.dispatch(&mut encoder, &bind_group, invocations);
     pollster::block_on(gpu.submit_and_wait(encoder)).expect("GPU work finishes");
@@ -160,6 +160,15 @@ pub fn run_kernel<P: bytemuck::Pod>(gpu: &Gpu, pipeline: &KernelPipeline, params
         .zip(output_sizes)
         .map(|(b, &size)| pollster::block_on(gpu.read_buffer::<u8>(b, size.next_multiple_of(4))).expect("readback").into_iter().take(size).collect())
         .collect()
+}
+
+/// Binds `buffers` to the kernel's reflected bindings in WGSL order (the harness feeds any
+/// kernel generic inputs; production code uses the kernels' typed `Bindings`).
+fn bind_in_order(gpu: &Gpu, pipeline: &KernelPipeline, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
+    let bindings = pipeline.kernel.bindings;
+    assert_eq!(buffers.len(), bindings.len(), "kernel {} has {} bindings, the test gave {}", pipeline.kernel.name, bindings.len(), buffers.len());
+    let entries: Vec<wgpu::BindGroupEntry> = bindings.iter().zip(buffers).map(|(b, buf)| wgpu::BindGroupEntry { binding: b.binding, resource: buf.as_entire_binding() }).collect();
+    pipeline.bind_group(&gpu.device, &entries)
 }
 
 /// Reinterprets bytes read back from the GPU.
@@ -202,7 +211,7 @@ pub fn run_kernel_in_place<P: bytemuck::Pod>(gpu: &Gpu, pipeline: &KernelPipelin
         .collect();
     let mut all = vec![&params_buffer];
     all.extend(storage.iter());
-    let bind_group = pipeline.bind_group(&gpu.device, &all);
+    let bind_group = bind_in_order(gpu, pipeline, &all);
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.run_kernel_in_place") });
     pipeline.dispatch(&mut encoder, &bind_group, invocations);
     pollster::block_on(gpu.submit_and_wait(encoder)).expect("GPU work finishes");
@@ -212,3 +221,17 @@ pub fn run_kernel_in_place<P: bytemuck::Pod>(gpu: &Gpu, pipeline: &KernelPipelin
         .map(|(b, bytes)| pollster::block_on(gpu.read_buffer::<u8>(b, bytes.len().next_multiple_of(4))).expect("readback").into_iter().take(bytes.len()).collect())
         .collect()
 }
+
+/// Compares a Rust mirror with naga's layout of WGSL struct `$wgsl` in `$kernel`: size, and the
+/// listed members' names and offsets in declaration order (generated padding fields excluded).
+#[macro_export]
+macro_rules! check_layout {
+    ($kernel:expr, $wgsl:literal, $ty:ty, [$($field:ident),* $(,)?]) => {{
+        let layout = $kernel.struct_layout($wgsl).unwrap_or_else(|| panic!("{} has no struct {}", $kernel.name, $wgsl));
+        assert_eq!(std::mem::size_of::<$ty>() as u32, layout.size_bytes, "size of {}", $wgsl);
+        let rust: Vec<(&str, u32)> = vec![$((stringify!($field), std::mem::offset_of!($ty, $field) as u32)),*];
+        let wgsl: Vec<(&str, u32)> = layout.members.iter().map(|m| (m.name, m.offset_bytes)).collect();
+        assert_eq!(rust, wgsl, "members of {}", $wgsl);
+    }};
+}
+

@@ -12,11 +12,11 @@ use glam::{DQuat, DVec3};
 use nalgebra::{Matrix6, SymmetricEigen, Vector6};
 use web_time::Instant;
 
-use crate::kernels::icp_reduce::{self, IcpReduceBindings, IcpReduceParams, SUM_FLOATS};
-use crate::kernels::intensity_pyramid_down::{self, IntensityPyramidDownBindings, IntensityPyramidDownParams};
-use crate::kernels::rgb_reduce::{self, RgbReduceBindings, RgbReduceParams};
-use crate::kernels::raycast::{self, RaycastBindings, RaycastParams};
-use crate::kernels::tsdf_integrate::{self, TsdfIntegrateBindings, TsdfIntegrateParams};
+use crate::kernels::icp_reduce::{self, IcpReduceParams, SUM_FLOATS};
+use crate::kernels::intensity_pyramid_down::{self, IntensityPyramidDownParams};
+use crate::kernels::rgb_reduce::{self, RgbReduceParams};
+use crate::kernels::raycast::{self, RaycastParams};
+use crate::kernels::tsdf_integrate::{self, TsdfIntegrateParams};
 use crate::kernels::GpuIntrinsics;
 use crate::preprocess::{DepthPreprocessor, PreprocessConfig};
 use crate::tsdf::{DenseTsdfVolume, TsdfConfig, TsdfStore};
@@ -262,7 +262,7 @@ impl RaycastTarget {
         let shaded_rgba8 = gpu.storage_buffer::<u32>(&name("shaded_rgba8"), n);
         let color_rgba8 = gpu.storage_buffer::<u32>(&name("color_rgba8"), n);
         let params = gpu.uniform_buffer(&name("params"), &RaycastParams::default());
-        let bind_group = RaycastBindings {
+        let bind_group = raycast::Bindings {
             params: &params,
             tsdf_volume: store.voxels(),
             color_volume: store.colors(),
@@ -358,13 +358,13 @@ impl KinectFusion {
                     let p = IntensityPyramidDownParams { src_width_px: fine.width_px, src_height_px: fine.height_px, dst_width_px: k.width_px, dst_height_px: k.height_px };
                     let params = gpu.uniform_buffer(&format!("core.intensity_pyramid_down.params[{l}]"), &p);
                     let src = intensities[l - 1].as_ref().unwrap_or(&preprocessor.intensity);
-                    let bind_group = IntensityPyramidDownBindings { params: &params, src, dst: intensity_here }.bind_group(gpu);
+                    let bind_group = intensity_pyramid_down::Bindings { params: &params, src, dst: intensity_here }.bind_group(gpu);
                     (p, params, bind_group)
                 });
                 let prev_intensity = gpu.storage_buffer::<f32>(&format!("core.fusion.prev_intensity[{l}]"), k.pixel_count());
                 let prev_depth_m = gpu.storage_buffer::<f32>(&format!("core.fusion.prev_depth_m[{l}]"), k.pixel_count());
                 let rgb_params = gpu.uniform_buffer(&format!("core.rgb_reduce.params[{l}]"), &RgbReduceParams::default());
-                let rgb_bind_group = RgbReduceBindings {
+                let rgb_bind_group = rgb_reduce::Bindings {
                     params: &rgb_params,
                     vertex_in_camera: &preprocessor.levels[l].vertex_in_camera,
                     intensity: intensity_here,
@@ -374,7 +374,7 @@ impl KinectFusion {
                 }
                 .bind_group(gpu);
                 let params = gpu.uniform_buffer(&format!("core.icp_reduce.params[{l}]"), &IcpReduceParams::default());
-                let bind_group = IcpReduceBindings {
+                let bind_group = icp_reduce::Bindings {
                     params: &params,
                     vertex_in_camera: &preprocessor.levels[l].vertex_in_camera,
                     normal_in_camera: &preprocessor.levels[l].normal_in_camera,
@@ -388,7 +388,7 @@ impl KinectFusion {
             .collect();
         let integrate_params = gpu.uniform_buffer("core.tsdf_integrate.params", &TsdfIntegrateParams::default());
         let depth_for_fusion = preprocessor.depth_unfiltered_m.as_ref().unwrap_or(&preprocessor.levels[0].depth_m);
-        let integrate_bind_group = TsdfIntegrateBindings {
+        let integrate_bind_group = tsdf_integrate::Bindings {
             params: &integrate_params,
             depth_m: depth_for_fusion,
             color: &preprocessor.color,
@@ -473,7 +473,7 @@ impl KinectFusion {
         self.preprocessor.encode(gpu, &mut encoder);
         for lvl in &self.icp_levels {
             if let Some((p, _, bind_group)) = &lvl.down {
-                intensity_pyramid_down::encode(gpu, &mut encoder, bind_group, p);
+                gpu.kernels.intensity_pyramid_down.dispatch(&mut encoder, bind_group, [p.dst_width_px, p.dst_height_px, 1]);
             }
         }
         gpu.submit_and_wait(encoder).await?;
@@ -529,7 +529,7 @@ impl KinectFusion {
         };
         gpu.write_buffer(&self.integrate_params, std::slice::from_ref(&p));
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.fusion.integrate") });
-        tsdf_integrate::encode(gpu, &mut encoder, &self.integrate_bind_group, &p);
+        gpu.kernels.tsdf_integrate.dispatch(&mut encoder, &self.integrate_bind_group, [p.volume.dim_x, p.volume.dim_y, 1]);
         gpu.submit_and_wait(encoder).await
     }
 
@@ -576,7 +576,7 @@ impl KinectFusion {
                     camera_prev_from_world,
                     dist_thresh_m: icp.dist_thresh_m,
                     cos_angle_thresh: icp.angle_thresh_rad.cos(),
-                    thread_count: icp_reduce::WORKGROUPS * icp_reduce::WORKGROUP_SIZE,
+                    thread_count: icp_reduce::WORKGROUPS * icp_reduce::WORKGROUP_THREADS,
                     huber_delta_m: icp.huber_delta_m,
                     noise_weighting: u32::from(icp.noise_weighting),
                     ..Default::default()
@@ -596,7 +596,7 @@ impl KinectFusion {
                         _pad0: 0,
                     };
                     gpu.write_buffer(&lvl.rgb_params, std::slice::from_ref(&rp));
-                    rgb_reduce::encode(gpu, &mut encoder, &lvl.rgb_bind_group, &rp);
+                    gpu.kernels.rgb_reduce.dispatch(&mut encoder, &lvl.rgb_bind_group, [rp.thread_count, 1, 1]);
                 }
                 gpu.queue.submit([encoder.finish()]);
                 let system = if photometric.is_some() {

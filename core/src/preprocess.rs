@@ -265,59 +265,56 @@ impl DepthPreprocessor {
             (gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_x_tmp", n0), gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_y_tmp", n0))
         });
 
+        use crate::kernels::{bilateral_filter, color_to_float, depth_pyramid_down, depth_to_metres, gradient_smooth, normal_map, vertex_gradients, vertex_map};
         let mut stages = Vec::new();
-        let mut push = |name: String, pipeline: fn(&Kernels) -> &KernelPipeline, params: wgpu::Buffer, buffers: &[&wgpu::Buffer], invocations: [u32; 3]| {
-            let mut all = vec![&params];
-            all.extend_from_slice(buffers);
-            let bind_group = pipeline(&gpu.kernels).bind_group(&gpu.device, &all);
+        let mut push = |name: String, pipeline: fn(&Kernels) -> &KernelPipeline, params: wgpu::Buffer, bind_group: wgpu::BindGroup, invocations: [u32; 3]| {
             stages.push(Stage { name, pipeline, bind_group, invocations, _params: params });
         };
         let (w0, h0) = (k0.width_px, k0.height_px);
         let to_metres_out = depth_unfiltered_m.as_ref().unwrap_or(&levels[0].depth_m);
-        let p = config.depth_to_metres_params(&calibration);
-        push("depth_to_metres".into(), |k| &k.depth_to_metres, gpu.uniform_buffer("core.depth_to_metres.params", &p), &[&depth_raw, to_metres_out], [w0, h0, 1]);
+        let params = gpu.uniform_buffer("core.depth_to_metres.params", &config.depth_to_metres_params(&calibration));
+        let bg = depth_to_metres::Bindings { params: &params, depth_raw: &depth_raw, depth_m: to_metres_out }.bind_group(gpu);
+        push("depth_to_metres".into(), |k| &k.depth_to_metres, params, bg, [w0, h0, 1]);
         if let (Some(b), Some(unfiltered)) = (config.bilateral, &depth_unfiltered_m) {
-            let p = b.params(&k0);
-            push("bilateral_filter".into(), |k| &k.bilateral_filter, gpu.uniform_buffer("core.bilateral_filter.params", &p), &[unfiltered, &levels[0].depth_m], [w0, h0, 1]);
+            let params = gpu.uniform_buffer("core.bilateral_filter.params", &b.params(&k0));
+            let bg = bilateral_filter::Bindings { params: &params, depth_in_m: unfiltered, depth_out_m: &levels[0].depth_m }.bind_group(gpu);
+            push("bilateral_filter".into(), |k| &k.bilateral_filter, params, bg, [w0, h0, 1]);
         }
         for l in 1..levels.len() {
             let (fine, coarse) = (&levels[l - 1], &levels[l]);
             let p = config.depth_pyramid_down_params(&fine.intrinsics, &coarse.intrinsics);
             let inv = [p.dst_width_px, p.dst_height_px, 1];
-            push(format!("depth_pyramid_down[{l}]"), |k| &k.depth_pyramid_down, gpu.uniform_buffer("core.depth_pyramid_down.params", &p), &[&fine.depth_m, &coarse.depth_m], inv);
+            let params = gpu.uniform_buffer("core.depth_pyramid_down.params", &p);
+            let bg = depth_pyramid_down::Bindings { params: &params, depth_fine_m: &fine.depth_m, depth_coarse_m: &coarse.depth_m }.bind_group(gpu);
+            push(format!("depth_pyramid_down[{l}]"), |k| &k.depth_pyramid_down, params, bg, inv);
         }
         for (l, level) in levels.iter().enumerate() {
             let k = level.intrinsics;
             let inv = [k.width_px, k.height_px, 1];
-            let p = VertexMapParams { intrinsics: GpuIntrinsics::from(k) };
-            push(format!("vertex_map[{l}]"), |k| &k.vertex_map, gpu.uniform_buffer("core.vertex_map.params", &p), &[&level.depth_m, &level.vertex_in_camera], inv);
+            let params = gpu.uniform_buffer("core.vertex_map.params", &VertexMapParams { intrinsics: GpuIntrinsics::from(k) });
+            let bg = vertex_map::Bindings { params: &params, depth_m: &level.depth_m, vertex_in_camera: &level.vertex_in_camera }.bind_group(gpu);
+            push(format!("vertex_map[{l}]"), |k| &k.vertex_map, params, bg, inv);
             let p = VertexGradientsParams { width_px: k.width_px, height_px: k.height_px, ..Default::default() };
-            push(
-                format!("vertex_gradients[{l}]"),
-                |k| &k.vertex_gradients,
-                gpu.uniform_buffer("core.vertex_gradients.params", &p),
-                &[&level.vertex_in_camera, &level.grad_x, &level.grad_y],
-                inv,
-            );
+            let params = gpu.uniform_buffer("core.vertex_gradients.params", &p);
+            let bg = vertex_gradients::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x: &level.grad_x, grad_y: &level.grad_y }.bind_group(gpu);
+            push(format!("vertex_gradients[{l}]"), |k| &k.vertex_gradients, params, bg, inv);
             if let (Some(g), Some((tmp_x, tmp_y))) = (config.gradient_smoothing, &grad_tmp) {
                 for axis in 0..2u32 {
-                    let p = g.params(&k, axis);
-                    let io: [&wgpu::Buffer; 4] =
+                    let params = gpu.uniform_buffer("core.gradient_smooth.params", &g.params(&k, axis));
+                    let [grad_x_in, grad_y_in, grad_x_out, grad_y_out]: [&wgpu::Buffer; 4] =
                         if axis == 0 { [&level.grad_x, &level.grad_y, tmp_x, tmp_y] } else { [tmp_x, tmp_y, &level.grad_x, &level.grad_y] };
-                    push(format!("gradient_smooth[{l}].{}", ["x", "y"][axis as usize]), |k| &k.gradient_smooth, gpu.uniform_buffer("core.gradient_smooth.params", &p), &io, inv);
+                    let bg = gradient_smooth::Bindings { params: &params, grad_x_in, grad_y_in, grad_x_out, grad_y_out }.bind_group(gpu);
+                    push(format!("gradient_smooth[{l}].{}", ["x", "y"][axis as usize]), |k| &k.gradient_smooth, params, bg, inv);
                 }
             }
-            let p = config.normal_map_params(&k);
-            push(
-                format!("normal_map[{l}]"),
-                |k| &k.normal_map,
-                gpu.uniform_buffer("core.normal_map.params", &p),
-                &[&level.vertex_in_camera, &level.grad_x, &level.grad_y, &level.normal_in_camera],
-                inv,
-            );
+            let params = gpu.uniform_buffer("core.normal_map.params", &config.normal_map_params(&k));
+            let bg = normal_map::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x: &level.grad_x, grad_y: &level.grad_y, normal_in_camera: &level.normal_in_camera }
+                .bind_group(gpu);
+            push(format!("normal_map[{l}]"), |k| &k.normal_map, params, bg, inv);
         }
-        let p = ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() };
-        push("color_to_float".into(), |k| &k.color_to_float, gpu.uniform_buffer("core.color_to_float.params", &p), &[&rgb8, &color, &intensity], [w0, h0, 1]);
+        let params = gpu.uniform_buffer("core.color_to_float.params", &ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() });
+        let bg = color_to_float::Bindings { params: &params, rgb8: &rgb8, color: &color, intensity: &intensity }.bind_group(gpu);
+        push("color_to_float".into(), |k| &k.color_to_float, params, bg, [w0, h0, 1]);
 
         Ok(Self { calibration, config, depth_raw, rgb8, depth_unfiltered_m, color, intensity, levels, stages })
     }

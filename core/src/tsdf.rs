@@ -131,35 +131,8 @@ impl TsdfConfig {
     }
 }
 
-/// Mirror of WGSL `VolumeDesc` (shaders/wgsl/shared/tsdf.wgsl).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct VolumeDesc {
-    /// Voxels along x.
-    pub dim_x: u32,
-    /// Voxels along y.
-    pub dim_y: u32,
-    /// Voxels along z.
-    pub dim_z: u32,
-    /// Cap of the integration weight.
-    pub max_weight: u32,
-    /// World x of voxel (0, 0, 0)'s outer corner, metres.
-    pub origin_x_m: f32,
-    /// World y of the origin corner, metres.
-    pub origin_y_m: f32,
-    /// World z of the origin corner, metres.
-    pub origin_z_m: f32,
-    /// Voxel edge, metres.
-    pub voxel_size_m: f32,
-    /// Truncation distance μ, metres.
-    pub truncation_m: f32,
-    /// Padding.
-    pub _pad0: u32,
-    /// Padding.
-    pub _pad1: u32,
-    /// Padding.
-    pub _pad2: u32,
-}
+/// Mirror of WGSL `VolumeDesc` (shaders/wgsl/shared/tsdf.wgsl), generated from its layout.
+pub use crate::kernels::gpu_data::VolumeDesc;
 
 impl VolumeDesc {
     /// Number of voxels.

@@ -29,12 +29,13 @@ fn validation_errors_are_caught_by_the_canary() {
     // A 4-byte uniform where the kernel's params need 32 bytes: wgpu must report it.
     let tiny = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("test.tiny"), size: 4, usage: wgpu::BufferUsages::UNIFORM, mapped_at_creation: false });
     let storage = gpu.storage_buffer::<f32>("test.storage", 16);
-    let _ = gpu.kernels.vertex_map.bind_group(&gpu.device, &[&tiny, &storage, &storage]);
+    let _ = webfusion_core::kernels::vertex_map::Bindings { params: &tiny, depth_m: &storage, vertex_in_camera: &storage }.bind_group(&gpu);
     let errors = gpu.take_errors();
     assert!(!errors.is_empty(), "the canary must see the bad binding");
     assert!(std::panic::catch_unwind(|| {
         let g = webfusion_tests::gpu();
-        let _ = g.kernels.vertex_map.bind_group(&g.device, &[&g.storage_buffer::<u8>("a", 4), &g.storage_buffer::<u8>("b", 4), &g.storage_buffer::<u8>("c", 4)]);
+        let (a, b, c) = (g.storage_buffer::<u8>("a", 4), g.storage_buffer::<u8>("b", 4), g.storage_buffer::<u8>("c", 4));
+        let _ = webfusion_core::kernels::vertex_map::Bindings { params: &a, depth_m: &b, vertex_in_camera: &c }.bind_group(&g);
         finish(&g);
     })
     .is_err(), "finish() must fail a test that produced validation errors");

@@ -4,7 +4,7 @@
 #![cfg(target_arch = "wasm32")]
 
 use wasm_bindgen_test::*;
-use webfusion_core::cpu::preprocess::preprocess;
+use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
 use webfusion_core::{ColorImage, DepthImage, Gpu, GpuOptions, RgbdCalibration, RgbdFrame};
 

@@ -1,55 +1,26 @@
 // SPDX-License-Identifier: MIT
-//! CPU reference of every kernel, one file per kernel with the kernel's name, taking the same
-//! parameters and buffers in the same order as the WGSL bindings.
+//! CPU reference of every kernel: `cpu/<capability>/<kernel>.rs` defines `pub fn <kernel>`,
+//! taking the same parameters and buffers in the same order as the WGSL bindings, and is
+//! re-exported here as `cpu::<kernel>`. `core/build.rs` builds this module tree from the files
+//! it finds, and the coverage list ([`TWINS`], [`coverage`]) with it.
 //!
 //! These are written to mirror the shaders statement by statement (same loop order, same f32
 //! arithmetic) rather than idiomatically, so GPU-vs-CPU tests can use tight tolerances and any
-//! stage can be swapped for its reference when bisecting.
+//! stage can be swapped for its reference when bisecting. Files of a capability folder that are
+//! named after no kernel are helpers shared by its twins (e.g. `mesh/marching_cubes.rs`) or CPU
+//! compositions of several kernels (`preprocess/chain.rs`).
 
 #![expect(clippy::needless_range_loop, reason = "loops mirror the per-invocation WGSL code")]
 
-pub mod bilateral_filter;
-pub mod color_to_float;
-pub mod depth_pyramid_down;
-pub mod depth_to_metres;
-pub mod gradient_smooth;
-pub mod icp_reduce;
-pub mod intensity_pyramid_down;
-pub mod marching_cubes;
-pub mod mc_count;
-pub mod mc_generate;
-pub mod mc_scan;
-pub mod normal_map;
-pub mod preprocess;
-pub mod raycast;
-pub mod rgb_reduce;
 pub mod shared;
-pub mod tsdf_integrate;
-pub mod vertex_gradients;
-pub mod vertex_map;
 
-pub use bilateral_filter::bilateral_filter;
-pub use color_to_float::color_to_float;
-pub use depth_pyramid_down::depth_pyramid_down;
-pub use depth_to_metres::depth_to_metres;
-pub use gradient_smooth::gradient_smooth;
-pub use icp_reduce::icp_reduce;
-pub use intensity_pyramid_down::intensity_pyramid_down;
-pub use mc_count::mc_count;
-pub use mc_generate::mc_generate;
-pub use mc_scan::mc_scan;
-pub use normal_map::normal_map;
-pub use raycast::raycast;
-pub use rgb_reduce::rgb_reduce;
-pub use tsdf_integrate::tsdf_integrate;
-pub use vertex_gradients::vertex_gradients;
-pub use vertex_map::vertex_map;
+include!(concat!(env!("OUT_DIR"), "/cpu_tree.rs"));
 
-/// Which kernels have a CPU reference (all of them, today); a kernel added without one must
-/// say why here, so coverage is explicit.
-#[derive(Clone, Copy, Debug)]
+/// Whether a kernel has a CPU reference; a kernel without one must say why in its WGSL doc
+/// (`//! cpu-twin: none: <reason>`), so coverage is explicit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CpuKernel {
-    /// A reference exists.
+    /// `core/src/cpu/<capability>/<kernel>.rs` exists.
     Present,
     /// No reference, and why.
     Missing {
@@ -58,12 +29,13 @@ pub enum CpuKernel {
     },
 }
 
-/// CPU-reference coverage by kernel name.
+/// CPU-reference coverage of the kernel called `kernel_name`.
 pub fn coverage(kernel_name: &str) -> CpuKernel {
-    match kernel_name {
-        "depth_to_metres" | "bilateral_filter" | "depth_pyramid_down" | "vertex_map" | "vertex_gradients" | "gradient_smooth"
-        | "normal_map" | "color_to_float" | "tsdf_integrate" | "raycast" | "icp_reduce" | "intensity_pyramid_down" | "rgb_reduce" => CpuKernel::Present,
-        "mc_count" | "mc_scan" | "mc_generate" => CpuKernel::Present,
-        _ => CpuKernel::Missing { reason: "kernel not yet paired with a CPU reference" },
+    if TWINS.contains(&kernel_name) {
+        return CpuKernel::Present;
+    }
+    match webfusion_shaders::kernel(kernel_name).and_then(|k| k.cpu_twin_exemption) {
+        Some(reason) => CpuKernel::Missing { reason },
+        None => CpuKernel::Missing { reason: "no core/src/cpu/<capability>/<kernel>.rs and no `cpu-twin: none:` reason in its WGSL doc" },
     }
 }

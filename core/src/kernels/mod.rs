@@ -1,52 +1,24 @@
 // SPDX-License-Identifier: MIT
-//! Host side of every kernel: the `#[repr(C)]` mirror of its uniform parameters, a typed
-//! bindings struct in WGSL binding order, and an `encode` that records one dispatch.
+//! Host side of every kernel, generated from the shaders' reflection (`shaders/build.rs`,
+//! `core/build.rs`): one module per kernel, `kernels::<capability>::<kernel>` (also reachable
+//! as `kernels::<kernel>`), holding
 //!
-//! Each file here pairs with `shaders/wgsl/<name>.wgsl` and `core/src/cpu/<name>.rs`.
-//! Pipelines and bind group layouts are built once per device from the reflected shader set.
-
-pub mod bilateral_filter;
-pub mod color_to_float;
-pub mod depth_pyramid_down;
-pub mod depth_to_metres;
-pub mod gradient_smooth;
-pub mod mc_count;
-pub mod mc_generate;
-pub mod mc_scan;
-pub mod icp_reduce;
-pub mod intensity_pyramid_down;
-pub mod normal_map;
-pub mod raycast;
-pub mod rgb_reduce;
-pub mod tsdf_integrate;
-pub mod vertex_gradients;
-pub mod vertex_map;
-
-use webfusion_shaders::{BindingKind, Kernel};
+//! - the `#[repr(C)]` mirrors of the WGSL structs it binds (defined once in [`gpu_data`]),
+//! - `Bindings<'a>`: its resources by WGSL name, in binding order, and `bind_group`,
+//! - `layout_entries()`, `WORKGROUP_SIZE`, `pipeline(gpu)` and `KERNEL` (the reflection),
+//! - and, only for kernels with a host file `core/src/kernels/<capability>/<kernel>.rs`, that
+//!   file's items (custom dispatch, constants).
+//!
+//! Pipelines are built once per device in [`Kernels`] (in parallel threads natively). Each
+//! kernel pairs with `shaders/wgsl/<capability>/<kernel>.wgsl` and its CPU twin
+//! `core/src/cpu/<capability>/<kernel>.rs`.
 
 use crate::PinholeIntrinsics;
 
+include!(concat!(env!("OUT_DIR"), "/kernels_tree.rs"));
+
 /// Mirror of WGSL `Intrinsics` (shaders/wgsl/shared/camera.wgsl).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct GpuIntrinsics {
-    /// Focal length x, pixels.
-    pub fx_px: f32,
-    /// Focal length y, pixels.
-    pub fy_px: f32,
-    /// Principal point x, pixels.
-    pub cx_px: f32,
-    /// Principal point y, pixels.
-    pub cy_px: f32,
-    /// Width, pixels.
-    pub width_px: u32,
-    /// Height, pixels.
-    pub height_px: u32,
-    /// Padding.
-    pub _pad0: u32,
-    /// Padding.
-    pub _pad1: u32,
-}
+pub type GpuIntrinsics = gpu_data::Intrinsics;
 
 impl From<PinholeIntrinsics> for GpuIntrinsics {
     fn from(k: PinholeIntrinsics) -> Self {
@@ -54,11 +26,33 @@ impl From<PinholeIntrinsics> for GpuIntrinsics {
     }
 }
 
+/// A kernel's reflection and its layout entries, as `Kernels::new` compiles it.
+type KernelSpec = (&'static webfusion_shaders::Kernel, fn() -> Vec<wgpu::BindGroupLayoutEntry>);
+
+/// Compiles every kernel of `specs`, in order. Natively the work is spread over the available
+/// cores (pipeline creation is thread-safe and dominates start-up on software adapters); the
+/// browser compiles in its GPU process, so there it is one loop.
+fn compile_all(device: &wgpu::Device, specs: &[KernelSpec]) -> Vec<KernelPipeline> {
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get).min(specs.len()).max(1);
+        let chunk = specs.len().div_ceil(threads).max(1);
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = specs.chunks(chunk).map(|part| scope.spawn(move || part.iter().map(|(k, entries)| KernelPipeline::new(device, k, &entries())).collect::<Vec<_>>())).collect();
+            handles.into_iter().flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
+        })
+    }
+    #[cfg(target_arch = "wasm32")]
+    {
+        specs.iter().map(|(k, entries)| KernelPipeline::new(device, k, &entries())).collect()
+    }
+}
+
 /// One compiled kernel: its reflected description, bind group layout and pipeline.
 #[derive(Debug)]
 pub struct KernelPipeline {
     /// Reflected kernel (source, workgroup size, bindings).
-    pub kernel: &'static Kernel,
+    pub kernel: &'static webfusion_shaders::Kernel,
     /// Layout of bind group 0, built from the reflected bindings.
     pub bind_group_layout: wgpu::BindGroupLayout,
     /// The compute pipeline.
@@ -66,33 +60,11 @@ pub struct KernelPipeline {
 }
 
 impl KernelPipeline {
-    /// Compiles `kernel` for `device`.
-    pub fn new(device: &wgpu::Device, kernel: &'static Kernel) -> Self {
+    /// Compiles `kernel` for `device` with bind group 0 laid out as `entries`.
+    pub fn new(device: &wgpu::Device, kernel: &'static webfusion_shaders::Kernel, entries: &[wgpu::BindGroupLayoutEntry]) -> Self {
         let label = format!("core.{}", kernel.name);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(&label),
-            source: wgpu::ShaderSource::Wgsl(kernel.source.into()),
-        });
-        let entries: Vec<wgpu::BindGroupLayoutEntry> = kernel
-            .bindings
-            .iter()
-            .map(|b| wgpu::BindGroupLayoutEntry {
-                binding: b.binding,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: match b.kind {
-                        BindingKind::Uniform => wgpu::BufferBindingType::Uniform,
-                        BindingKind::StorageRead => wgpu::BufferBindingType::Storage { read_only: true },
-                        BindingKind::StorageReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
-                    },
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(b.min_size_bytes.into()),
-                },
-                count: None,
-            })
-            .collect();
-        let bind_group_layout =
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(&format!("{label}.bind_group_layout")), entries: &entries });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(&label), source: wgpu::ShaderSource::Wgsl(kernel.source.into()) });
+        let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(&format!("{label}.bind_group_layout")), entries });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(&format!("{label}.pipeline_layout")),
             bind_group_layouts: &[Some(&bind_group_layout)],
@@ -109,31 +81,23 @@ impl KernelPipeline {
         Self { kernel, bind_group_layout, pipeline }
     }
 
-    /// Binds `buffers` in WGSL binding order.
-    ///
-    /// # Panics
-    /// If the count differs from the reflected binding count: that is a bug in the typed
-    /// bindings struct, which the layout tests catch.
-    pub fn bind_group(&self, device: &wgpu::Device, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
-        assert_eq!(buffers.len(), self.kernel.bindings.len(), "kernel {} has {} bindings", self.kernel.name, self.kernel.bindings.len());
-        let entries: Vec<wgpu::BindGroupEntry> = self
-            .kernel
-            .bindings
-            .iter()
-            .zip(buffers)
-            .map(|(b, buf)| wgpu::BindGroupEntry { binding: b.binding, resource: buf.as_entire_binding() })
-            .collect();
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(&format!("core.{}.bind_group", self.kernel.name)),
-            layout: &self.bind_group_layout,
-            entries: &entries,
-        })
+    /// A bind group of `entries` (the generated `Bindings::bind_group` passes them in WGSL
+    /// binding order).
+    pub fn bind_group(&self, device: &wgpu::Device, entries: &[wgpu::BindGroupEntry]) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(&format!("core.{}.bind_group", self.kernel.name)), layout: &self.bind_group_layout, entries })
     }
 
-    /// Records one dispatch covering `invocations` threads (rounded up to whole workgroups).
+    /// Records one dispatch covering `invocations` threads (rounded up to whole workgroups) in
+    /// a compute pass of its own.
     pub fn dispatch(&self, encoder: &mut wgpu::CommandEncoder, bind_group: &wgpu::BindGroup, invocations: [u32; 3]) {
         let label = format!("core.{}", self.kernel.name);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&label), timestamp_writes: None });
+        self.dispatch_in(&mut pass, bind_group, invocations);
+    }
+
+    /// Records one dispatch covering `invocations` threads into an open compute pass (a stage
+    /// records all its dispatches into one pass).
+    pub fn dispatch_in(&self, pass: &mut wgpu::ComputePass<'_>, bind_group: &wgpu::BindGroup, invocations: [u32; 3]) {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         let [x, y, z] = self.workgroup_count(invocations);
@@ -144,67 +108,5 @@ impl KernelPipeline {
     pub fn workgroup_count(&self, invocations: [u32; 3]) -> [u32; 3] {
         let wg = self.kernel.workgroup_size;
         [invocations[0].div_ceil(wg[0]), invocations[1].div_ceil(wg[1]), invocations[2].div_ceil(wg[2])]
-    }
-}
-
-/// Every kernel pipeline, compiled once per device.
-#[derive(Debug)]
-pub struct Kernels {
-    /// `depth_to_metres`.
-    pub depth_to_metres: KernelPipeline,
-    /// `bilateral_filter`.
-    pub bilateral_filter: KernelPipeline,
-    /// `depth_pyramid_down`.
-    pub depth_pyramid_down: KernelPipeline,
-    /// `vertex_map`.
-    pub vertex_map: KernelPipeline,
-    /// `vertex_gradients`.
-    pub vertex_gradients: KernelPipeline,
-    /// `gradient_smooth`.
-    pub gradient_smooth: KernelPipeline,
-    /// `normal_map`.
-    pub normal_map: KernelPipeline,
-    /// `color_to_float`.
-    pub color_to_float: KernelPipeline,
-    /// `tsdf_integrate`.
-    pub tsdf_integrate: KernelPipeline,
-    /// `raycast`.
-    pub raycast: KernelPipeline,
-    /// `icp_reduce`.
-    pub icp_reduce: KernelPipeline,
-    /// `intensity_pyramid_down`.
-    pub intensity_pyramid_down: KernelPipeline,
-    /// `rgb_reduce`.
-    pub rgb_reduce: KernelPipeline,
-    /// `mc_count` (marching cubes, pass 1).
-    pub mc_count: KernelPipeline,
-    /// `mc_scan` (marching cubes, pass 2).
-    pub mc_scan: KernelPipeline,
-    /// `mc_generate` (marching cubes, pass 3).
-    pub mc_generate: KernelPipeline,
-}
-
-impl Kernels {
-    /// Compiles every kernel.
-    pub fn new(device: &wgpu::Device) -> Self {
-        use webfusion_shaders as s;
-        Self {
-            depth_to_metres: KernelPipeline::new(device, &s::DEPTH_TO_METRES),
-            bilateral_filter: KernelPipeline::new(device, &s::BILATERAL_FILTER),
-            depth_pyramid_down: KernelPipeline::new(device, &s::DEPTH_PYRAMID_DOWN),
-            vertex_map: KernelPipeline::new(device, &s::VERTEX_MAP),
-            vertex_gradients: KernelPipeline::new(device, &s::VERTEX_GRADIENTS),
-            gradient_smooth: KernelPipeline::new(device, &s::GRADIENT_SMOOTH),
-            normal_map: KernelPipeline::new(device, &s::NORMAL_MAP),
-            color_to_float: KernelPipeline::new(device, &s::COLOR_TO_FLOAT),
-            tsdf_integrate: KernelPipeline::new(device, &s::TSDF_INTEGRATE),
-            raycast: KernelPipeline::new(device, &s::RAYCAST),
-            icp_reduce: KernelPipeline::new(device, &s::ICP_REDUCE),
-            intensity_pyramid_down: KernelPipeline::new(device, &s::INTENSITY_PYRAMID_DOWN),
-            rgb_reduce: KernelPipeline::new(device, &s::RGB_REDUCE),
-            mc_count: KernelPipeline::new(device, &s::MC_COUNT),
-            mc_scan: KernelPipeline::new(device, &s::MC_SCAN),
-            mc_generate: KernelPipeline::new(device, &s::MC_GENERATE),
-        }
     }
 }

@@ -34,9 +34,9 @@ pub use glb::write_glb;
 pub use ply::write_ply;
 
 use crate::cpu;
-use crate::kernels::mc_count::{McCountBindings, McCountParams, McGrid};
-use crate::kernels::mc_generate::{McGenerateBindings, McGenerateParams, McVertex};
-use crate::kernels::mc_scan::{MC_FAILED_OUTPUT, McCounters, McScanBindings, McScanParams, counters_buffer};
+use crate::kernels::mc_count::{self, McCountParams, McGrid};
+use crate::kernels::mc_generate::{self, McGenerateParams, McVertex};
+use crate::kernels::mc_scan::{self, MC_FAILED_OUTPUT, McCounters, McScanParams, counters_buffer};
 use crate::tsdf::{TsdfStore, VolumeDesc};
 use crate::{Error, Gpu, Result};
 
@@ -214,13 +214,13 @@ pub async fn extract_triangles(gpu: &Gpu, store: &dyn TsdfStore, options: &MeshO
         _pad0: 0,
     };
     let scan_params = gpu.uniform_buffer("core.mc_scan.params", &scan_params);
-    let count_bg = McCountBindings { params: &count_params, tsdf_volume: store.voxels(), mc_table: &table, block_counts: &block_counts }.bind_group(gpu);
-    let scan_bg = McScanBindings { params: &scan_params, block_counts: &block_counts, block_offsets: &block_offsets, active_blocks: &active_blocks, counters: &counters }.bind_group(gpu);
+    let count_bg = mc_count::Bindings { params: &count_params, tsdf_volume: store.voxels(), mc_table: &table, block_counts: &block_counts }.bind_group(gpu);
+    let scan_bg = mc_scan::Bindings { params: &scan_params, block_counts: &block_counts, block_offsets: &block_offsets, active_blocks: &active_blocks, counters: &counters }.bind_group(gpu);
     // Records mc_generate for triangles first..first + capacity into a new buffer.
     let generate = |encoder: &mut wgpu::CommandEncoder, first: u32, capacity: u32| {
         let params = gpu.uniform_buffer("core.mc_generate.params", &McGenerateParams::new(volume, grid, first, capacity, store.has_color()));
         let vertices = gpu.storage_buffer::<McVertex>("core.mc.vertices", 3 * capacity as usize);
-        let bg = McGenerateBindings { params: &params, tsdf_volume: store.voxels(), colors: store.colors(), mc_table: &table, active_blocks: &active_blocks, block_offsets: &block_offsets, vertices: &vertices }
+        let bg = mc_generate::Bindings { params: &params, tsdf_volume: store.voxels(), colors: store.colors(), mc_table: &table, active_blocks: &active_blocks, block_offsets: &block_offsets, vertices: &vertices }
             .bind_group(gpu);
         crate::kernels::mc_generate::encode_indirect(gpu, encoder, &bg, &counters);
         vertices

@@ -3,11 +3,17 @@
 // y down, camera looking down +z. Mirrors `GpuIntrinsics` in core/src/kernels/mod.rs.
 
 struct Intrinsics {
+    // Focal length x, pixels.
     fx_px: f32,
+    // Focal length y, pixels.
     fy_px: f32,
+    // Principal point x, pixels.
     cx_px: f32,
+    // Principal point y, pixels.
     cy_px: f32,
+    // Width, pixels.
     width_px: u32,
+    // Height, pixels.
     height_px: u32,
     _pad0: u32,
     _pad1: u32,

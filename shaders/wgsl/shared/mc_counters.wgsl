@@ -15,7 +15,9 @@ struct McCounters {
     // Workgroups of mc_generate (one per active block; 2D past the per-dimension limit;
     // 0 x 1 x 1 without triangles). Byte offset 16: the indirect dispatch arguments.
     generate_workgroups_x: u32,
+    // Workgroups of `mc_generate` along y.
     generate_workgroups_y: u32,
+    // Workgroups of `mc_generate` along z (1).
     generate_workgroups_z: u32,
     _pad0: u32,
 }

@@ -6,14 +6,23 @@
 // Mirrors `VolumeDesc` in core/src/tsdf.rs and the helpers in core/src/cpu/shared.rs.
 
 struct VolumeDesc {
+    // Voxels along x.
     dim_x: u32,
+    // Voxels along y.
     dim_y: u32,
+    // Voxels along z.
     dim_z: u32,
+    // Cap of the integration weight.
     max_weight: u32,
+    // World x of voxel (0, 0, 0)'s outer corner, metres.
     origin_x_m: f32,
+    // World y of the origin corner, metres.
     origin_y_m: f32,
+    // World z of the origin corner, metres.
     origin_z_m: f32,
+    // Voxel edge, metres.
     voxel_size_m: f32,
+    // Truncation distance μ, metres.
     truncation_m: f32,
     _pad0: u32,
     _pad1: u32,

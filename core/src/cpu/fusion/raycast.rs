@@ -1,0 +1,116 @@
+// SPDX-License-Identifier: MIT
+//! CPU reference of `shaders/wgsl/raycast.wgsl`.
+
+use crate::cpu::shared::{INVALID, INVALID_VEC4, TsdfSample, back_project, dot3, pack_rgb8, sample_tsdf, transform_vector, voxel_index};
+use crate::kernels::raycast::RaycastParams;
+
+const OPAQUE: u32 = 0xff00_0000;
+
+/// Casts every pixel's ray as one invocation of the kernel does.
+#[expect(clippy::too_many_arguments, reason = "one argument per WGSL binding, in binding order")]
+pub fn raycast(
+    params: &RaycastParams,
+    tsdf_volume: &[u32],
+    color_volume: &[u32],
+    vertex_in_world: &mut [[f32; 4]],
+    normal_in_world: &mut [[f32; 4]],
+    depth_m: &mut [f32],
+    shaded_rgba8: &mut [u32],
+    color_rgba8: &mut [u32],
+) {
+    let k = &params.intrinsics;
+    let d = &params.volume;
+    for gy in 0..k.height_px {
+        for gx in 0..k.width_px {
+            let ix = (gy * k.width_px + gx) as usize;
+            let mut miss = || {
+                vertex_in_world[ix] = INVALID_VEC4;
+                normal_in_world[ix] = INVALID_VEC4;
+                depth_m[ix] = INVALID;
+                shaded_rgba8[ix] = 0;
+                color_rgba8[ix] = 0;
+            };
+            let ray_cam = back_project(k, gx as f32, gy as f32, 1.0);
+            let inv_len = 1.0 / dot3(ray_cam, ray_cam).sqrt();
+            let z_per_t = inv_len;
+            let m = &params.world_from_camera;
+            let origin = [m[3][0], m[3][1], m[3][2]];
+            let dir = transform_vector(m, ray_cam.map(|c| c * inv_len));
+            let lo = [d.origin_x_m + 0.5 * d.voxel_size_m, d.origin_y_m + 0.5 * d.voxel_size_m, d.origin_z_m + 0.5 * d.voxel_size_m];
+            let dims = [d.dim_x, d.dim_y, d.dim_z];
+            let hi: [f32; 3] = std::array::from_fn(|i| lo[i] + (dims[i] - 1) as f32 * d.voxel_size_m);
+            let safe_dir = dir.map(|c| if c.abs() < 1e-12 { 1e-12 } else { c });
+            let t0: [f32; 3] = std::array::from_fn(|i| (lo[i] - origin[i]) * (1.0 / safe_dir[i]));
+            let t1: [f32; 3] = std::array::from_fn(|i| (hi[i] - origin[i]) * (1.0 / safe_dir[i]));
+            let t_near: [f32; 3] = std::array::from_fn(|i| t0[i].min(t1[i]));
+            let t_far: [f32; 3] = std::array::from_fn(|i| t0[i].max(t1[i]));
+            let mut t = t_near[0].max(t_near[1]).max(t_near[2]).max(params.min_depth_m / z_per_t);
+            let t_end = t_far[0].min(t_far[1]).min(t_far[2]).min(params.max_depth_m / z_per_t);
+            if !(t < t_end) {
+                miss();
+                continue;
+            }
+            let max_step = params.step_factor * d.truncation_m;
+            let min_step = 0.5 * d.voxel_size_m;
+            let mut prev_t = t;
+            let mut prev = TsdfSample { tsdf: 0.0, valid: false };
+            let mut hit = false;
+            let mut t_hit = 0.0;
+            let at = |t: f32| std::array::from_fn(|i| origin[i] + dir[i] * t);
+            let mut i = 0;
+            while i < params.max_steps && t < t_end {
+                let s = sample_tsdf(tsdf_volume, d, at(t));
+                if s.valid && prev.valid {
+                    if prev.tsdf > 0.0 && s.tsdf <= 0.0 {
+                        t_hit = prev_t + (t - prev_t) * prev.tsdf / (prev.tsdf - s.tsdf);
+                        hit = true;
+                        break;
+                    }
+                    if prev.tsdf < 0.0 && s.tsdf > 0.0 {
+                        break;
+                    }
+                }
+                prev = s;
+                prev_t = t;
+                let mut step = max_step;
+                if s.valid {
+                    step = (s.tsdf * d.truncation_m * params.step_factor).clamp(min_step, max_step);
+                }
+                t += step;
+                i += 1;
+            }
+            if !hit {
+                miss();
+                continue;
+            }
+            let p: [f32; 3] = at(t_hit);
+            let h = d.voxel_size_m;
+            let offset = |axis: usize, s: f32| {
+                let mut q = p;
+                q[axis] += s * h;
+                sample_tsdf(tsdf_volume, d, q)
+            };
+            let (sx0, sx1, sy0, sy1, sz0, sz1) = (offset(0, -1.0), offset(0, 1.0), offset(1, -1.0), offset(1, 1.0), offset(2, -1.0), offset(2, 1.0));
+            if !(sx0.valid && sx1.valid && sy0.valid && sy1.valid && sz0.valid && sz1.valid) {
+                miss();
+                continue;
+            }
+            let grad = [sx1.tsdf - sx0.tsdf, sy1.tsdf - sy0.tsdf, sz1.tsdf - sz0.tsdf];
+            let grad_len = dot3(grad, grad).sqrt();
+            if !(grad_len > 1e-6) {
+                miss();
+                continue;
+            }
+            let n = grad.map(|g| g / grad_len);
+            vertex_in_world[ix] = [p[0], p[1], p[2], 1.0];
+            normal_in_world[ix] = [n[0], n[1], n[2], 0.0];
+            depth_m[ix] = t_hit * z_per_t;
+            let grey = 0.15 + 0.85 * (-dot3(n, dir)).max(0.0);
+            shaded_rgba8[ix] = pack_rgb8([grey; 3]) | OPAQUE;
+            let origin_v = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
+            let c: [u32; 3] = std::array::from_fn(|i| (((p[i] - origin_v[i]) / d.voxel_size_m).max(0.0) as u32).min(dims[i] - 1));
+            let cix = (voxel_index(d, c[0], c[1], c[2]) as usize).min(color_volume.len() - 1);
+            color_rgba8[ix] = color_volume[cix] | OPAQUE;
+        }
+    }
+}

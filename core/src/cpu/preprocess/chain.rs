@@ -1,0 +1,96 @@
+// SPDX-License-Identifier: MIT
+//! CPU twin of [`crate::preprocess::DepthPreprocessor`]: the same chain of kernels, run with
+//! the CPU references, for end-to-end checks and for CPU-only tests of later stages.
+
+use crate::cpu::shared::{pack_bytes, pack_u16_pairs};
+use crate::kernels::{
+    GpuIntrinsics, color_to_float::ColorToFloatParams, vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams,
+};
+use crate::preprocess::PreprocessConfig;
+use crate::{PinholeIntrinsics, RgbdCalibration, RgbdFrame};
+
+/// One pyramid level computed on the CPU.
+#[derive(Clone, Debug)]
+pub struct CpuPyramidLevel {
+    /// Intrinsics of this level.
+    pub intrinsics: PinholeIntrinsics,
+    /// Depth, metres.
+    pub depth_m: Vec<f32>,
+    /// Vertices (x, y, z, 1), camera frame.
+    pub vertex_in_camera: Vec<[f32; 4]>,
+    /// Final gradients along x (after smoothing when on).
+    pub grad_x: Vec<[f32; 4]>,
+    /// Final gradients along y (after smoothing when on).
+    pub grad_y: Vec<[f32; 4]>,
+    /// Unit normals (nx, ny, nz, 0), camera frame.
+    pub normal_in_camera: Vec<[f32; 4]>,
+}
+
+/// Everything the GPU preprocessor produces, computed on the CPU.
+#[derive(Clone, Debug)]
+pub struct CpuPreprocessed {
+    /// Depth in metres before the bilateral filter.
+    pub depth_unfiltered_m: Vec<f32>,
+    /// Pyramid, level 0 = full resolution.
+    pub levels: Vec<CpuPyramidLevel>,
+    /// Colour (r, g, b, 1).
+    pub color: Vec<[f32; 4]>,
+    /// BT.601 intensity.
+    pub intensity: Vec<f32>,
+}
+
+/// Runs the preprocessing chain on the CPU, stage for stage as the GPU does.
+pub fn preprocess(calibration: &RgbdCalibration, config: &PreprocessConfig, frame: &RgbdFrame) -> CpuPreprocessed {
+    let k0 = calibration.intrinsics;
+    let (w0, h0) = (k0.width_px, k0.height_px);
+    let n0 = k0.pixel_count();
+    let mut depth_unfiltered_m = vec![0.0; n0];
+    let p = config.depth_to_metres_params(calibration);
+    crate::cpu::depth_to_metres(&p, &pack_u16_pairs(&frame.depth.units), &mut depth_unfiltered_m);
+    let depth0 = match config.bilateral {
+        Some(b) => {
+            let mut out = vec![0.0; n0];
+            let p = b.params(&k0);
+            crate::cpu::bilateral_filter(&p, &depth_unfiltered_m, &mut out);
+            out
+        }
+        None => depth_unfiltered_m.clone(),
+    };
+    let mut depths = vec![depth0];
+    for l in 1..config.pyramid_levels {
+        let (fine, coarse) = (k0.pyramid_level(l - 1), k0.pyramid_level(l));
+        let p = config.depth_pyramid_down_params(&fine, &coarse);
+        let mut out = vec![0.0; coarse.pixel_count()];
+        crate::cpu::depth_pyramid_down(&p, &depths[l - 1], &mut out);
+        depths.push(out);
+    }
+    let levels = depths
+        .into_iter()
+        .enumerate()
+        .map(|(l, depth_m)| {
+            let k = k0.pyramid_level(l);
+            let n = k.pixel_count();
+            let mut vertex_in_camera = vec![[0.0; 4]; n];
+            crate::cpu::vertex_map(&VertexMapParams { intrinsics: GpuIntrinsics::from(k) }, &depth_m, &mut vertex_in_camera);
+            let (mut grad_x, mut grad_y) = (vec![[0.0; 4]; n], vec![[0.0; 4]; n]);
+            let p = VertexGradientsParams { width_px: k.width_px, height_px: k.height_px, ..Default::default() };
+            crate::cpu::vertex_gradients(&p, &vertex_in_camera, &mut grad_x, &mut grad_y);
+            if let Some(g) = config.gradient_smoothing {
+                for axis in 0..2 {
+                    let p = g.params(&k, axis);
+                    let (mut ox, mut oy) = (vec![[0.0; 4]; n], vec![[0.0; 4]; n]);
+                    crate::cpu::gradient_smooth(&p, &grad_x, &grad_y, &mut ox, &mut oy);
+                    (grad_x, grad_y) = (ox, oy);
+                }
+            }
+            let mut normal_in_camera = vec![[0.0; 4]; n];
+            let p = config.normal_map_params(&k);
+            crate::cpu::normal_map(&p, &vertex_in_camera, &grad_x, &grad_y, &mut normal_in_camera);
+            CpuPyramidLevel { intrinsics: k, depth_m, vertex_in_camera, grad_x, grad_y, normal_in_camera }
+        })
+        .collect();
+    let mut color = vec![[0.0; 4]; n0];
+    let mut intensity = vec![0.0; n0];
+    crate::cpu::color_to_float(&ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() }, &pack_bytes(&frame.color.rgb8), &mut color, &mut intensity);
+    CpuPreprocessed { depth_unfiltered_m, levels, color, intensity }
+}

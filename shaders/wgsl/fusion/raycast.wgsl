@@ -1,0 +1,146 @@
+// SPDX-License-Identifier: MIT
+//! Each invocation casts the ray of one pixel through the TSDF (000-digest §1.3.3): marches
+//! from the near plane (or the volume's entry) in steps of at most `step_factor * μ`, shrinking
+//! with the sampled distance, until the trilinear TSDF changes sign from + to -; the surface
+//! point is the linear interpolation of the crossing, its normal the normalised TSDF gradient
+//! (central differences, one voxel apart). Writes the world-frame vertex and normal, the depth
+//! (camera z) a virtual sensor at this pose would see, a headlight-shaded grey and the model
+//! colour (nearest voxel). Misses, back faces and unobserved space give NaN / 0.
+#import invalid
+#import camera
+#import tsdf_sample
+
+struct RaycastParams {
+    // The volume.
+    volume: VolumeDesc,
+    // Intrinsics of the rendered images.
+    intrinsics: Intrinsics,
+    // Camera to world, column-major.
+    world_from_camera: mat4x4<f32>,
+    // Nearest depth searched, metres.
+    min_depth_m: f32,
+    // Farthest depth searched, metres.
+    max_depth_m: f32,
+    // Largest step as a fraction of μ.
+    step_factor: f32,
+    // Cap on march steps per ray.
+    max_steps: u32,
+}
+
+// Uniform `RaycastParams`.
+@group(0) @binding(0) var<uniform> params: RaycastParams;
+// Voxel words.
+@group(0) @binding(1) var<storage, read> tsdf_volume: array<u32>;
+// Colour words (one placeholder word when colour is off).
+@group(0) @binding(2) var<storage, read> color_volume: array<u32>;
+// Surface points (x, y, z, 1), world frame.
+@group(0) @binding(3) var<storage, read_write> vertex_in_world: array<vec4<f32>>;
+// Unit normals (nx, ny, nz, 0), world frame.
+@group(0) @binding(4) var<storage, read_write> normal_in_world: array<vec4<f32>>;
+// Depth along the camera's z, metres.
+@group(0) @binding(5) var<storage, read_write> depth_m: array<f32>;
+// Headlight-shaded grey, RGBA8.
+@group(0) @binding(6) var<storage, read_write> shaded_rgba8: array<u32>;
+// Model colour, RGBA8.
+@group(0) @binding(7) var<storage, read_write> color_rgba8: array<u32>;
+
+const OPAQUE: u32 = 0xff000000u;
+
+fn write_miss(ix: u32) {
+    vertex_in_world[ix] = invalid_vec4();
+    normal_in_world[ix] = invalid_vec4();
+    depth_m[ix] = invalid_f32();
+    shaded_rgba8[ix] = 0u;
+    color_rgba8[ix] = 0u;
+}
+
+@compute @workgroup_size(16, 16, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = params.intrinsics;
+    if gid.x >= k.width_px || gid.y >= k.height_px {
+        return;
+    }
+    let ix = gid.y * k.width_px + gid.x;
+    let d = params.volume;
+    // Ray in world: origin at the camera centre, unit direction; `z_per_t` converts ray length
+    // to camera depth.
+    let ray_cam = back_project(k, f32(gid.x), f32(gid.y), 1.0);
+    let inv_len = 1.0 / length(ray_cam);
+    let z_per_t = inv_len;
+    let origin = params.world_from_camera[3].xyz;
+    let dir = (params.world_from_camera * vec4<f32>(ray_cam * inv_len, 0.0)).xyz;
+    // Clip to the box of voxel centres (where trilinear samples exist) and the depth range.
+    let lo = vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m) + vec3<f32>(0.5 * d.voxel_size_m);
+    let hi = lo + vec3<f32>(f32(d.dim_x - 1u), f32(d.dim_y - 1u), f32(d.dim_z - 1u)) * d.voxel_size_m;
+    // Axis-parallel rays: a tiny stand-in keeps the slab test finite.
+    let safe_dir = select(dir, vec3<f32>(1e-12), abs(dir) < vec3<f32>(1e-12));
+    let inv_dir = 1.0 / safe_dir;
+    let t0 = (lo - origin) * inv_dir;
+    let t1 = (hi - origin) * inv_dir;
+    let t_near = min(t0, t1);
+    let t_far = max(t0, t1);
+    var t = max(max(max(t_near.x, t_near.y), t_near.z), params.min_depth_m / z_per_t);
+    let t_end = min(min(min(t_far.x, t_far.y), t_far.z), params.max_depth_m / z_per_t);
+    if !(t < t_end) {
+        write_miss(ix);
+        return;
+    }
+    let max_step = params.step_factor * d.truncation_m;
+    let min_step = 0.5 * d.voxel_size_m;
+    var prev_t = t;
+    var prev = TsdfSample(0.0, false);
+    var hit = false;
+    var t_hit = 0.0;
+    for (var i = 0u; i < params.max_steps && t < t_end; i++) {
+        let s = sample_tsdf(d, origin + dir * t);
+        if s.valid && prev.valid {
+            if prev.tsdf > 0.0 && s.tsdf <= 0.0 {
+                t_hit = prev_t + (t - prev_t) * prev.tsdf / (prev.tsdf - s.tsdf);
+                hit = true;
+                break;
+            }
+            if prev.tsdf < 0.0 && s.tsdf > 0.0 {
+                break;
+            }
+        }
+        prev = s;
+        prev_t = t;
+        var step = max_step;
+        if s.valid {
+            step = clamp(s.tsdf * d.truncation_m * params.step_factor, min_step, max_step);
+        }
+        t += step;
+    }
+    if !hit {
+        write_miss(ix);
+        return;
+    }
+    let p = origin + dir * t_hit;
+    let h = d.voxel_size_m;
+    let sx0 = sample_tsdf(d, p - vec3<f32>(h, 0.0, 0.0));
+    let sx1 = sample_tsdf(d, p + vec3<f32>(h, 0.0, 0.0));
+    let sy0 = sample_tsdf(d, p - vec3<f32>(0.0, h, 0.0));
+    let sy1 = sample_tsdf(d, p + vec3<f32>(0.0, h, 0.0));
+    let sz0 = sample_tsdf(d, p - vec3<f32>(0.0, 0.0, h));
+    let sz1 = sample_tsdf(d, p + vec3<f32>(0.0, 0.0, h));
+    if !(sx0.valid && sx1.valid && sy0.valid && sy1.valid && sz0.valid && sz1.valid) {
+        write_miss(ix);
+        return;
+    }
+    let grad = vec3<f32>(sx1.tsdf - sx0.tsdf, sy1.tsdf - sy0.tsdf, sz1.tsdf - sz0.tsdf);
+    let grad_len = length(grad);
+    if !(grad_len > 1e-6) {
+        write_miss(ix);
+        return;
+    }
+    let n = grad / grad_len;
+    vertex_in_world[ix] = vec4<f32>(p, 1.0);
+    normal_in_world[ix] = vec4<f32>(n, 0.0);
+    depth_m[ix] = t_hit * z_per_t;
+    let grey = 0.15 + 0.85 * max(0.0, -dot(n, dir));
+    shaded_rgba8[ix] = pack_rgb8(vec3<f32>(grey)) | OPAQUE;
+    // Nearest voxel centre's colour.
+    let g = (p - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m;
+    let c = min(vec3<u32>(max(g, vec3<f32>(0.0))), vec3<u32>(d.dim_x - 1u, d.dim_y - 1u, d.dim_z - 1u));
+    color_rgba8[ix] = color_volume[min(voxel_index(d, c.x, c.y, c.z), arrayLength(&color_volume) - 1u)] | OPAQUE;
+}

@@ -1,0 +1,151 @@
+// SPDX-License-Identifier: MIT
+//! `tsdf_integrate`: an analytic wall fuses to its exact signed distance, and the GPU matches the
+//! CPU reference voxel by voxel on a real Kinect frame fused at two poses.
+//!
+//! Tolerances: a voxel word is compared as (TSDF, weight, colour). The TSDF may differ by one
+//! LSB (1/32767 of μ: the kernel's division and the projection may round differently under
+//! FMA contraction), weights and colours must match, except that a voxel whose centre
+//! projects within an ulp of a pixel boundary may pick the neighbouring depth sample: at most
+//! 0.1 % of the touched voxels may differ beyond that.
+
+use glam::{DQuat, DVec3};
+use webfusion_core::cpu::{self, shared::{voxel_tsdf, voxel_weight}};
+use webfusion_core::kernels::GpuIntrinsics;
+use webfusion_core::kernels::tsdf_integrate::TsdfIntegrateParams;
+use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
+use webfusion_core::{PinholeIntrinsics, Se3};
+use webfusion_tests::{cast, finish, gpu, run_kernel_in_place};
+
+use crate::preprocess::chain::real_cpu_chain;
+use crate::synthetic::K_SMALL;
+
+/// One TSDF LSB.
+const TSDF_LSB: f32 = 1.0 / 32767.0;
+/// Largest fraction of touched voxels allowed to differ beyond one LSB (pixel-boundary flips).
+const MAX_FLIP_FRACTION: f64 = 1e-3;
+
+fn params(desc: VolumeDesc, k: PinholeIntrinsics, world_from_camera: &Se3, color: bool) -> TsdfIntegrateParams {
+    TsdfIntegrateParams {
+        volume: desc,
+        intrinsics: GpuIntrinsics::from(k),
+        camera_from_world: world_from_camera.inverse().to_mat4().to_cols_array_2d(),
+        color_enabled: u32::from(color),
+        ..Default::default()
+    }
+}
+
+/// Integrates on the GPU and on the CPU; returns (GPU, CPU) voxel and colour words.
+fn integrate(p: &TsdfIntegrateParams, depth_m: &[f32], color: &[[f32; 4]], voxels: &[u32], colors: &[u32]) -> ((Vec<u32>, Vec<u32>), (Vec<u32>, Vec<u32>)) {
+    let gpu = gpu();
+    let out = run_kernel_in_place(
+        &gpu,
+        &gpu.kernels.tsdf_integrate,
+        p,
+        &[bytemuck::cast_slice(depth_m), bytemuck::cast_slice(color), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)],
+        [p.volume.dim_x, p.volume.dim_y, 1],
+    );
+    finish(&gpu);
+    let (mut cv, mut cc) = (voxels.to_vec(), colors.to_vec());
+    cpu::tsdf_integrate(p, depth_m, color, &mut cv, &mut cc);
+    ((cast(&out[2]), cast(&out[3])), (cv, cc))
+}
+
+/// Compares voxel and colour words under the tolerances above; returns the number of voxels
+/// differing beyond one LSB.
+fn compare_volumes(gpu: (&[u32], &[u32]), cpu: (&[u32], &[u32])) -> Result<usize, String> {
+    let (gv, gc) = gpu;
+    let (cv, cc) = cpu;
+    let touched = cv.iter().filter(|&&w| voxel_weight(w) > 0).count().max(1);
+    let mut flips = 0;
+    for i in 0..cv.len() {
+        let same_weight = voxel_weight(gv[i]) == voxel_weight(cv[i]);
+        let tsdf_err = (voxel_tsdf(gv[i]) - voxel_tsdf(cv[i])).abs();
+        let colour_err = (0..3).map(|c| ((gc[i] >> (8 * c)) & 0xff).abs_diff((cc[i] >> (8 * c)) & 0xff)).max().unwrap_or(0);
+        if !(same_weight && tsdf_err <= 1.5 * TSDF_LSB && colour_err <= 1) {
+            flips += 1;
+        }
+    }
+    if flips as f64 > MAX_FLIP_FRACTION * touched as f64 {
+        return Err(format!("{flips} of {touched} touched voxels differ (allowed {:.0})", MAX_FLIP_FRACTION * touched as f64));
+    }
+    Ok(flips)
+}
+
+#[test]
+fn a_wall_fuses_to_its_signed_distance() {
+    // A wall 1.0 m in front of the camera filling the image; 32³ voxels of 5 cm, μ = 20 cm.
+    let k = K_SMALL;
+    let config = TsdfConfig { max_weight: 2, ..TsdfConfig::cube(32, 0.05) };
+    let desc = config.desc(config.origin_for_first_camera(&Se3::IDENTITY));
+    let depth = vec![1.0f32; k.pixel_count()];
+    let color = vec![[0.2f32, 0.4, 0.6, 1.0]; k.pixel_count()];
+    let mut voxels = vec![0u32; desc.voxel_count()];
+    let mut colors = vec![0u32; desc.voxel_count()];
+    let p = params(desc, k, &Se3::IDENTITY, true);
+    for frame in 1..=3u32 {
+        let ((gv, gc), (cv, cc)) = integrate(&p, &depth, &color, &voxels, &colors);
+        assert_eq!(compare_volumes((&gv, &gc), (&cv, &cc)), Ok(0), "frame {frame}: GPU and CPU agree exactly on a wall");
+        // The central column (x, y = 16) sees the wall head-on.
+        for z in 0..desc.dim_z {
+            let ix = (16 + 32 * (16 + 32 * z)) as usize;
+            let z_m = (z as f32 + 0.5) * 0.05;
+            let sdf = 1.0 - z_m;
+            let word = gv[ix];
+            let x_m = desc.origin_x_m + 16.5 * 0.05;
+            let u = (k.fx_px * x_m / z_m + k.cx_px + 0.5).floor();
+            if u >= k.width_px as f32 {
+                assert_eq!(voxel_weight(word), 0, "z = {z_m} m projects outside the image: untouched");
+                continue;
+            }
+            if sdf < -desc.truncation_m {
+                assert_eq!(voxel_weight(word), 0, "z = {z_m} m lies more than μ behind the wall: untouched");
+                continue;
+            }
+            assert_eq!(voxel_weight(word), frame.min(2), "z = {z_m} m: weight after {frame} frames (cap 2)");
+            let expected = (sdf / desc.truncation_m).min(1.0);
+            assert!((voxel_tsdf(word) - expected).abs() <= 2.0 * TSDF_LSB, "z = {z_m} m: TSDF {} vs {expected}", voxel_tsdf(word));
+            if expected < 1.0 {
+                assert_eq!(gc[ix] & 0xff_ffff, 51 | (102 << 8) | (153 << 16), "z = {z_m} m: colour in the band");
+            }
+        }
+        voxels = gv;
+        colors = gc;
+    }
+    // Outside the frustum (behind the camera's field of view at the volume's corner) nothing is written.
+    assert_eq!(voxel_weight(voxels[0]), 0, "corner voxel outside the frustum stays unobserved");
+}
+
+#[test]
+fn real_frame_at_two_poses_matches_cpu() {
+    let chain = real_cpu_chain();
+    let k = chain.levels[0].intrinsics;
+    let config = TsdfConfig::cube(64, 3.0 / 64.0);
+    let desc = config.desc(config.origin_for_first_camera(&Se3::IDENTITY));
+    let (mut voxels, mut colors) = (vec![0u32; desc.voxel_count()], vec![0u32; desc.voxel_count()]);
+    let poses = [Se3::IDENTITY, Se3::new(DQuat::from_axis_angle(DVec3::new(0.2, 1.0, 0.1).normalize(), 0.05), DVec3::new(0.03, -0.02, 0.05))];
+    for (i, pose) in poses.iter().enumerate() {
+        let p = params(desc, k, pose, true);
+        let ((gv, gc), (cv, cc)) = integrate(&p, &chain.depth_unfiltered_m, &chain.color, &voxels, &colors);
+        let flips = compare_volumes((&gv, &gc), (&cv, &cc)).unwrap_or_else(|e| panic!("pose {i}: {e}"));
+        let touched = cv.iter().filter(|&&w| voxel_weight(w) > 0).count();
+        eprintln!("pose {i}: {touched} voxels touched, {flips} differ beyond 1 LSB");
+        assert!(touched > 10_000, "the frame touches a good part of the volume ({touched})");
+        // Negative controls: one TSDF moved by 2 LSB, one weight changed, one colour changed.
+        let some = cv.iter().position(|&w| voxel_weight(w) > 0 && voxel_tsdf(w).abs() < 0.5).expect("a voxel near the surface");
+        let mut bad = cv.clone();
+        bad[some] = cpu::shared::pack_voxel(voxel_tsdf(cv[some]) + 3.0 * TSDF_LSB, voxel_weight(cv[some]));
+        assert!(compare_volumes((&bad, &cc), (&cv, &cc)) == Ok(1), "a TSDF 3 LSB off is counted");
+        bad[some] = cv[some] + (1 << 16);
+        assert!(compare_volumes((&bad, &cc), (&cv, &cc)) == Ok(1), "a weight off by one is counted");
+        let mut bad_c = cc.clone();
+        bad_c[some] ^= 0x0400;
+        assert!(compare_volumes((&cv, &bad_c), (&cv, &cc)) == Ok(1), "a colour 4 levels off is counted");
+        let mut many = cv.clone();
+        for w in many.iter_mut().filter(|w| voxel_weight(**w) > 0).take(touched / 100) {
+            *w += 1 << 16;
+        }
+        assert!(compare_volumes((&many, &cc), (&cv, &cc)).is_err(), "1 % of voxels wrong fails the comparison");
+        voxels = gv;
+        colors = gc;
+    }
+}
