@@ -171,6 +171,56 @@ fn bind_in_order(gpu: &Gpu, pipeline: &KernelPipeline, buffers: &[&wgpu::Buffer]
     pipeline.bind_group(&gpu.device, &entries)
 }
 
+/// One storage binding of [`run_kernel_slots`], in WGSL binding order after the params.
+#[derive(Clone, Copy, Debug)]
+pub enum Slot<'a> {
+    /// A read-only input with these bytes.
+    In(&'a [u8]),
+    /// An output of this many bytes, pre-filled with [`SENTINEL_F32`].
+    Out(usize),
+    /// A buffer read and written in place, starting with these bytes (returned with the
+    /// outputs).
+    InOut(&'a [u8]),
+}
+
+/// Runs `pipeline` once with `params` at binding 0 and `slots` (inputs and outputs in any order,
+/// as the kernel declares them); returns the outputs' bytes in order.
+pub fn run_kernel_slots<P: bytemuck::Pod>(gpu: &Gpu, pipeline: &KernelPipeline, params: &P, slots: &[Slot], invocations: [u32; 3]) -> Vec<Vec<u8>> {
+    let name = pipeline.kernel.name;
+    let params_buffer = gpu.uniform_buffer(&format!("test.{name}.params"), params);
+    let buffers: Vec<(wgpu::Buffer, Option<usize>)> = slots
+        .iter()
+        .enumerate()
+        .map(|(i, slot)| match slot {
+            Slot::In(bytes) => {
+                let b = gpu.storage_buffer::<u8>(&format!("test.{name}.slot{i}"), bytes.len());
+                gpu.write_buffer(&b, bytes);
+                (b, None)
+            }
+            Slot::Out(size) => {
+                let b = gpu.storage_buffer::<u8>(&format!("test.{name}.slot{i}"), *size);
+                gpu.fill_buffer(&b, SENTINEL_F32);
+                (b, Some(*size))
+            }
+            Slot::InOut(bytes) => {
+                let b = gpu.storage_buffer::<u8>(&format!("test.{name}.slot{i}"), bytes.len());
+                gpu.write_buffer(&b, bytes);
+                (b, Some(bytes.len()))
+            }
+        })
+        .collect();
+    let mut all = vec![&params_buffer];
+    all.extend(buffers.iter().map(|(b, _)| b));
+    let bind_group = bind_in_order(gpu, pipeline, &all);
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.run_kernel_slots") });
+    pipeline.dispatch(&mut encoder, &bind_group, invocations);
+    pollster::block_on(gpu.submit_and_wait(encoder)).expect("GPU work finishes");
+    buffers
+        .iter()
+        .filter_map(|(b, size)| size.map(|size| pollster::block_on(gpu.read_buffer::<u8>(b, size.next_multiple_of(4))).expect("readback").into_iter().take(size).collect()))
+        .collect()
+}
+
 /// Reinterprets bytes read back from the GPU.
 pub fn cast<T: bytemuck::Pod>(bytes: &[u8]) -> Vec<T> {
     bytemuck::pod_collect_to_vec(bytes)

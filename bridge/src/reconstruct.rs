@@ -5,9 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use webfusion_core::fusion::{FusionConfig, KinectFusion, TrackingState};
+use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, TrackingState};
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
-use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, VolumePlacement};
+use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, TsdfStore as _, VolumePlacement};
 use webfusion_core::GpuOptions;
 
 use crate::calib::CalibrationArgs;
@@ -55,6 +55,10 @@ pub(crate) struct ReconstructArgs {
     /// Weight of the photometric term (0: depth-only ICP).
     #[arg(long, default_value_t = webfusion_core::fusion::DEFAULT_RGB_WEIGHT)]
     rgb_weight: f32,
+    /// ICP convergence: a level stops once an update moves no point within 3 m by more than
+    /// this at full resolution, metres (2^l times this at level l).
+    #[arg(long, default_value_t = webfusion_core::fusion::DEFAULT_CONVERGED_UPDATE_M)]
+    icp_converged: f32,
     /// Initialise each frame with a constant-velocity motion model.
     #[arg(long)]
     constant_velocity: bool,
@@ -80,6 +84,7 @@ impl ReconstructArgs {
         config.icp.huber_delta_m = self.huber;
         config.icp.rgb_weight = self.rgb_weight;
         config.icp.noise_weighting = !self.no_noise_weighting;
+        config.icp.converged_update_m = self.icp_converged;
         config.validate()?;
         Ok(config)
     }
@@ -96,27 +101,64 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let mut trajectory = Vec::with_capacity(range.len());
     let mut lost = Vec::new();
     let n_frames = range.len();
-    for (done, index) in range.enumerate() {
-        let frame = source.read_frame(index).with_context(|| format!("reading frame {index} of {}", source.name()))?;
-        let report = pollster::block_on(fusion.process_frame(&gpu, &frame)).with_context(|| format!("processing frame {index}"))?;
-        let t = report.times_ms;
-        times.record("preprocess", t.preprocess);
-        if report.state != TrackingState::Initialised {
-            times.record("track", t.track);
+    let mut timestamps = std::collections::HashMap::new();
+    let mut iterations = [0u64; 4];
+    let mut tracked_frames = 0u64;
+    let mut host = webfusion_core::GpuCounts::default();
+    let mut last_done: Option<std::time::Instant> = None;
+    let started = std::time::Instant::now();
+    // Frames stream through the GPU: the next frame is read and submitted while the GPU still
+    // works on the previous one, and each report arrives a frame or so late.
+    let mut on_report = |report: FrameReport, times: &mut StageTimes, trajectory: &mut Vec<TimedPose>, timestamps: &mut std::collections::HashMap<u64, i64>| {
+        let now = std::time::Instant::now();
+        if let Some(prev) = last_done.replace(now) {
+            times.record("frame", (now - prev).as_secs_f64() * 1e3);
         }
-        if !report.state.is_lost() {
-            times.record("integrate", t.integrate);
-            times.record("raycast", t.raycast);
+        if let Some(g) = report.gpu_ms {
+            times.record("gpu preprocess", g.preprocess);
+            if report.state != TrackingState::Initialised {
+                times.record("gpu track", g.track);
+            }
+            times.record("gpu integrate", g.integrate);
+            times.record("gpu raycast", g.raycast);
+            times.record("gpu frame", g.total);
         }
-        times.record("frame", t.total);
+        times.record("encode + submit", report.encode_ms);
+        for s in &report.icp {
+            iterations[s.level] += u64::from(s.iterations);
+            if s.level == 0 && s.condition < 1e29 {
+                times.record("finest-level condition number", s.condition);
+            }
+        }
+        if !report.icp.is_empty() {
+            tracked_frames += 1;
+        }
+        host.submits += report.host.submits;
+        host.host_waits += report.host.host_waits;
+        host.readbacks += report.host.readbacks;
         if let TrackingState::Lost(reason) = report.state {
-            eprintln!("\nframe {index}: tracking lost ({reason:?}); keeping the last good pose");
-            lost.push(index);
+            eprintln!("\nframe {}: tracking lost ({reason:?}); keeping the last good pose", report.index);
+            lost.push(report.index);
         }
-        trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: report.world_from_camera });
+        let timestamp_ns = timestamps.remove(&report.index).unwrap_or_default();
+        trajectory.push(TimedPose { timestamp_ns, world_from_camera: report.world_from_camera });
         let inliers = report.icp.last().map_or(0, |s| s.inliers);
-        eprint!("\rframe {}/{} [{}] {:.0} ms, ICP inliers {inliers}   ", done + 1, n_frames, report.state.name(), t.total);
+        eprint!("\rframe {}/{} [{}], ICP inliers {inliers}   ", trajectory.len(), n_frames, report.state.name());
+    };
+    for index in range {
+        let sw = crate::timing::Stopwatch::start();
+        let frame = source.read_frame(index).with_context(|| format!("reading frame {index} of {}", source.name()))?;
+        times.record("read", sw.ms());
+        timestamps.insert(frame.index, frame.depth_timestamp_ns);
+        pollster::block_on(fusion.submit_frame(&gpu, &frame)).with_context(|| format!("processing frame {index}"))?;
+        for report in fusion.poll_reports(&gpu)? {
+            on_report(report, &mut times, &mut trajectory, &mut timestamps);
+        }
     }
+    for report in pollster::block_on(fusion.flush(&gpu))? {
+        on_report(report, &mut times, &mut trajectory, &mut timestamps);
+    }
+    let wall_s = started.elapsed().as_secs_f64();
     eprintln!();
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
@@ -126,8 +168,24 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     if !args.no_mesh {
         write_mesh(&gpu, &fusion, &args.out.join("mesh.ply"), &mut times)?;
     }
-    println!("{n_frames} frames of {} on {}; {} lost", source.name(), gpu.adapter_summary(), lost.len());
+    println!("{n_frames} frames of {} on {}; {} lost; {:.2} frames/s over {:.1} s", source.name(), gpu.adapter_summary(), lost.len(), n_frames as f64 / wall_s, wall_s);
+    if fusion.timer_available() {
+        println!("stage times: \"gpu …\" from GPU timestamps; \"frame\" is the wall-clock interval between consecutive frames (reading and decoding overlapped)");
+    } else {
+        println!("the adapter has no timestamp queries: only wall-clock times");
+    }
     times.print();
+    let per_frame = |n: u64| if n_frames == 0 { 0.0 } else { n as f64 / n_frames as f64 };
+    let mean_iterations: Vec<f64> = iterations.iter().map(|&n| if tracked_frames == 0 { 0.0 } else { n as f64 / tracked_frames as f64 }).collect();
+    println!(
+        "host per frame: {:.2} submissions, {:.2} waits, {:.2} readbacks; ICP iterations per tracked frame (level 0, 1, 2): {:.2}, {:.2}, {:.2}",
+        per_frame(host.submits),
+        per_frame(host.host_waits),
+        per_frame(host.readbacks),
+        mean_iterations[0],
+        mean_iterations[1],
+        mean_iterations[2]
+    );
     // Sources with ground truth (TUM directories, recordings that carry it) are scored at once.
     let ate = source.ground_truth().and_then(|gt| match webfusion_core::eval::ate(gt, &trajectory, &Default::default()) {
         Ok(report) => {
@@ -145,6 +203,11 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         "frames": n_frames,
         "lost_frames": lost,
         "adapter": gpu.adapter_summary(),
+        "gpu_timestamps": fusion.timer_available(),
+        "wall_s": wall_s,
+        "frames_per_s": n_frames as f64 / wall_s,
+        "host_per_frame": { "submits": per_frame(host.submits), "waits": per_frame(host.host_waits), "readbacks": per_frame(host.readbacks) },
+        "icp_iterations_per_frame": mean_iterations,
         "volume": { "dims_voxels": fusion.config().tsdf.dims_voxels, "voxel_size_m": fusion.config().tsdf.voxel_size_m, "truncation_m": fusion.config().tsdf.truncation_m, "memory_bytes": fusion.volume().memory_bytes() },
         "stages_ms": times.to_json(),
     });

@@ -41,6 +41,13 @@ pub enum Error {
     /// Waiting for the GPU failed or timed out.
     #[error("waiting for the GPU failed: {0}")]
     Poll(String),
+    /// The GPU device was lost (driver reset, GPU process crash, `destroy`); everything on it
+    /// must be rebuilt.
+    #[error("the GPU device was lost ({reason}); the pipeline must be rebuilt on a new device")]
+    DeviceLost {
+        /// What the driver or browser said.
+        reason: String,
+    },
     /// An image does not have the size the pipeline was built for.
     #[error("{what} is {got_width}x{got_height} px but the pipeline expects {want_width}x{want_height} px")]
     FrameSize {

@@ -5,6 +5,7 @@
 //! browser it is WebGPU. The constructor is async so the same code serves both: native callers
 //! drive it with `pollster::block_on`, the web app with `wasm_bindgen_futures`.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use crate::kernels::Kernels;
@@ -40,7 +41,75 @@ pub struct Gpu {
     pub limits: wgpu::Limits,
     /// Every kernel, compiled for this device.
     pub kernels: Kernels,
+    /// Whether passes can carry GPU timestamps (`Features::TIMESTAMP_QUERY`).
+    pub has_timestamps: bool,
+    /// Submissions, host waits and readbacks so far.
+    pub counters: GpuCounters,
     errors: Arc<Mutex<Vec<String>>>,
+    lost: Arc<Mutex<Option<String>>>,
+    /// Mappable staging buffers kept for reuse by [`Gpu::read_buffers`].
+    staging: Mutex<Vec<wgpu::Buffer>>,
+}
+
+/// How often the host touched the GPU: every submission, every wait for the GPU (a blocking
+/// poll natively, an awaited callback in the browser) and every readback. A frame of the
+/// pipeline is meant to be one submission and one late readback with no wait.
+#[derive(Debug, Default)]
+pub struct GpuCounters {
+    submits: AtomicU64,
+    host_waits: AtomicU64,
+    readbacks: AtomicU64,
+    readback_bytes: AtomicU64,
+}
+
+/// A snapshot of [`GpuCounters`]; subtract two to count what happened between them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GpuCounts {
+    /// Command buffer submissions.
+    pub submits: u64,
+    /// Times the host waited for the GPU.
+    pub host_waits: u64,
+    /// Buffers copied back to the host.
+    pub readbacks: u64,
+    /// Bytes copied back.
+    pub readback_bytes: u64,
+}
+
+impl std::ops::Sub for GpuCounts {
+    type Output = Self;
+    fn sub(self, rhs: Self) -> Self {
+        Self {
+            submits: self.submits - rhs.submits,
+            host_waits: self.host_waits - rhs.host_waits,
+            readbacks: self.readbacks - rhs.readbacks,
+            readback_bytes: self.readback_bytes - rhs.readback_bytes,
+        }
+    }
+}
+
+impl GpuCounters {
+    /// The counts so far.
+    pub fn snapshot(&self) -> GpuCounts {
+        GpuCounts {
+            submits: self.submits.load(Ordering::Relaxed),
+            host_waits: self.host_waits.load(Ordering::Relaxed),
+            readbacks: self.readbacks.load(Ordering::Relaxed),
+            readback_bytes: self.readback_bytes.load(Ordering::Relaxed),
+        }
+    }
+
+    pub(crate) fn count_submit(&self) {
+        self.submits.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub(crate) fn count_wait(&self) {
+        self.host_waits.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub(crate) fn count_readback(&self, bytes: u64) {
+        self.readbacks.fetch_add(1, Ordering::Relaxed);
+        self.readback_bytes.fetch_add(bytes, Ordering::Relaxed);
+    }
 }
 
 impl std::fmt::Debug for Gpu {
@@ -66,10 +135,11 @@ impl Gpu {
     pub async fn from_adapter(adapter: &wgpu::Adapter) -> Result<Self> {
         let adapter_info = adapter.get_info();
         let required_limits = required_limits(&adapter_info.name, &adapter.limits())?;
+        let required_features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("core.device"),
-                required_features: wgpu::Features::empty(),
+                required_features,
                 required_limits: required_limits.clone(),
                 memory_hints: wgpu::MemoryHints::Performance,
                 ..Default::default()
@@ -84,8 +154,43 @@ impl Gpu {
                 v.push(message);
             }
         }));
+        let lost = Arc::new(Mutex::new(None));
+        let lost_sink = lost.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            let text = format!("{reason:?}: {message}");
+            log_error(&format!("device lost: {text}"));
+            if let Ok(mut l) = lost_sink.lock() {
+                *l = Some(text);
+            }
+        });
         let kernels = Kernels::new(&device);
-        Ok(Self { device, queue, adapter_info, limits: required_limits, kernels, errors })
+        Ok(Self {
+            device,
+            queue,
+            adapter_info,
+            limits: required_limits,
+            kernels,
+            has_timestamps: required_features.contains(wgpu::Features::TIMESTAMP_QUERY),
+            counters: GpuCounters::default(),
+            errors,
+            lost,
+            staging: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// [`Error::DeviceLost`] once the device is gone (a driver reset, the browser's GPU
+    /// process crashing, `destroy`): everything on it must be rebuilt on a new [`Gpu`].
+    pub fn check_lost(&self) -> Result<()> {
+        match self.lost.lock().ok().and_then(|l| l.clone()) {
+            Some(reason) => Err(Error::DeviceLost { reason }),
+            None => Ok(()),
+        }
+    }
+
+    /// Submits command buffers (counted in [`Gpu::counters`]).
+    pub fn submit(&self, buffers: impl IntoIterator<Item = wgpu::CommandBuffer>) -> wgpu::SubmissionIndex {
+        self.counters.count_submit();
+        self.queue.submit(buffers)
     }
 
     /// Validation and out-of-memory errors wgpu reported since the last call. Tests fail on
@@ -142,13 +247,14 @@ impl Gpu {
 
     /// Submits the encoder and waits until the GPU has finished it.
     pub async fn submit_and_wait(&self, encoder: wgpu::CommandEncoder) -> Result<()> {
-        let index = self.queue.submit(Some(encoder.finish()));
+        let index = self.submit(Some(encoder.finish()));
         self.wait(Some(index)).await
     }
 
     /// Waits for the queue (natively blocking with a timeout; in the browser by yielding to
     /// the event loop).
     pub async fn wait(&self, index: Option<wgpu::SubmissionIndex>) -> Result<()> {
+        self.counters.count_wait();
         #[cfg(not(target_arch = "wasm32"))]
         {
             self.device
@@ -162,7 +268,7 @@ impl Gpu {
             self.queue.on_submitted_work_done(move || sender.send(()));
             receiver.await;
         }
-        Ok(())
+        self.check_lost()
     }
 
     /// Copies the first `len` elements of `buffer` back to the CPU.
@@ -176,19 +282,15 @@ impl Gpu {
         let sizes: Vec<u64> = parts.iter().map(|&(_, len)| ((len * std::mem::size_of::<T>()) as u64).next_multiple_of(4)).collect();
         let total: u64 = sizes.iter().sum();
         let label = "core.readback".to_owned();
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(&label),
-            size: total.max(4),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let staging = self.take_staging(total.max(4));
+        self.counters.count_readback(total);
         let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(&label) });
         let mut offset = 0;
         for (&(buffer, _), &size) in parts.iter().zip(&sizes) {
             encoder.copy_buffer_to_buffer(buffer, 0, &staging, offset, size);
             offset += size;
         }
-        let index = self.queue.submit(Some(encoder.finish()));
+        let index = self.submit(Some(encoder.finish()));
         let (sender, receiver) = oneshot();
         staging.map_async(wgpu::MapMode::Read, .., move |r| sender.send(r));
         self.wait(Some(index)).await?;
@@ -202,7 +304,32 @@ impl Gpu {
         }
         drop(view);
         staging.unmap();
+        self.return_staging(staging);
         Ok(out)
+    }
+
+    /// A mappable staging buffer of at least `size` bytes, reused when one is free.
+    fn take_staging(&self, size: u64) -> wgpu::Buffer {
+        if let Ok(mut pool) = self.staging.lock()
+            && let Some(i) = pool.iter().position(|b| b.size() >= size && b.size() <= size.saturating_mul(4).max(4096))
+        {
+            return pool.swap_remove(i);
+        }
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("core.readback.staging"),
+            size: size.next_multiple_of(256),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Keeps a staging buffer for reuse (a few, so a burst of readbacks cannot pile up memory).
+    fn return_staging(&self, buffer: wgpu::Buffer) {
+        if let Ok(mut pool) = self.staging.lock()
+            && pool.len() < 8
+        {
+            pool.push(buffer);
+        }
     }
 }
 
@@ -275,7 +402,7 @@ fn required_limits(adapter: &str, available: &wgpu::Limits) -> Result<wgpu::Limi
 
 /// A single-use channel whose receiver is a future; works without threads (browser) and with
 /// them (native map callbacks).
-fn oneshot<T: Send + 'static>() -> (OneshotSender<T>, OneshotReceiver<T>) {
+pub(crate) fn oneshot<T: Send + 'static>() -> (OneshotSender<T>, OneshotReceiver<T>) {
     let shared = Arc::new(Mutex::new(OneshotState { value: None, waker: None }));
     (OneshotSender(shared.clone()), OneshotReceiver(shared))
 }
@@ -285,11 +412,24 @@ struct OneshotState<T> {
     waker: Option<std::task::Waker>,
 }
 
-struct OneshotSender<T>(Arc<Mutex<OneshotState<T>>>);
-struct OneshotReceiver<T>(Arc<Mutex<OneshotState<T>>>);
+pub(crate) struct OneshotSender<T>(Arc<Mutex<OneshotState<T>>>);
+pub(crate) struct OneshotReceiver<T>(Arc<Mutex<OneshotState<T>>>);
+
+impl<T> OneshotReceiver<T> {
+    /// The value, if it has been sent (without waiting).
+    pub(crate) fn try_take(&self) -> Option<T> {
+        self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner).value.take()
+    }
+}
+
+impl<T> std::fmt::Debug for OneshotReceiver<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("OneshotReceiver")
+    }
+}
 
 impl<T> OneshotSender<T> {
-    fn send(self, value: T) {
+    pub(crate) fn send(self, value: T) {
         let waker = match self.0.lock() {
             Ok(mut s) => {
                 s.value = Some(value);

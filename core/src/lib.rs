@@ -10,6 +10,7 @@
 pub mod camera;
 pub mod codec;
 pub mod cpu;
+pub mod engine;
 mod error;
 pub mod eval;
 pub mod frame;
@@ -28,5 +29,5 @@ pub mod tsdf;
 pub use camera::{PinholeIntrinsics, RgbdCalibration};
 pub use error::{Error, Result};
 pub use frame::{ColorImage, DepthImage, RgbdFrame};
-pub use gpu::{Gpu, GpuOptions};
+pub use gpu::{Gpu, GpuCounts, GpuOptions};
 pub use pose::Se3;

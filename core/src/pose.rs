@@ -48,6 +48,19 @@ impl Se3 {
         DMat4::from_rotation_translation(self.rotation, self.translation_m).as_mat4()
     }
 
+    /// The rigid transform of a column-major matrix from the GPU (`[[f32; 4]; 4]`, rotation in
+    /// the upper 3x3): its rotation as a unit quaternion, its translation as given.
+    pub fn from_cols_f32(m: &[[f32; 4]; 4]) -> Se3 {
+        let cols = m.map(|c| DVec3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2])));
+        let rotation = DQuat::from_mat3(&glam::DMat3::from_cols(cols[0], cols[1], cols[2]));
+        Se3::new(rotation, cols[3])
+    }
+
+    /// The matrix the GPU reads, column-major `[[f32; 4]; 4]`.
+    pub fn to_cols_f32(&self) -> [[f32; 4]; 4] {
+        self.to_mat4().to_cols_array_2d()
+    }
+
     /// Rotation angle of this transform, in radians.
     pub fn rotation_angle_rad(&self) -> f64 {
         let w = self.rotation.w.abs().min(1.0);
@@ -60,4 +73,13 @@ impl std::ops::Mul for Se3 {
     fn mul(self, rhs: Se3) -> Se3 {
         self.compose(&rhs)
     }
+}
+
+/// exp of a twist (ω, t) as the tracker applies it: rotation by the axis-angle ω (Rodrigues)
+/// followed by the translation t, `[R(ω) | t]`, on the left of the estimate (world frame).
+/// The f64 twin of WGSL `twist_exp_mat()`.
+pub fn twist_exp(omega: DVec3, t: DVec3) -> Se3 {
+    let angle = omega.length();
+    let rotation = if angle > 0.0 { DQuat::from_axis_angle(omega / angle, angle) } else { DQuat::IDENTITY };
+    Se3::new(rotation, t)
 }

@@ -10,7 +10,7 @@
 use crate::kernels::{
     GpuIntrinsics, KernelPipeline, Kernels, bilateral_filter::BilateralFilterParams, color_to_float::ColorToFloatParams,
     depth_pyramid_down::DepthPyramidDownParams, depth_to_metres::DepthToMetresParams, gradient_smooth::GradientSmoothParams,
-    normal_map::NormalMapParams, vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams,
+    intensity_pyramid_down::IntensityPyramidDownParams, normal_map::NormalMapParams, vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams,
 };
 use crate::{Error, Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Result};
 
@@ -199,6 +199,9 @@ pub struct PyramidLevel {
     pub grad_x: wgpu::Buffer,
     /// Vertex gradient along y (smoothed when smoothing is on).
     pub grad_y: wgpu::Buffer,
+    /// Intensity in [0, 1] (level 0 is [`DepthPreprocessor::intensity`]; coarser levels are
+    /// 2x2 block means).
+    pub intensity: wgpu::Buffer,
 }
 
 /// One recorded dispatch of the preprocessing chain.
@@ -244,7 +247,7 @@ impl DepthPreprocessor {
         let depth_raw = gpu.storage_buffer::<u16>("core.preprocess.depth_raw", n0);
         let rgb8 = gpu.storage_buffer::<u8>("core.preprocess.rgb8", 3 * n0);
         let color = gpu.storage_buffer::<[f32; 4]>("core.preprocess.color", n0);
-        let intensity = gpu.storage_buffer::<f32>("core.preprocess.intensity", n0);
+        let intensity = gpu.storage_buffer::<f32>("core.preprocess.intensity[0]", n0);
         let levels: Vec<PyramidLevel> = (0..config.pyramid_levels)
             .map(|l| {
                 let k = k0.pyramid_level(l);
@@ -257,6 +260,7 @@ impl DepthPreprocessor {
                     normal_in_camera: gpu.storage_buffer::<[f32; 4]>(&name("normal_in_camera"), n),
                     grad_x: gpu.storage_buffer::<[f32; 4]>(&name("grad_x"), n),
                     grad_y: gpu.storage_buffer::<[f32; 4]>(&name("grad_y"), n),
+                    intensity: if l == 0 { intensity.clone() } else { gpu.storage_buffer::<f32>(&name("intensity"), n) },
                 }
             })
             .collect();
@@ -265,7 +269,7 @@ impl DepthPreprocessor {
             (gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_x_tmp", n0), gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_y_tmp", n0))
         });
 
-        use crate::kernels::{bilateral_filter, color_to_float, depth_pyramid_down, depth_to_metres, gradient_smooth, normal_map, vertex_gradients, vertex_map};
+        use crate::kernels::{bilateral_filter, color_to_float, depth_pyramid_down, depth_to_metres, gradient_smooth, intensity_pyramid_down, normal_map, vertex_gradients, vertex_map};
         let mut stages = Vec::new();
         let mut push = |name: String, pipeline: fn(&Kernels) -> &KernelPipeline, params: wgpu::Buffer, bind_group: wgpu::BindGroup, invocations: [u32; 3]| {
             stages.push(Stage { name, pipeline, bind_group, invocations, _params: params });
@@ -315,6 +319,13 @@ impl DepthPreprocessor {
         let params = gpu.uniform_buffer("core.color_to_float.params", &ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() });
         let bg = color_to_float::Bindings { params: &params, rgb8: &rgb8, color: &color, intensity: &intensity }.bind_group(gpu);
         push("color_to_float".into(), |k| &k.color_to_float, params, bg, [w0, h0, 1]);
+        for l in 1..levels.len() {
+            let (fine, coarse) = (&levels[l - 1], &levels[l]);
+            let p = IntensityPyramidDownParams { src_width_px: fine.intrinsics.width_px, src_height_px: fine.intrinsics.height_px, dst_width_px: coarse.intrinsics.width_px, dst_height_px: coarse.intrinsics.height_px };
+            let params = gpu.uniform_buffer("core.intensity_pyramid_down.params", &p);
+            let bg = intensity_pyramid_down::Bindings { params: &params, src: &fine.intensity, dst: &coarse.intensity }.bind_group(gpu);
+            push(format!("intensity_pyramid_down[{l}]"), |k| &k.intensity_pyramid_down, params, bg, [p.dst_width_px, p.dst_height_px, 1]);
+        }
 
         Ok(Self { calibration, config, depth_raw, rgb8, depth_unfiltered_m, color, intensity, levels, stages })
     }
@@ -351,10 +362,18 @@ impl DepthPreprocessor {
         Ok(())
     }
 
-    /// Records the whole chain.
+    /// Records the whole chain, each kernel in a compute pass of its own.
     pub fn encode(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder) {
         for ix in 0..self.stages.len() {
             self.encode_stage(gpu, encoder, ix);
+        }
+    }
+
+    /// Records the whole chain into one open compute pass (the frame engine's preprocess
+    /// stage).
+    pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        for s in &self.stages {
+            (s.pipeline)(&gpu.kernels).dispatch_in(pass, &s.bind_group, s.invocations);
         }
     }
 

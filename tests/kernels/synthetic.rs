@@ -122,3 +122,32 @@ impl Room {
         out
     }
 }
+
+/// Raw depth (units of 1/`UNITS_PER_M` m) of a scene given by its ray-distance function,
+/// seen from `world_from_camera`; rays meeting nothing (or beyond the u16 range) read 0.
+pub(crate) fn render_scene_units(k: &PinholeIntrinsics, world_from_camera: &webfusion_core::Se3, ray_distance: impl Fn([f64; 3], [f64; 3]) -> Option<f64>) -> Vec<u16> {
+    let mut out = Vec::with_capacity(k.pixel_count());
+    let o = world_from_camera.translation_m;
+    for y in 0..k.height_px {
+        for x in 0..k.width_px {
+            let ray = glam::DVec3::new((f64::from(x) - f64::from(k.cx_px)) / f64::from(k.fx_px), (f64::from(y) - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
+            let dir_cam = ray.normalize();
+            let dir = world_from_camera.rotation * dir_cam;
+            let units = ray_distance(o.to_array(), dir.to_array()).map(|t| (t * dir_cam.z * f64::from(UNITS_PER_M)).round()).filter(|&u| u > 0.0 && u < 65535.0).map_or(0, |u| u as u16);
+            out.push(units);
+        }
+    }
+    out
+}
+
+/// Distance along `dir` from `o` to the nearest of the planes `n · p = d` (unit n) in front.
+pub(crate) fn nearest_plane(o: [f64; 3], dir: [f64; 3], planes: &[([f64; 3], f64)]) -> Option<f64> {
+    planes
+        .iter()
+        .filter_map(|(n, d)| {
+            let denom = n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2];
+            let t = (d - (n[0] * o[0] + n[1] * o[1] + n[2] * o[2])) / denom;
+            (denom.abs() > 1e-12 && t > 1e-9).then_some(t)
+        })
+        .min_by(f64::total_cmp)
+}

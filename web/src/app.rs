@@ -566,7 +566,7 @@ impl App {
         let t_views = Instant::now();
         self.draw_frame_views(&frame).await?;
         let views_ms = t_views.elapsed().as_secs_f64() * 1e3;
-        let t = report.times_ms;
+        let t = report.gpu_ms.unwrap_or_default();
         self.stage_samples_ms.push([decode_ms, t.preprocess, t.track, t.integrate, t.raycast, views_ms]);
         let now = Instant::now();
         self.frame_instants.push_back(now);
@@ -596,8 +596,8 @@ impl App {
         let n = (w * h) as usize;
         let normals: Vec<[f32; 4]> = self.gpu.read_buffer(&fusion.preprocessor().levels[0].normal_in_camera, n).await.map_err(|e| e.to_string())?;
         view::draw_rgba(&ui::element("view-normals")?, w, h, &view::rgba_from_normals(&normals)).map_err(js)?;
-        let shaded: Vec<u32> = self.gpu.read_buffer(&fusion.prediction(0).shaded_rgba8, n).await.map_err(|e| e.to_string())?;
-        view::draw_rgba(&ui::element("view-model")?, w, h, &view::rgba_from_packed(&shaded)).map_err(js)?;
+        let model: Vec<[f32; 4]> = self.gpu.read_buffer(&fusion.prediction().normal_in_world, n).await.map_err(|e| e.to_string())?;
+        view::draw_rgba(&ui::element("view-model")?, w, h, &view::rgba_from_normals(&model)).map_err(js)?;
         Ok(())
     }
 
@@ -605,18 +605,23 @@ impl App {
     async fn render_free_view(&mut self) -> Result<(), String> {
         self.view_dirty = false;
         let (Some(fusion), Some(orbit)) = (&self.fusion, self.orbit) else { return Ok(()) };
-        if fusion.frames_processed() == 0 {
+        if fusion.frames_submitted() == 0 {
             return Ok(());
         }
         let target = self.free_view.get_or_insert_with(|| RaycastTarget::new(&self.gpu, fusion.volume(), FREE_VIEW, "free_view"));
         let world_from_viewer = orbit.world_from_viewer();
         let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.free_view") });
-        target.encode(&self.gpu, &mut encoder, fusion.volume(), &world_from_viewer, (0.05, 20.0));
+        target.render(&self.gpu, &mut encoder, fusion.volume(), &world_from_viewer, (0.05, 20.0)).map_err(|e| e.to_string())?;
         self.gpu.submit_and_wait(encoder).await.map_err(|e| e.to_string())?;
-        let buffer = if self.view_colour { &target.color_rgba8 } else { &target.shaded_rgba8 };
-        let pixels: Vec<u32> = self.gpu.read_buffer(buffer, FREE_VIEW.pixel_count()).await.map_err(|e| e.to_string())?;
+        let rgba = if self.view_colour {
+            let pixels: Vec<u32> = self.gpu.read_buffer(&target.color_rgba8, FREE_VIEW.pixel_count()).await.map_err(|e| e.to_string())?;
+            view::rgba_from_packed(&pixels)
+        } else {
+            let normals: Vec<[f32; 4]> = self.gpu.read_buffer(&target.normal_in_world, FREE_VIEW.pixel_count()).await.map_err(|e| e.to_string())?;
+            view::rgba_from_normals(&normals)
+        };
         let canvas: web_sys::HtmlCanvasElement = ui::element("view-free")?;
-        let ctx = view::draw_rgba(&canvas, FREE_VIEW.width_px, FREE_VIEW.height_px, &view::rgba_from_packed(&pixels)).map_err(|e| js_text(&e))?;
+        let ctx = view::draw_rgba(&canvas, FREE_VIEW.width_px, FREE_VIEW.height_px, &rgba).map_err(|e| js_text(&e))?;
         if let Some(ate) = &self.ate {
             // Ground truth, moved into this reconstruction's frame by the ATE alignment.
             let est_from_gt = ate.alignment.gt_from_est.inverse();

@@ -16,6 +16,13 @@ pub fn is_valid_f32(x: f32) -> bool {
     (x.to_bits() & 0x7f80_0000) != 0x7f80_0000
 }
 
+/// Twin of `kinect_sigma_m()` in `shared/kinect.wgsl`: Kinect v1 axial depth noise at `z_m`
+/// (Nguyen, Izadi and Lovell 2012), metres.
+pub fn kinect_sigma_m(z_m: f32) -> f32 {
+    let d = z_m - 0.4;
+    0.0012 + 0.0019 * d * d
+}
+
 /// Twin of `depth_to_metres()` in `shared/depth.wgsl`.
 pub fn depth_to_metres(raw_units: u32, metres_per_unit: f32, min_depth_m: f32, max_depth_m: f32) -> f32 {
     if raw_units == 0 {
@@ -157,30 +164,42 @@ pub const NE_WORKGROUP_SIZE: u32 = 128;
 /// Floats per workgroup sum (8 vec4).
 pub const NE_SUM_FLOATS: usize = 32;
 
-/// Twin of `ne_add_row()`: adds the row `[a (3), b (3), r]` to `acc`.
-pub fn ne_add_row(acc: &mut [f32; NE_SUM_FLOATS], row: [f32; 7]) {
-    let [j0, j1, j2, j3, j4, j5, r] = row;
+/// Twin of `ne_add_jacobian()`: adds JᵀJ and Jᵀr of the row `J = [a, b]` with residual `r`.
+pub fn ne_add_jacobian(acc: &mut [f32; NE_SUM_FLOATS], a: [f32; 3], b: [f32; 3], r: f32) {
+    let [j0, j1, j2] = a;
+    let [j3, j4, j5] = b;
     let terms = [
         j0 * j0, j0 * j1, j0 * j2, j0 * j3, j0 * j4, j0 * j5, j1 * j1, j1 * j2, j1 * j3, j1 * j4, j1 * j5, j2 * j2, j2 * j3, j2 * j4, j2 * j5, j3 * j3, j3 * j4,
-        j3 * j5, j4 * j4, j4 * j5, j5 * j5, j0 * r, j1 * r, j2 * r, j3 * r, j4 * r, j5 * r, r * r, 1.0,
+        j3 * j5, j4 * j4, j4 * j5, j5 * j5, j0 * r, j1 * r, j2 * r, j3 * r, j4 * r, j5 * r,
     ];
     for (a, t) in acc.iter_mut().zip(terms) {
         *a += t;
     }
 }
 
+/// Twin of `ne_add_icp_stats()`.
+pub fn ne_add_icp_stats(acc: &mut [f32; NE_SUM_FLOATS], r: f32) {
+    acc[27] += r * r;
+    acc[28] += 1.0;
+}
+
+/// Twin of `ne_add_rgb_stats()`.
+pub fn ne_add_rgb_stats(acc: &mut [f32; NE_SUM_FLOATS], r: f32) {
+    acc[29] += r * r;
+    acc[30] += 1.0;
+}
+
 /// The kernels' grid-stride walk plus `ne_reduce_and_store()`: thread `lid` of workgroup `wid`
-/// visits pixels `wid * 128 + lid`, then every `thread_count`-th; `row(ix)` is the kernel's
-/// loop body. Fills one [`NE_SUM_FLOATS`] block per workgroup in the same tree order.
-pub fn reduce_normal_equations(thread_count: u32, pixel_count: u32, partial_sums: &mut [f32], row: impl Fn(usize) -> Option<[f32; 7]>) {
+/// visits pixels `wid * 128 + lid`, then every `thread_count`-th; `pixel(ix, acc)` is the
+/// kernel's loop body, adding its rows to the thread's accumulator. Fills one
+/// [`NE_SUM_FLOATS`] block per workgroup in the same tree order.
+pub fn reduce_normal_equations(thread_count: u32, pixel_count: u32, partial_sums: &mut [f32], pixel: impl Fn(usize, &mut [f32; NE_SUM_FLOATS])) {
     for wid in 0..thread_count.div_ceil(NE_WORKGROUP_SIZE) {
         let mut scratch = vec![[0.0f32; NE_SUM_FLOATS]; NE_WORKGROUP_SIZE as usize];
         for lid in 0..NE_WORKGROUP_SIZE {
             let mut ix = wid * NE_WORKGROUP_SIZE + lid;
             while ix < pixel_count {
-                if let Some(r) = row(ix as usize) {
-                    ne_add_row(&mut scratch[lid as usize], r);
-                }
+                pixel(ix as usize, &mut scratch[lid as usize]);
                 ix += thread_count;
             }
         }
@@ -195,4 +214,68 @@ pub fn reduce_normal_equations(thread_count: u32, pixel_count: u32, partial_sums
         }
         partial_sums[wid as usize * NE_SUM_FLOATS..][..NE_SUM_FLOATS].copy_from_slice(&scratch[0]);
     }
+}
+
+/// A column-major 4x4 matrix, as WGSL `mat4x4<f32>`.
+pub type Mat4 = [[f32; 4]; 4];
+
+/// The identity.
+pub const IDENTITY: Mat4 = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+
+/// `a * b`, as WGSL `mat4x4 * mat4x4`.
+pub fn mat4_mul(a: &Mat4, b: &Mat4) -> Mat4 {
+    std::array::from_fn(|c| mat4_mul_vec4(a, b[c]))
+}
+
+fn normalize3(v: [f32; 3]) -> [f32; 3] {
+    let len = dot3(v, v).sqrt();
+    v.map(|c| c / len)
+}
+
+/// Twin of `rigid_inverse()`: `[Rᵀ | -Rᵀ t]`.
+pub fn rigid_inverse(m: &Mat4) -> Mat4 {
+    // Rows of Rᵀ are the columns of R.
+    let rt = |i: usize| [m[0][i], m[1][i], m[2][i]];
+    let t = [m[3][0], m[3][1], m[3][2]];
+    // (Rᵀ t)_i = column i of R · t.
+    let rtt: [f32; 3] = std::array::from_fn(|i| m[i][0] * t[0] + m[i][1] * t[1] + m[i][2] * t[2]);
+    let (c0, c1, c2) = (rt(0), rt(1), rt(2));
+    [[c0[0], c0[1], c0[2], 0.0], [c1[0], c1[1], c1[2], 0.0], [c2[0], c2[1], c2[2], 0.0], [-rtt[0], -rtt[1], -rtt[2], 1.0]]
+}
+
+/// Twin of `twist_exp_mat()`: `[R(ω) | t]` with R(ω) the axis-angle rotation (Rodrigues).
+pub fn twist_exp_mat(omega: [f32; 3], t: [f32; 3]) -> Mat4 {
+    let angle = dot3(omega, omega).sqrt();
+    let mut r = [[1.0f32, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    if angle > 0.0 {
+        let k = omega.map(|c| c / angle);
+        let (c, s) = (angle.cos(), angle.sin());
+        let v = 1.0 - c;
+        r = [
+            [c + k[0] * k[0] * v, k[1] * k[0] * v + k[2] * s, k[2] * k[0] * v - k[1] * s],
+            [k[0] * k[1] * v - k[2] * s, c + k[1] * k[1] * v, k[2] * k[1] * v + k[0] * s],
+            [k[0] * k[2] * v + k[1] * s, k[1] * k[2] * v - k[0] * s, c + k[2] * k[2] * v],
+        ];
+    }
+    [[r[0][0], r[0][1], r[0][2], 0.0], [r[1][0], r[1][1], r[1][2], 0.0], [r[2][0], r[2][1], r[2][2], 0.0], [t[0], t[1], t[2], 1.0]]
+}
+
+/// Twin of `orthonormalised()`.
+pub fn orthonormalised(m: &Mat4) -> Mat4 {
+    let x = normalize3([m[0][0], m[0][1], m[0][2]]);
+    let m1 = [m[1][0], m[1][1], m[1][2]];
+    let d = dot3(x, m1);
+    let y = normalize3([m1[0] - d * x[0], m1[1] - d * x[1], m1[2] - d * x[2]]);
+    let z = cross3(x, y);
+    [[x[0], x[1], x[2], 0.0], [y[0], y[1], y[2], 0.0], [z[0], z[1], z[2], 0.0], [m[3][0], m[3][1], m[3][2], 1.0]]
+}
+
+/// Twin of `rotation_angle_rad()`.
+pub fn rotation_angle_rad(m: &Mat4) -> f32 {
+    (0.5 * (m[0][0] + m[1][1] + m[2][2] - 1.0)).clamp(-1.0, 1.0).acos()
+}
+
+/// Twin of `camera_pose()`.
+pub fn camera_pose(world_from_camera: &Mat4, enabled: u32) -> crate::kernels::gpu_data::CameraPose {
+    crate::kernels::gpu_data::CameraPose { world_from_camera: *world_from_camera, camera_from_world: rigid_inverse(world_from_camera), enabled, ..Default::default() }
 }

@@ -1,22 +1,31 @@
 // SPDX-License-Identifier: MIT
-//! Each invocation casts the ray of one pixel through the TSDF (000-digest §1.3.3): marches
-//! from the near plane (or the volume's entry) in steps of at most `step_factor * μ`, shrinking
-//! with the sampled distance, until the trilinear TSDF changes sign from + to -; the surface
-//! point is the linear interpolation of the crossing, its normal the normalised TSDF gradient
-//! (central differences, one voxel apart). Writes the world-frame vertex and normal, the depth
-//! (camera z) a virtual sensor at this pose would see, a headlight-shaded grey and the model
-//! colour (nearest voxel). Misses, back faces and unobserved space give NaN / 0.
+//! Each invocation casts the ray of one pixel through the TSDF (000-digest §1.3.3) from the pose
+//! in `pose` (the tracker's, a free view's, a virtual sensor's); nothing is written when that
+//! pose is inactive (a lost frame keeps the previous prediction). The march starts at the near
+//! plane (or the volume's entry) and reads only the nearest voxel while that voxel says the
+//! surface is far: unobserved space and the truncated band (TSDF within `FAR_TSDF` of +1, at
+//! least μ - ½√3 voxel from any surface) are crossed in steps of `step_factor * μ` with one read
+//! per step. Nearer the surface it samples the trilinear TSDF and steps by the sampled distance
+//! (at least half a voxel), until the TSDF changes sign from + to -; the surface point is the
+//! linear interpolation of the crossing (the sample before it re-read trilinearly when it was a
+//! nearest-voxel one), its normal the normalised TSDF gradient (central differences, one voxel
+//! apart). Writes the world-frame vertex and normal, the depth (camera z) a virtual sensor at
+//! this pose would see and the model colour (nearest voxel). Misses, back faces and unobserved
+//! space give NaN / 0. A prediction rendered at the pose a depth image was just fused at may
+//! start each ray at that pixel's measured depth minus μ + 3σ (Kinect noise) instead of the near
+//! plane: the fused surface lies there, and a model surface further in front is one the new
+//! measurement sees through.
 #import invalid
 #import camera
+#import camera_pose
 #import tsdf_sample
+#import kinect
 
 struct RaycastParams {
     // The volume.
     volume: VolumeDesc,
     // Intrinsics of the rendered images.
     intrinsics: Intrinsics,
-    // Camera to world, column-major.
-    world_from_camera: mat4x4<f32>,
     // Nearest depth searched, metres.
     min_depth_m: f32,
     // Farthest depth searched, metres.
@@ -25,24 +34,36 @@ struct RaycastParams {
     step_factor: f32,
     // Cap on march steps per ray.
     max_steps: u32,
+    // Non-zero: start each ray near the depth `depth_hint_m` measured at its pixel (a
+    // prediction at the pose that depth was just fused at), at hint - (hint_margin_m + 3σ(hint)).
+    use_depth_hint: u32,
+    // The truncation distance μ the hint's search window starts in front of it, metres.
+    hint_margin_m: f32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
-// Uniform `RaycastParams`.
+// A nearest voxel at least this close to +1 (truncation units) is treated as far from any surface.
+const FAR_TSDF: f32 = 0.999;
+
 @group(0) @binding(0) var<uniform> params: RaycastParams;
-// Voxel words.
-@group(0) @binding(1) var<storage, read> tsdf_volume: array<u32>;
+// The pose to render from.
+@group(0) @binding(1) var<storage, read> pose: CameraPose;
+// Voxel words (TSDF + weight).
+@group(0) @binding(2) var<storage, read> tsdf_volume: array<u32>;
 // Colour words (one placeholder word when colour is off).
-@group(0) @binding(2) var<storage, read> color_volume: array<u32>;
-// Surface points (x, y, z, 1), world frame.
-@group(0) @binding(3) var<storage, read_write> vertex_in_world: array<vec4<f32>>;
-// Unit normals (nx, ny, nz, 0), world frame.
-@group(0) @binding(4) var<storage, read_write> normal_in_world: array<vec4<f32>>;
-// Depth along the camera's z, metres.
-@group(0) @binding(5) var<storage, read_write> depth_m: array<f32>;
-// Headlight-shaded grey, RGBA8.
-@group(0) @binding(6) var<storage, read_write> shaded_rgba8: array<u32>;
-// Model colour, RGBA8.
+@group(0) @binding(3) var<storage, read> color_volume: array<u32>;
+// Out: surface points (x, y, z, 1), world frame.
+@group(0) @binding(4) var<storage, read_write> vertex_in_world: array<vec4<f32>>;
+// Out: unit normals (nx, ny, nz, 0), world frame.
+@group(0) @binding(5) var<storage, read_write> normal_in_world: array<vec4<f32>>;
+// Out: depth along the camera's z, metres.
+@group(0) @binding(6) var<storage, read_write> depth_m: array<f32>;
+// Out: model colour, RGBA8.
 @group(0) @binding(7) var<storage, read_write> color_rgba8: array<u32>;
+// Depth measured at each pixel from this pose, metres (NaN: none), when `use_depth_hint` is set;
+// one placeholder word otherwise.
+@group(0) @binding(8) var<storage, read> depth_hint_m: array<f32>;
 
 const OPAQUE: u32 = 0xff000000u;
 
@@ -50,14 +71,22 @@ fn write_miss(ix: u32) {
     vertex_in_world[ix] = invalid_vec4();
     normal_in_world[ix] = invalid_vec4();
     depth_m[ix] = invalid_f32();
-    shaded_rgba8[ix] = 0u;
     color_rgba8[ix] = 0u;
+}
+
+// The nearest voxel's word at a world point, or 0 (never observed) outside the volume.
+fn nearest_word(d: VolumeDesc, p_world: vec3<f32>) -> u32 {
+    let g = floor((p_world - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m);
+    if g.x < 0.0 || g.y < 0.0 || g.z < 0.0 || g.x >= f32(d.dim_x) || g.y >= f32(d.dim_y) || g.z >= f32(d.dim_z) {
+        return 0u;
+    }
+    return tsdf_volume[voxel_index(d, u32(g.x), u32(g.y), u32(g.z))];
 }
 
 @compute @workgroup_size(16, 16, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k = params.intrinsics;
-    if gid.x >= k.width_px || gid.y >= k.height_px {
+    if gid.x >= k.width_px || gid.y >= k.height_px || pose.enabled == 0u {
         return;
     }
     let ix = gid.y * k.width_px + gid.x;
@@ -67,8 +96,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let ray_cam = back_project(k, f32(gid.x), f32(gid.y), 1.0);
     let inv_len = 1.0 / length(ray_cam);
     let z_per_t = inv_len;
-    let origin = params.world_from_camera[3].xyz;
-    let dir = (params.world_from_camera * vec4<f32>(ray_cam * inv_len, 0.0)).xyz;
+    let world_from_camera = pose.world_from_camera;
+    let origin = world_from_camera[3].xyz;
+    let dir = (world_from_camera * vec4<f32>(ray_cam * inv_len, 0.0)).xyz;
     // Clip to the box of voxel centres (where trilinear samples exist) and the depth range.
     let lo = vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m) + vec3<f32>(0.5 * d.voxel_size_m);
     let hi = lo + vec3<f32>(f32(d.dim_x - 1u), f32(d.dim_y - 1u), f32(d.dim_z - 1u)) * d.voxel_size_m;
@@ -81,6 +111,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t_far = max(t0, t1);
     var t = max(max(max(t_near.x, t_near.y), t_near.z), params.min_depth_m / z_per_t);
     let t_end = min(min(min(t_far.x, t_far.y), t_far.z), params.max_depth_m / z_per_t);
+    if params.use_depth_hint != 0u {
+        let hint = depth_hint_m[ix];
+        if is_valid_f32(hint) {
+            t = max(t, (hint - params.hint_margin_m - 3.0 * kinect_sigma_m(hint)) / z_per_t);
+        }
+    }
     if !(t < t_end) {
         write_miss(ix);
         return;
@@ -89,13 +125,38 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let min_step = 0.5 * d.voxel_size_m;
     var prev_t = t;
     var prev = TsdfSample(0.0, false);
+    // Whether `prev` came from the nearest voxel rather than trilinear interpolation.
+    var prev_nearest = false;
     var hit = false;
     var t_hit = 0.0;
     for (var i = 0u; i < params.max_steps && t < t_end; i++) {
-        let s = sample_tsdf(d, origin + dir * t);
+        let p = origin + dir * t;
+        let word = nearest_word(d, p);
+        if voxel_weight(word) == 0u {
+            prev = TsdfSample(0.0, false);
+            prev_nearest = false;
+            prev_t = t;
+            t += max_step;
+            continue;
+        }
+        if voxel_tsdf(word) >= FAR_TSDF {
+            prev = TsdfSample(1.0, true);
+            prev_nearest = true;
+            prev_t = t;
+            t += max_step;
+            continue;
+        }
+        let s = sample_tsdf(d, p);
         if s.valid && prev.valid {
             if prev.tsdf > 0.0 && s.tsdf <= 0.0 {
-                t_hit = prev_t + (t - prev_t) * prev.tsdf / (prev.tsdf - s.tsdf);
+                var before = prev;
+                if prev_nearest {
+                    let exact = sample_tsdf(d, origin + dir * prev_t);
+                    if exact.valid && exact.tsdf > 0.0 {
+                        before = exact;
+                    }
+                }
+                t_hit = prev_t + (t - prev_t) * before.tsdf / (before.tsdf - s.tsdf);
                 hit = true;
                 break;
             }
@@ -104,6 +165,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
         prev = s;
+        prev_nearest = false;
         prev_t = t;
         var step = max_step;
         if s.valid {
@@ -137,8 +199,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     vertex_in_world[ix] = vec4<f32>(p, 1.0);
     normal_in_world[ix] = vec4<f32>(n, 0.0);
     depth_m[ix] = t_hit * z_per_t;
-    let grey = 0.15 + 0.85 * max(0.0, -dot(n, dir));
-    shaded_rgba8[ix] = pack_rgb8(vec3<f32>(grey)) | OPAQUE;
     // Nearest voxel centre's colour.
     let g = (p - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m;
     let c = min(vec3<u32>(max(g, vec3<f32>(0.0))), vec3<u32>(d.dim_x - 1u, d.dim_y - 1u, d.dim_z - 1u));

@@ -1,14 +1,17 @@
 // SPDX-License-Identifier: MIT
 //! Each invocation walks one voxel column (x, y) along z (as KinectFusion does: one thread per
-//! column keeps the workgroup count small) and updates each voxel (000-digest §1.3.2,
-//! Eq. 1.6-1.8): projects its centre into
-//! the depth image (nearest pixel), takes the signed distance along the optical axis
-//! sdf = depth - z (positive in front of the surface), skips voxels outside the frustum,
-//! without depth, or more than μ behind the surface, and folds min(1, sdf / μ) into the
-//! running weighted average, weight capped at `max_weight`. With colour on, voxels within the
-//! truncation band also average the pixel's colour with the same weights.
+//! column keeps the workgroup count small), only over the stretch of the column inside the
+//! camera's frustum (the half-lines 0 < z_cam <= `max_depth_m` + μ and pixel bounds, solved in
+//! closed form per column, one voxel of margin each side), and updates each voxel
+//! (000-digest §1.3.2, Eq. 1.6-1.8): projects its centre into the depth image (nearest pixel),
+//! takes the signed distance along the optical axis sdf = depth - z (positive in front of the
+//! surface), skips voxels outside the image, without depth, or more than μ behind the surface,
+//! and folds min(1, sdf / μ) into the running weighted average, weight capped at `max_weight`.
+//! With colour on, voxels within the truncation band also average the pixel's colour with the
+//! same weights. Nothing is fused when the pose is inactive (a lost frame).
 #import invalid
 #import camera
+#import camera_pose
 #import tsdf
 
 struct TsdfIntegrateParams {
@@ -16,40 +19,77 @@ struct TsdfIntegrateParams {
     volume: VolumeDesc,
     // Intrinsics of the depth image.
     intrinsics: Intrinsics,
-    // World to camera, column-major.
-    camera_from_world: mat4x4<f32>,
-    // Non-zero: also fuse colour.
+    // 1 to fuse colour as well.
     color_enabled: u32,
+    // Farthest valid depth, metres: voxels beyond it plus μ cannot be updated.
+    max_depth_m: f32,
     _pad0: u32,
     _pad1: u32,
-    _pad2: u32,
 }
 
-// Uniform `TsdfIntegrateParams`.
 @group(0) @binding(0) var<uniform> params: TsdfIntegrateParams;
-// Depth, metres (NaN = none).
-@group(0) @binding(1) var<storage, read> depth_m: array<f32>;
-// Colour (r, g, b, 1), registered to depth.
-@group(0) @binding(2) var<storage, read> color: array<vec4<f32>>;
-// Voxel words, updated in place.
-@group(0) @binding(3) var<storage, read_write> tsdf_volume: array<u32>;
-// Colour words, updated in place.
-@group(0) @binding(4) var<storage, read_write> color_volume: array<u32>;
+// The pose to fuse at (the tracker's, or one the host gives).
+@group(0) @binding(1) var<storage, read> pose: CameraPose;
+// Depth to fuse, metres (NaN: none).
+@group(0) @binding(2) var<storage, read> depth_m: array<f32>;
+// Colour (r, g, b, 1) in [0, 1].
+@group(0) @binding(3) var<storage, read> color: array<vec4<f32>>;
+// Voxel words (TSDF + weight), updated in place.
+@group(0) @binding(4) var<storage, read_write> tsdf_volume: array<u32>;
+// Colour words (RGB8), updated in place (one placeholder word when colour is off).
+@group(0) @binding(5) var<storage, read_write> color_volume: array<u32>;
+
+// The z-index interval [lo, hi] of column points a + k b (camera frame) inside the frustum, as
+// floats (empty when lo > hi). Each condition is c0 + k c1 >= 0 (or > 0).
+fn frustum_interval(a: vec3<f32>, b: vec3<f32>, far_m: f32) -> vec2<f32> {
+    let k = params.intrinsics;
+    var lo = -1e30;
+    var hi = 1e30;
+    // z > 0, z <= far, and the four image borders (multiplied out by z > 0).
+    var cs = array<vec2<f32>, 6>(
+        vec2<f32>(a.z, b.z),
+        vec2<f32>(far_m - a.z, -b.z),
+        vec2<f32>(k.fx_px * a.x + (k.cx_px + 0.5) * a.z, k.fx_px * b.x + (k.cx_px + 0.5) * b.z),
+        vec2<f32>(-(k.fx_px * a.x + (k.cx_px + 0.5 - f32(k.width_px)) * a.z), -(k.fx_px * b.x + (k.cx_px + 0.5 - f32(k.width_px)) * b.z)),
+        vec2<f32>(k.fy_px * a.y + (k.cy_px + 0.5) * a.z, k.fy_px * b.y + (k.cy_px + 0.5) * b.z),
+        vec2<f32>(-(k.fy_px * a.y + (k.cy_px + 0.5 - f32(k.height_px)) * a.z), -(k.fy_px * b.y + (k.cy_px + 0.5 - f32(k.height_px)) * b.z)),
+    );
+    for (var i = 0u; i < 6u; i++) {
+        let c = cs[i];
+        if c.y > 0.0 {
+            lo = max(lo, -c.x / c.y);
+        } else if c.y < 0.0 {
+            hi = min(hi, -c.x / c.y);
+        } else if c.x < 0.0 {
+            return vec2<f32>(1.0, 0.0);
+        }
+    }
+    return vec2<f32>(lo, hi);
+}
 
 @compute @workgroup_size(16, 16, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let d = params.volume;
-    if gid.x >= d.dim_x || gid.y >= d.dim_y {
+    if gid.x >= d.dim_x || gid.y >= d.dim_y || pose.enabled == 0u {
         return;
     }
-    for (var z = 0u; z < d.dim_z; z++) {
+    let c = pose.camera_from_world;
+    let a = (c * vec4<f32>(voxel_centre_in_world(d, gid.x, gid.y, 0u), 1.0)).xyz;
+    let b = (c * vec4<f32>(0.0, 0.0, d.voxel_size_m, 0.0)).xyz;
+    let range = frustum_interval(a, b, params.max_depth_m + d.truncation_m);
+    if !(range.x <= range.y) || range.y < -1.0 || range.x > f32(d.dim_z) {
+        return;
+    }
+    let z0 = u32(max(floor(range.x) - 1.0, 0.0));
+    let z1 = u32(min(ceil(range.y) + 1.0, f32(d.dim_z - 1u)));
+    for (var z = z0; z <= z1; z++) {
         integrate_voxel(d, gid.x, gid.y, z);
     }
 }
 
 fn integrate_voxel(d: VolumeDesc, x: u32, y: u32, z: u32) {
     let p_world = voxel_centre_in_world(d, x, y, z);
-    let p_cam = (params.camera_from_world * vec4<f32>(p_world, 1.0)).xyz;
+    let p_cam = (pose.camera_from_world * vec4<f32>(p_world, 1.0)).xyz;
     if !(p_cam.z > 0.0) {
         return;
     }

@@ -1,10 +1,12 @@
 // SPDX-License-Identifier: MIT
-// 6-DOF normal equations shared by `icp_reduce` and `rgb_reduce`: per-thread accumulation of
-// rows J = [a, b] (a: rotation part, b: translation part) with residual r, then a workgroup
-// tree reduction in workgroup memory (no atomics) writing 8 vec4 per workgroup:
-// [JᵀJ upper triangle row-major (21), Jᵀr (6), r², count, 0, 0, 0]. The importing kernel
-// declares `partial_sums: array<vec4<f32>>` and runs NE_WORKGROUP_SIZE threads per workgroup.
-// Mirrors core/src/cpu/shared.rs::{ne_add_row, reduce_normal_equations}.
+// 6-DOF normal equations of the tracker: per-thread accumulation of rows J = [a, b] (a: rotation
+// part, b: translation part) with residual r, then a workgroup tree reduction in workgroup
+// memory (no atomics) writing 8 vec4 per workgroup:
+// [JᵀJ upper triangle row-major (21), Jᵀr (6), Σ r² of the point-to-plane rows, their count,
+//  Σ r² of the photometric rows, their count, 0]. The importing kernel declares
+// `partial_sums: array<vec4<f32>>` and runs NE_WORKGROUP_SIZE threads per workgroup.
+// Mirrors core/src/cpu/shared.rs::{ne_add_jacobian, ne_add_icp_stats, ne_add_rgb_stats,
+// reduce_normal_equations}.
 
 const NE_WORKGROUP_SIZE: u32 = 128u;
 const NE_SUM_VEC4S: u32 = 8u;
@@ -19,8 +21,8 @@ fn ne_zero() -> array<vec4<f32>, NE_SUM_VEC4S> {
     return acc;
 }
 
-// Adds the row J = [a, b] with residual r.
-fn ne_add_row(acc: ptr<function, array<vec4<f32>, NE_SUM_VEC4S>>, a: vec3<f32>, b: vec3<f32>, r: f32) {
+// Adds JᵀJ and Jᵀr of the row J = [a, b] with residual r.
+fn ne_add_jacobian(acc: ptr<function, array<vec4<f32>, NE_SUM_VEC4S>>, a: vec3<f32>, b: vec3<f32>, r: f32) {
     let j0 = a.x;
     let j1 = a.y;
     let j2 = a.z;
@@ -33,8 +35,19 @@ fn ne_add_row(acc: ptr<function, array<vec4<f32>, NE_SUM_VEC4S>>, a: vec3<f32>, 
     (*acc)[3] += vec4<f32>(j2 * j3, j2 * j4, j2 * j5, j3 * j3);
     (*acc)[4] += vec4<f32>(j3 * j4, j3 * j5, j4 * j4, j4 * j5);
     (*acc)[5] += vec4<f32>(j5 * j5, j0 * r, j1 * r, j2 * r);
-    (*acc)[6] += vec4<f32>(j3 * r, j4 * r, j5 * r, r * r);
-    (*acc)[7] += vec4<f32>(1.0, 0.0, 0.0, 0.0);
+    (*acc)[6] += vec4<f32>(j3 * r, j4 * r, j5 * r, 0.0);
+}
+
+// Counts a point-to-plane row with (weighted) residual r.
+fn ne_add_icp_stats(acc: ptr<function, array<vec4<f32>, NE_SUM_VEC4S>>, r: f32) {
+    (*acc)[6].w += r * r;
+    (*acc)[7].x += 1.0;
+}
+
+// Counts a photometric row with residual r.
+fn ne_add_rgb_stats(acc: ptr<function, array<vec4<f32>, NE_SUM_VEC4S>>, r: f32) {
+    (*acc)[7].y += r * r;
+    (*acc)[7].z += 1.0;
 }
 
 // Tree-reduces every thread's `acc` and writes the workgroup's sum. Call from uniform control

@@ -2,19 +2,22 @@
 //! `raycast`: an analytic TSDF (a plane and a sphere) renders to its exact depth and normals,
 //! the GPU matches the CPU reference for every output, and rays that meet nothing give NaN / 0.
 //!
+//! Starting each ray at a measured depth (the prediction's depth hint) finds the same surface,
+//! and a disabled pose renders nothing.
+//!
 //! Tolerances: where both sides hit, vertex and depth within 1e-4 m, normal components within
-//! 1e-3, shaded and colour bytes within 1 level. The march accumulates t in f32 and the
+//! 1e-3, colour bytes within 1 level. The march accumulates t in f32 and the
 //! zero-crossing test is a comparison, so under FMA contraction a ray grazing a silhouette can
 //! hit on one side and miss on the other: at most 0.5 % of the pixels may disagree that way.
 
 use glam::{DQuat, DVec3};
 use webfusion_core::cpu::{self, shared::pack_rgb8};
 use webfusion_core::kernels::GpuIntrinsics;
-use webfusion_core::kernels::raycast::{DEFAULT_MAX_STEPS, DEFAULT_STEP_FACTOR, RaycastParams};
+use webfusion_core::kernels::raycast::{CameraPose, DEFAULT_MAX_STEPS, DEFAULT_STEP_FACTOR, RaycastParams};
 use webfusion_core::mesh::tsdf_from_sdf;
 use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
 use webfusion_core::{PinholeIntrinsics, Se3};
-use webfusion_tests::{SENTINEL_F32, cast, finish, gpu, run_kernel};
+use webfusion_tests::{SENTINEL_F32, cast, finish, gpu};
 
 use crate::synthetic::K_SMALL;
 
@@ -43,38 +46,50 @@ fn scene() -> (VolumeDesc, Vec<u32>, Vec<u32>) {
     (desc, voxels, colors)
 }
 
+#[derive(Clone)]
 struct Images {
     vertex: Vec<[f32; 4]>,
     normal: Vec<[f32; 4]>,
     depth: Vec<f32>,
-    shaded: Vec<u32>,
     color: Vec<u32>,
 }
 
-fn params(desc: VolumeDesc, k: PinholeIntrinsics, world_from_camera: &Se3) -> RaycastParams {
-    RaycastParams {
+/// Raycast parameters and pose; `hint`: each ray starts near a measured depth.
+struct Setup {
+    params: RaycastParams,
+    pose: CameraPose,
+    hint: Option<Vec<f32>>,
+}
+
+fn params(desc: VolumeDesc, k: PinholeIntrinsics, world_from_camera: &Se3) -> Setup {
+    let params = RaycastParams {
         volume: desc,
         intrinsics: GpuIntrinsics::from(k),
-        world_from_camera: world_from_camera.to_mat4().to_cols_array_2d(),
         min_depth_m: 0.3,
         max_depth_m: 5.0,
         step_factor: DEFAULT_STEP_FACTOR,
         max_steps: DEFAULT_MAX_STEPS,
-    }
+        ..Default::default()
+    };
+    Setup { params, pose: webfusion_core::fusion::predictor::camera_pose(Some(world_from_camera)), hint: None }
 }
 
-fn render(p: &RaycastParams, voxels: &[u32], colors: &[u32]) -> (Images, Images) {
+fn render(s: &Setup, voxels: &[u32], colors: &[u32]) -> (Images, Images) {
     let gpu = gpu();
+    let p = &s.params;
     let n = (p.intrinsics.width_px * p.intrinsics.height_px) as usize;
-    let out = run_kernel(&gpu, &gpu.kernels.raycast, p, &[bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)], &[16 * n, 16 * n, 4 * n, 4 * n, 4 * n], [
-        p.intrinsics.width_px,
-        p.intrinsics.height_px,
-        1,
-    ]);
+    let no_hint = vec![f32::NAN];
+    let hint = s.hint.as_ref().unwrap_or(&no_hint);
+    let p = &RaycastParams { use_depth_hint: u32::from(s.hint.is_some()), hint_margin_m: p.volume.truncation_m, ..*p };
+    // Bindings: params, pose, volume, colours, then the outputs, then the depth hint.
+    let inputs: [&[u8]; 3] = [bytemuck::bytes_of(&s.pose), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)];
+    use webfusion_tests::Slot::{In, Out};
+    let slots = [In(inputs[0]), In(inputs[1]), In(inputs[2]), Out(16 * n), Out(16 * n), Out(4 * n), Out(4 * n), In(bytemuck::cast_slice(hint))];
+    let out = webfusion_tests::run_kernel_slots(&gpu, &gpu.kernels.raycast, p, &slots, [p.intrinsics.width_px, p.intrinsics.height_px, 1]);
     finish(&gpu);
-    let g = Images { vertex: cast(&out[0]), normal: cast(&out[1]), depth: cast(&out[2]), shaded: cast(&out[3]), color: cast(&out[4]) };
-    let mut c = Images { vertex: vec![[0.0; 4]; n], normal: vec![[0.0; 4]; n], depth: vec![0.0; n], shaded: vec![0; n], color: vec![0; n] };
-    cpu::raycast(p, voxels, colors, &mut c.vertex, &mut c.normal, &mut c.depth, &mut c.shaded, &mut c.color);
+    let g = Images { vertex: cast(&out[0]), normal: cast(&out[1]), depth: cast(&out[2]), color: cast(&out[3]) };
+    let mut c = Images { vertex: vec![[0.0; 4]; n], normal: vec![[0.0; 4]; n], depth: vec![0.0; n], color: vec![0; n] };
+    cpu::raycast(p, &s.pose, voxels, colors, &mut c.vertex, &mut c.normal, &mut c.depth, &mut c.color, hint);
     (g, c)
 }
 
@@ -88,13 +103,12 @@ fn disagreements(g: &Images, c: &Images) -> usize {
                 return true;
             }
             if !ch {
-                return !(g.vertex[i].iter().all(|v| v.is_nan()) && g.normal[i].iter().all(|v| v.is_nan()) && g.shaded[i] == 0 && g.color[i] == 0);
+                return !(g.vertex[i].iter().all(|v| v.is_nan()) && g.normal[i].iter().all(|v| v.is_nan()) && g.color[i] == 0);
             }
             let close = |a: &[f32; 4], b: &[f32; 4], tol: f32| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol);
             !(close(&g.vertex[i], &c.vertex[i], 1e-4)
                 && close(&g.normal[i], &c.normal[i], 1e-3)
                 && (g.depth[i] - c.depth[i]).abs() <= 1e-4
-                && bytes_close(g.shaded[i], c.shaded[i])
                 && bytes_close(g.color[i], c.color[i]))
         })
         .count()
@@ -169,7 +183,7 @@ fn gpu_matches_cpu_at_a_rotated_pose_and_the_comparison_can_fail() {
     // Negative controls: each kind of error must be counted.
     let i = c.depth.iter().position(|d| !d.is_nan()).expect("a hit");
     let base = disagreements(&g, &c);
-    let mut bad = Images { vertex: g.vertex.clone(), normal: g.normal.clone(), depth: g.depth.clone(), shaded: g.shaded.clone(), color: g.color.clone() };
+    let mut bad = g.clone();
     bad.depth[i] += 1e-3;
     assert_eq!(disagreements(&bad, &c), base + 1, "a depth 1 mm off is counted");
     bad.depth[i] = g.depth[i];
@@ -197,7 +211,53 @@ fn rays_that_meet_nothing_are_invalid() {
             assert!(g.depth[i].is_nan() && c.depth[i].is_nan(), "{what}: pixel {i} should miss");
             assert_eq!(g.depth[i].to_bits(), 0x7fc0_0000, "{what}: the invalid marker bit pattern");
             assert!(g.vertex[i].iter().chain(&g.normal[i]).all(|v| v.to_bits() == 0x7fc0_0000), "{what}: vertex/normal invalid");
-            assert_eq!((g.shaded[i], g.color[i]), (0, 0), "{what}: no colour on a miss");
+            assert_eq!(g.color[i], 0, "{what}: no colour on a miss");
         }
     }
+}
+
+#[test]
+fn starting_at_the_measured_depth_finds_the_same_surface() {
+    let (desc, voxels, colors) = scene();
+    let k = PinholeIntrinsics { fx_px: 129.4, fy_px: 129.2, cx_px: 79.6, cy_px: 63.8, width_px: 160, height_px: 120 };
+    let plain = params(desc, k, &Se3::IDENTITY);
+    let (full, _) = render(&plain, &voxels, &colors);
+    // The measured depth: the rendered surface, with holes where nothing was measured (those
+    // rays march from the near plane as before).
+    let hint: Vec<f32> = full.depth.iter().enumerate().map(|(i, &d)| if i % 7 == 0 { f32::NAN } else { d }).collect();
+    let hinted = Setup { hint: Some(hint), ..params(desc, k, &Se3::IDENTITY) };
+    let (g, c) = render(&hinted, &voxels, &colors);
+    assert_agree("hinted GPU vs CPU", &g, &c);
+    // The march visits other sample points, so the crossing moves by a fraction of a voxel;
+    // only rays grazing a silhouette (a neighbour's depth 10 cm or more away), where the TSDF
+    // dips below zero for less than a step, may find another surface.
+    let (w, h) = (k.width_px as usize, k.height_px as usize);
+    let silhouette = |i: usize| {
+        let (x, y) = (i % w, i / w);
+        (y.saturating_sub(2)..(y + 3).min(h)).any(|yy| (x.saturating_sub(2)..(x + 3).min(w)).any(|xx| !((full.depth[yy * w + xx] - full.depth[i]).abs() < 0.1)))
+    };
+    let quarter_voxel = desc.voxel_size_m / 4.0;
+    let mut off_surface = 0;
+    for i in (0..full.depth.len()).filter(|&i| !full.depth[i].is_nan()) {
+        if !((g.depth[i] - full.depth[i]).abs() <= quarter_voxel) {
+            off_surface += 1;
+            assert!(silhouette(i), "pixel ({}, {}) away from any silhouette: hinted {} vs full march {}", i % w, i / w, g.depth[i], full.depth[i]);
+        }
+    }
+    eprintln!("hinted vs full march: {off_surface} of {} hits differ by more than a quarter voxel, all at silhouettes", full.depth.len());
+    assert!(off_surface * 50 < full.depth.len(), "at most 2 % of the pixels ({off_surface})");
+    // A hint far behind every surface: the ray starts past them and sees nothing in front.
+    let behind = Setup { hint: Some(vec![4.5; k.pixel_count()]), ..params(desc, k, &Se3::IDENTITY) };
+    let (g, _) = render(&behind, &voxels, &colors);
+    assert!(g.depth.iter().all(|d| d.is_nan()), "a ray starting behind the surface meets only its back");
+}
+
+#[test]
+fn a_disabled_pose_renders_nothing() {
+    let (desc, voxels, colors) = scene();
+    let mut s = params(desc, K_SMALL, &Se3::IDENTITY);
+    s.pose.enabled = 0;
+    let (g, c) = render(&s, &voxels, &colors);
+    assert!(g.depth.iter().all(|d| d.to_bits() == SENTINEL_F32.to_bits()), "the GPU wrote nothing for a lost frame's pose");
+    assert!(c.depth.iter().all(|&d| d == 0.0), "nor did the CPU twin");
 }

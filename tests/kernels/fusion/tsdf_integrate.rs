@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
-//! `tsdf_integrate`: an analytic wall fuses to its exact signed distance, and the GPU matches the
-//! CPU reference voxel by voxel on a real Kinect frame fused at two poses.
+//! `tsdf_integrate`: an analytic wall fuses to its exact signed distance, the GPU matches the
+//! CPU reference voxel by voxel on a real Kinect frame fused at two poses, the per-column
+//! frustum stretch skips no voxel the full sweep would update, and a disabled pose (a lost
+//! frame) fuses nothing.
 //!
 //! Tolerances: a voxel word is compared as (TSDF, weight, colour). The TSDF may differ by one
 //! LSB (1/32767 of μ: the kernel's division and the projection may round differently under
@@ -11,7 +13,7 @@
 use glam::{DQuat, DVec3};
 use webfusion_core::cpu::{self, shared::{voxel_tsdf, voxel_weight}};
 use webfusion_core::kernels::GpuIntrinsics;
-use webfusion_core::kernels::tsdf_integrate::TsdfIntegrateParams;
+use webfusion_core::kernels::tsdf_integrate::{CameraPose, TsdfIntegrateParams};
 use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
 use webfusion_core::{PinholeIntrinsics, Se3};
 use webfusion_tests::{cast, finish, gpu, run_kernel_in_place};
@@ -24,30 +26,62 @@ const TSDF_LSB: f32 = 1.0 / 32767.0;
 /// Largest fraction of touched voxels allowed to differ beyond one LSB (pixel-boundary flips).
 const MAX_FLIP_FRACTION: f64 = 1e-3;
 
-fn params(desc: VolumeDesc, k: PinholeIntrinsics, world_from_camera: &Se3, color: bool) -> TsdfIntegrateParams {
-    TsdfIntegrateParams {
-        volume: desc,
-        intrinsics: GpuIntrinsics::from(k),
-        camera_from_world: world_from_camera.inverse().to_mat4().to_cols_array_2d(),
-        color_enabled: u32::from(color),
-        ..Default::default()
-    }
+/// Farthest depth the tests' depth images hold, metres (the kernel's frustum ends there + μ).
+const MAX_DEPTH_M: f32 = 5.0;
+
+fn params(desc: VolumeDesc, k: PinholeIntrinsics, world_from_camera: &Se3, color: bool) -> (TsdfIntegrateParams, CameraPose) {
+    let p = TsdfIntegrateParams { volume: desc, intrinsics: GpuIntrinsics::from(k), color_enabled: u32::from(color), max_depth_m: MAX_DEPTH_M, ..Default::default() };
+    (p, webfusion_core::fusion::predictor::camera_pose(Some(world_from_camera)))
 }
 
 /// Integrates on the GPU and on the CPU; returns (GPU, CPU) voxel and colour words.
-fn integrate(p: &TsdfIntegrateParams, depth_m: &[f32], color: &[[f32; 4]], voxels: &[u32], colors: &[u32]) -> ((Vec<u32>, Vec<u32>), (Vec<u32>, Vec<u32>)) {
+fn integrate(p: &(TsdfIntegrateParams, CameraPose), depth_m: &[f32], color: &[[f32; 4]], voxels: &[u32], colors: &[u32]) -> ((Vec<u32>, Vec<u32>), (Vec<u32>, Vec<u32>)) {
     let gpu = gpu();
     let out = run_kernel_in_place(
         &gpu,
         &gpu.kernels.tsdf_integrate,
-        p,
-        &[bytemuck::cast_slice(depth_m), bytemuck::cast_slice(color), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)],
-        [p.volume.dim_x, p.volume.dim_y, 1],
+        &p.0,
+        &[bytemuck::bytes_of(&p.1), bytemuck::cast_slice(depth_m), bytemuck::cast_slice(color), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)],
+        [p.0.volume.dim_x, p.0.volume.dim_y, 1],
     );
     finish(&gpu);
     let (mut cv, mut cc) = (voxels.to_vec(), colors.to_vec());
-    cpu::tsdf_integrate(p, depth_m, color, &mut cv, &mut cc);
-    ((cast(&out[2]), cast(&out[3])), (cv, cc))
+    cpu::tsdf_integrate(&p.0, &p.1, depth_m, color, &mut cv, &mut cc);
+    ((cast(&out[3]), cast(&out[4])), (cv, cc))
+}
+
+/// The voxels a full sweep of every voxel (no frustum stretch) would update: the kernel's
+/// per-voxel tests applied to each voxel of the volume.
+fn full_sweep(p: &(TsdfIntegrateParams, CameraPose), depth_m: &[f32], voxels: &[u32]) -> Vec<u32> {
+    use webfusion_core::cpu::shared::{pack_voxel, transform_point, voxel_centre_in_world, voxel_index};
+    let (p, pose) = p;
+    let d = &p.volume;
+    let k = &p.intrinsics;
+    let mut out = voxels.to_vec();
+    for z in 0..d.dim_z {
+        for y in 0..d.dim_y {
+            for x in 0..d.dim_x {
+                let c = transform_point(&pose.camera_from_world, voxel_centre_in_world(d, x, y, z));
+                if !(c[2] > 0.0) {
+                    continue;
+                }
+                let u = (k.fx_px * c[0] / c[2] + k.cx_px + 0.5).floor();
+                let v = (k.fy_px * c[1] / c[2] + k.cy_px + 0.5).floor();
+                if !(u >= 0.0 && v >= 0.0 && u < k.width_px as f32 && v < k.height_px as f32) {
+                    continue;
+                }
+                let depth = depth_m[(v as u32 * k.width_px + u as u32) as usize];
+                if depth.is_nan() || depth - c[2] < -d.truncation_m {
+                    continue;
+                }
+                let ix = voxel_index(d, x, y, z) as usize;
+                let w = voxel_weight(out[ix]);
+                let tsdf = ((depth - c[2]) / d.truncation_m).min(1.0);
+                out[ix] = pack_voxel((voxel_tsdf(out[ix]) * w as f32 + tsdf) / (w + 1) as f32, (w + 1).min(d.max_weight));
+            }
+        }
+    }
+    out
 }
 
 /// Compares voxel and colour words under the tolerances above; returns the number of voxels
@@ -148,4 +182,37 @@ fn real_frame_at_two_poses_matches_cpu() {
         voxels = gv;
         colors = gc;
     }
+}
+
+#[test]
+fn the_frustum_stretch_updates_exactly_what_a_full_sweep_does() {
+    let chain = real_cpu_chain();
+    let k = chain.levels[0].intrinsics;
+    let config = TsdfConfig::cube(64, 3.0 / 64.0);
+    let desc = config.desc(config.origin_for_first_camera(&Se3::IDENTITY));
+    let empty = vec![0u32; desc.voxel_count()];
+    // Straight ahead, and turned so that the frustum cuts the columns at a slant.
+    for pose in [Se3::IDENTITY, Se3::new(DQuat::from_axis_angle(DVec3::new(0.4, 1.0, 0.3).normalize(), 0.6), DVec3::new(0.2, -0.1, 0.4))] {
+        let p = params(desc, k, &pose, false);
+        let ((gv, _), (cv, _)) = integrate(&p, &chain.depth_unfiltered_m, &chain.color, &empty, &empty);
+        let swept = full_sweep(&p, &chain.depth_unfiltered_m, &empty);
+        let touched = swept.iter().filter(|&&w| voxel_weight(w) > 0).count();
+        assert!(touched > 5000, "the frame touches voxels ({touched})");
+        assert_eq!(cv, swept, "the CPU twin's frustum stretch misses no voxel of the full sweep");
+        compare_volumes((&gv, &vec![0; gv.len()]), (&swept, &vec![0; gv.len()])).unwrap_or_else(|e| panic!("GPU vs full sweep: {e}"));
+    }
+}
+
+#[test]
+fn a_disabled_pose_fuses_nothing() {
+    let chain = real_cpu_chain();
+    let k = chain.levels[0].intrinsics;
+    let config = TsdfConfig::cube(32, 0.1);
+    let desc = config.desc(config.origin_for_first_camera(&Se3::IDENTITY));
+    let mut p = params(desc, k, &Se3::IDENTITY, true);
+    p.1.enabled = 0;
+    let voxels: Vec<u32> = (0..desc.voxel_count() as u32).collect();
+    let ((gv, gc), (cv, cc)) = integrate(&p, &chain.depth_unfiltered_m, &chain.color, &voxels, &voxels);
+    assert!(gv == voxels && gc == voxels, "the GPU left the volume as it was");
+    assert!(cv == voxels && cc == voxels, "so did the CPU twin");
 }

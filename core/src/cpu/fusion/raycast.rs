@@ -1,25 +1,43 @@
 // SPDX-License-Identifier: MIT
-//! CPU reference of `shaders/wgsl/raycast.wgsl`.
+//! CPU reference of `shaders/wgsl/fusion/raycast.wgsl`.
 
-use crate::cpu::shared::{INVALID, INVALID_VEC4, TsdfSample, back_project, dot3, pack_rgb8, sample_tsdf, transform_vector, voxel_index};
-use crate::kernels::raycast::RaycastParams;
+use crate::cpu::shared::{INVALID, INVALID_VEC4, TsdfSample, back_project, dot3, is_valid_f32, kinect_sigma_m, sample_tsdf, transform_vector, voxel_index, voxel_tsdf, voxel_weight};
+use crate::kernels::raycast::{CameraPose, RaycastParams};
+use crate::tsdf::VolumeDesc;
 
 const OPAQUE: u32 = 0xff00_0000;
+/// Twin of `FAR_TSDF`.
+pub const FAR_TSDF: f32 = 0.999;
+
+/// Twin of `nearest_word()`.
+pub fn nearest_word(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> u32 {
+    let origin = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
+    let g: [f32; 3] = std::array::from_fn(|i| ((p_world[i] - origin[i]) / d.voxel_size_m).floor());
+    let dims = [d.dim_x, d.dim_y, d.dim_z];
+    if (0..3).any(|i| g[i] < 0.0 || g[i] >= dims[i] as f32) {
+        return 0;
+    }
+    tsdf_volume[voxel_index(d, g[0] as u32, g[1] as u32, g[2] as u32) as usize]
+}
 
 /// Casts every pixel's ray as one invocation of the kernel does.
 #[expect(clippy::too_many_arguments, reason = "one argument per WGSL binding, in binding order")]
 pub fn raycast(
     params: &RaycastParams,
+    pose: &CameraPose,
     tsdf_volume: &[u32],
     color_volume: &[u32],
     vertex_in_world: &mut [[f32; 4]],
     normal_in_world: &mut [[f32; 4]],
     depth_m: &mut [f32],
-    shaded_rgba8: &mut [u32],
     color_rgba8: &mut [u32],
+    depth_hint_m: &[f32],
 ) {
     let k = &params.intrinsics;
     let d = &params.volume;
+    if pose.enabled == 0 {
+        return;
+    }
     for gy in 0..k.height_px {
         for gx in 0..k.width_px {
             let ix = (gy * k.width_px + gx) as usize;
@@ -27,13 +45,12 @@ pub fn raycast(
                 vertex_in_world[ix] = INVALID_VEC4;
                 normal_in_world[ix] = INVALID_VEC4;
                 depth_m[ix] = INVALID;
-                shaded_rgba8[ix] = 0;
                 color_rgba8[ix] = 0;
             };
             let ray_cam = back_project(k, gx as f32, gy as f32, 1.0);
             let inv_len = 1.0 / dot3(ray_cam, ray_cam).sqrt();
             let z_per_t = inv_len;
-            let m = &params.world_from_camera;
+            let m = &pose.world_from_camera;
             let origin = [m[3][0], m[3][1], m[3][2]];
             let dir = transform_vector(m, ray_cam.map(|c| c * inv_len));
             let lo = [d.origin_x_m + 0.5 * d.voxel_size_m, d.origin_y_m + 0.5 * d.voxel_size_m, d.origin_z_m + 0.5 * d.voxel_size_m];
@@ -46,6 +63,12 @@ pub fn raycast(
             let t_far: [f32; 3] = std::array::from_fn(|i| t0[i].max(t1[i]));
             let mut t = t_near[0].max(t_near[1]).max(t_near[2]).max(params.min_depth_m / z_per_t);
             let t_end = t_far[0].min(t_far[1]).min(t_far[2]).min(params.max_depth_m / z_per_t);
+            if params.use_depth_hint != 0 {
+                let hint = depth_hint_m[ix];
+                if is_valid_f32(hint) {
+                    t = t.max((hint - params.hint_margin_m - 3.0 * kinect_sigma_m(hint)) / z_per_t);
+                }
+            }
             if !(t < t_end) {
                 miss();
                 continue;
@@ -54,15 +77,40 @@ pub fn raycast(
             let min_step = 0.5 * d.voxel_size_m;
             let mut prev_t = t;
             let mut prev = TsdfSample { tsdf: 0.0, valid: false };
+            let mut prev_nearest = false;
             let mut hit = false;
             let mut t_hit = 0.0;
             let at = |t: f32| std::array::from_fn(|i| origin[i] + dir[i] * t);
             let mut i = 0;
             while i < params.max_steps && t < t_end {
+                let word = nearest_word(tsdf_volume, d, at(t));
+                if voxel_weight(word) == 0 {
+                    prev = TsdfSample { tsdf: 0.0, valid: false };
+                    prev_nearest = false;
+                    prev_t = t;
+                    t += max_step;
+                    i += 1;
+                    continue;
+                }
+                if voxel_tsdf(word) >= FAR_TSDF {
+                    prev = TsdfSample { tsdf: 1.0, valid: true };
+                    prev_nearest = true;
+                    prev_t = t;
+                    t += max_step;
+                    i += 1;
+                    continue;
+                }
                 let s = sample_tsdf(tsdf_volume, d, at(t));
                 if s.valid && prev.valid {
                     if prev.tsdf > 0.0 && s.tsdf <= 0.0 {
-                        t_hit = prev_t + (t - prev_t) * prev.tsdf / (prev.tsdf - s.tsdf);
+                        let mut before = prev;
+                        if prev_nearest {
+                            let exact = sample_tsdf(tsdf_volume, d, at(prev_t));
+                            if exact.valid && exact.tsdf > 0.0 {
+                                before = exact;
+                            }
+                        }
+                        t_hit = prev_t + (t - prev_t) * before.tsdf / (before.tsdf - s.tsdf);
                         hit = true;
                         break;
                     }
@@ -71,6 +119,7 @@ pub fn raycast(
                     }
                 }
                 prev = s;
+                prev_nearest = false;
                 prev_t = t;
                 let mut step = max_step;
                 if s.valid {
@@ -105,8 +154,6 @@ pub fn raycast(
             vertex_in_world[ix] = [p[0], p[1], p[2], 1.0];
             normal_in_world[ix] = [n[0], n[1], n[2], 0.0];
             depth_m[ix] = t_hit * z_per_t;
-            let grey = 0.15 + 0.85 * (-dot3(n, dir)).max(0.0);
-            shaded_rgba8[ix] = pack_rgb8([grey; 3]) | OPAQUE;
             let origin_v = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
             let c: [u32; 3] = std::array::from_fn(|i| (((p[i] - origin_v[i]) / d.voxel_size_m).max(0.0) as u32).min(dims[i] - 1));
             let cix = (voxel_index(d, c[0], c[1], c[2]) as usize).min(color_volume.len() - 1);

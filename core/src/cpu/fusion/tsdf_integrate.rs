@@ -1,17 +1,54 @@
 // SPDX-License-Identifier: MIT
-//! CPU reference of `shaders/wgsl/tsdf_integrate.wgsl`.
+//! CPU reference of `shaders/wgsl/fusion/tsdf_integrate.wgsl`.
 
-use crate::cpu::shared::{is_valid_f32, pack_rgb8, pack_voxel, transform_point, unpack_rgb8, voxel_centre_in_world, voxel_index, voxel_tsdf, voxel_weight};
-use crate::kernels::tsdf_integrate::TsdfIntegrateParams;
+use crate::cpu::shared::{is_valid_f32, pack_rgb8, pack_voxel, transform_point, transform_vector, unpack_rgb8, voxel_centre_in_world, voxel_index, voxel_tsdf, voxel_weight};
+use crate::kernels::tsdf_integrate::{CameraPose, TsdfIntegrateParams};
 
-/// Updates every voxel as one invocation of the kernel does.
-pub fn tsdf_integrate(params: &TsdfIntegrateParams, depth_m: &[f32], color: &[[f32; 4]], tsdf_volume: &mut [u32], color_volume: &mut [u32]) {
+/// Twin of `frustum_interval()`: the z-index interval `[lo, hi]` of the column points `a + k b`
+/// (camera frame) inside the frustum; empty when `lo > hi`.
+pub fn frustum_interval(params: &TsdfIntegrateParams, a: [f32; 3], b: [f32; 3], far_m: f32) -> [f32; 2] {
+    let k = &params.intrinsics;
+    let (w, h) = (k.width_px as f32, k.height_px as f32);
+    let cs = [
+        [a[2], b[2]],
+        [far_m - a[2], -b[2]],
+        [k.fx_px * a[0] + (k.cx_px + 0.5) * a[2], k.fx_px * b[0] + (k.cx_px + 0.5) * b[2]],
+        [-(k.fx_px * a[0] + (k.cx_px + 0.5 - w) * a[2]), -(k.fx_px * b[0] + (k.cx_px + 0.5 - w) * b[2])],
+        [k.fy_px * a[1] + (k.cy_px + 0.5) * a[2], k.fy_px * b[1] + (k.cy_px + 0.5) * b[2]],
+        [-(k.fy_px * a[1] + (k.cy_px + 0.5 - h) * a[2]), -(k.fy_px * b[1] + (k.cy_px + 0.5 - h) * b[2])],
+    ];
+    let (mut lo, mut hi) = (-1e30f32, 1e30f32);
+    for c in cs {
+        if c[1] > 0.0 {
+            lo = lo.max(-c[0] / c[1]);
+        } else if c[1] < 0.0 {
+            hi = hi.min(-c[0] / c[1]);
+        } else if c[0] < 0.0 {
+            return [1.0, 0.0];
+        }
+    }
+    [lo, hi]
+}
+
+/// Updates every voxel as the kernel's invocations (one per column, frustum stretch only) do.
+pub fn tsdf_integrate(params: &TsdfIntegrateParams, pose: &CameraPose, depth_m: &[f32], color: &[[f32; 4]], tsdf_volume: &mut [u32], color_volume: &mut [u32]) {
     let d = &params.volume;
-    for gz in 0..d.dim_z {
-        for gy in 0..d.dim_y {
-            for gx in 0..d.dim_x {
+    if pose.enabled == 0 {
+        return;
+    }
+    for gy in 0..d.dim_y {
+        for gx in 0..d.dim_x {
+            let a = transform_point(&pose.camera_from_world, voxel_centre_in_world(d, gx, gy, 0));
+            let b = transform_vector(&pose.camera_from_world, [0.0, 0.0, d.voxel_size_m]);
+            let range = frustum_interval(params, a, b, params.max_depth_m + d.truncation_m);
+            if !(range[0] <= range[1]) || range[1] < -1.0 || range[0] > d.dim_z as f32 {
+                continue;
+            }
+            let z0 = (range[0].floor() - 1.0).max(0.0) as u32;
+            let z1 = (range[1].ceil() + 1.0).min((d.dim_z - 1) as f32) as u32;
+            for gz in z0..=z1 {
                 let p_world = voxel_centre_in_world(d, gx, gy, gz);
-                let p_cam = transform_point(&params.camera_from_world, p_world);
+                let p_cam = transform_point(&pose.camera_from_world, p_world);
                 if !(p_cam[2] > 0.0) {
                     continue;
                 }

@@ -4,7 +4,8 @@
 
 use crate::cpu::shared::{pack_bytes, pack_u16_pairs};
 use crate::kernels::{
-    GpuIntrinsics, color_to_float::ColorToFloatParams, vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams,
+    GpuIntrinsics, color_to_float::ColorToFloatParams, intensity_pyramid_down::IntensityPyramidDownParams, vertex_gradients::VertexGradientsParams,
+    vertex_map::VertexMapParams,
 };
 use crate::preprocess::PreprocessConfig;
 use crate::{PinholeIntrinsics, RgbdCalibration, RgbdFrame};
@@ -24,6 +25,8 @@ pub struct CpuPyramidLevel {
     pub grad_y: Vec<[f32; 4]>,
     /// Unit normals (nx, ny, nz, 0), camera frame.
     pub normal_in_camera: Vec<[f32; 4]>,
+    /// Intensity (level 0: BT.601 of the colour; coarser: 2x2 block means).
+    pub intensity: Vec<f32>,
 }
 
 /// Everything the GPU preprocessor produces, computed on the CPU.
@@ -64,10 +67,22 @@ pub fn preprocess(calibration: &RgbdCalibration, config: &PreprocessConfig, fram
         crate::cpu::depth_pyramid_down(&p, &depths[l - 1], &mut out);
         depths.push(out);
     }
+    let mut color = vec![[0.0; 4]; n0];
+    let mut intensity = vec![0.0; n0];
+    crate::cpu::color_to_float(&ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() }, &pack_bytes(&frame.color.rgb8), &mut color, &mut intensity);
+    let mut intensities = vec![intensity.clone()];
+    for l in 1..config.pyramid_levels {
+        let (fine, coarse) = (k0.pyramid_level(l - 1), k0.pyramid_level(l));
+        let p = IntensityPyramidDownParams { src_width_px: fine.width_px, src_height_px: fine.height_px, dst_width_px: coarse.width_px, dst_height_px: coarse.height_px };
+        let mut out = vec![0.0; coarse.pixel_count()];
+        crate::cpu::intensity_pyramid_down(&p, &intensities[l - 1], &mut out);
+        intensities.push(out);
+    }
     let levels = depths
         .into_iter()
+        .zip(intensities)
         .enumerate()
-        .map(|(l, depth_m)| {
+        .map(|(l, (depth_m, intensity))| {
             let k = k0.pyramid_level(l);
             let n = k.pixel_count();
             let mut vertex_in_camera = vec![[0.0; 4]; n];
@@ -86,11 +101,8 @@ pub fn preprocess(calibration: &RgbdCalibration, config: &PreprocessConfig, fram
             let mut normal_in_camera = vec![[0.0; 4]; n];
             let p = config.normal_map_params(&k);
             crate::cpu::normal_map(&p, &vertex_in_camera, &grad_x, &grad_y, &mut normal_in_camera);
-            CpuPyramidLevel { intrinsics: k, depth_m, vertex_in_camera, grad_x, grad_y, normal_in_camera }
+            CpuPyramidLevel { intrinsics: k, depth_m, vertex_in_camera, grad_x, grad_y, normal_in_camera, intensity }
         })
         .collect();
-    let mut color = vec![[0.0; 4]; n0];
-    let mut intensity = vec![0.0; n0];
-    crate::cpu::color_to_float(&ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() }, &pack_bytes(&frame.color.rgb8), &mut color, &mut intensity);
     CpuPreprocessed { depth_unfiltered_m, levels, color, intensity }
 }

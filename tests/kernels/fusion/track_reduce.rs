@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: MIT
-//! `icp_reduce`: the GPU's per-workgroup normal equations match the CPU reference on a real
-//! Kinect frame; on an exactly rendered scene the residual vanishes at the true pose and
-//! Gauss-Newton on the GPU sums recovers a known perturbation; the rejection thresholds reject.
+//! `track_reduce`, its point-to-plane rows (the photometric rows are tested in
+//! `track_reduce_photometric.rs`, both together at the end): the GPU's per-workgroup normal
+//! equations match the CPU reference on a real Kinect frame; on an exactly rendered scene the
+//! residual vanishes at the true pose and Gauss-Newton on the GPU sums recovers a known
+//! perturbation; the rejection thresholds reject.
 //!
 //! Tolerances: JᵀJ and Jᵀr add terms of both signs, so entries are compared against the scale
 //! of the system (relative Frobenius difference of JᵀJ 1e-4, of Jᵀr 1e-3 of |JᵀJ|·1 mm), the
@@ -11,9 +13,10 @@
 
 use glam::{DQuat, DVec3};
 use webfusion_core::cpu;
-use webfusion_core::fusion::{NormalEquations, twist_exp};
-use webfusion_core::kernels::GpuIntrinsics;
-use webfusion_core::kernels::icp_reduce::{IcpReduceParams, SUM_FLOATS, WORKGROUP_THREADS, WORKGROUPS};
+use webfusion_core::cpu::fusion::track_reduce::TrackInputs;
+use webfusion_core::fusion::tracker::{initial_state, track_params};
+use webfusion_core::fusion::{IcpConfig, NormalEquations, twist_exp};
+use webfusion_core::kernels::track_reduce::{DEFAULT_WORKGROUPS as WORKGROUPS, SUM_FLOATS, TrackParams, TrackState};
 use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_core::{ColorImage, DepthImage, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
 use webfusion_core::Gpu;
@@ -52,30 +55,72 @@ fn maps(k: PinholeIntrinsics, vertex: &[[f32; 4]], normal: &[[f32; 4]], world_fr
     }
 }
 
-fn params(maps: &Maps, estimate: &Se3, world_from_camera_true: &Se3, dist_thresh_m: f32, angle_deg: f32) -> IcpReduceParams {
-    IcpReduceParams {
-        intrinsics: GpuIntrinsics::from(maps.k),
-        world_from_camera: estimate.to_mat4().to_cols_array_2d(),
-        camera_prev_from_world: world_from_camera_true.inverse().to_mat4().to_cols_array_2d(),
-        dist_thresh_m,
-        cos_angle_thresh: angle_deg.to_radians().cos(),
-        thread_count: WORKGROUPS * WORKGROUP_THREADS,
-        huber_delta_m: 0.01,
-        noise_weighting: 1,
-        ..Default::default()
-    }
+/// The tracker's parameters at level 0 of `k` with these thresholds, depth only (no
+/// photometric rows), and the state holding `estimate` against the reference `reference`.
+fn params(maps: &Maps, estimate: &Se3, reference: &Se3, dist_thresh_m: f32, angle_deg: f32) -> (TrackParams, TrackState) {
+    let config = IcpConfig { dist_thresh_m, angle_thresh_rad: angle_deg.to_radians(), huber_delta_m: 0.01, rgb_weight: 0.0, ..IcpConfig::default() };
+    (track_params(&config, 0, maps.k, 0), state_at(estimate, reference))
 }
 
-fn reduce_gpu(gpu: &Gpu, maps: &Maps, p: &IcpReduceParams) -> Vec<f32> {
-    let inputs: [&[u8]; 4] =
-        [bytemuck::cast_slice(&maps.vertex), bytemuck::cast_slice(&maps.normal), bytemuck::cast_slice(&maps.predicted_vertex), bytemuck::cast_slice(&maps.predicted_normal)];
-    cast(&run_kernel(gpu, &gpu.kernels.icp_reduce, p, &inputs, &[4 * PARTIALS], [p.thread_count, 1, 1])[0])
+/// A `TrackState` with `estimate` and `reference` set (the rest as after a reset).
+pub(crate) fn state_at(estimate: &Se3, reference: &Se3) -> TrackState {
+    TrackState { estimate: estimate.to_cols_f32(), reference: reference.to_cols_f32(), ..initial_state() }
 }
 
-fn reduce_cpu(maps: &Maps, p: &IcpReduceParams) -> Vec<f32> {
+/// All of `track_reduce`'s inputs, in binding order after the params and state.
+pub(crate) struct ReduceInputs<'a> {
+    pub(crate) vertex: &'a [[f32; 4]],
+    pub(crate) normal: &'a [[f32; 4]],
+    pub(crate) predicted_vertex: &'a [[f32; 4]],
+    pub(crate) predicted_normal: &'a [[f32; 4]],
+    pub(crate) intensity: &'a [f32],
+    pub(crate) previous: &'a [[f32; 4]],
+}
+
+/// The GPU's partial sums (`WORKGROUPS` blocks of `SUM_FLOATS`).
+pub(crate) fn reduce_gpu_with(gpu: &Gpu, p: &TrackParams, state: &TrackState, i: &ReduceInputs) -> Vec<f32> {
+    let inputs: [&[u8]; 7] = [
+        bytemuck::bytes_of(state),
+        bytemuck::cast_slice(i.vertex),
+        bytemuck::cast_slice(i.normal),
+        bytemuck::cast_slice(i.predicted_vertex),
+        bytemuck::cast_slice(i.predicted_normal),
+        bytemuck::cast_slice(i.intensity),
+        bytemuck::cast_slice(i.previous),
+    ];
+    cast(&run_kernel(gpu, &gpu.kernels.track_reduce, p, &inputs, &[4 * PARTIALS], [p.thread_count, 1, 1])[0])
+}
+
+/// The CPU twin's partial sums.
+pub(crate) fn reduce_cpu_with(p: &TrackParams, state: &TrackState, i: &ReduceInputs) -> Vec<f32> {
     let mut out = vec![0.0; PARTIALS];
-    cpu::icp_reduce(p, &maps.vertex, &maps.normal, &maps.predicted_vertex, &maps.predicted_normal, &mut out);
+    let inputs = TrackInputs {
+        vertex_in_camera: i.vertex,
+        normal_in_camera: i.normal,
+        predicted_vertex_in_world: i.predicted_vertex,
+        predicted_normal_in_world: i.predicted_normal,
+        intensity: i.intensity,
+        previous: i.previous,
+    };
+    cpu::track_reduce(p, state, &inputs, &mut out);
     out
+}
+
+fn depth_only_inputs(maps: &Maps) -> (Vec<f32>, Vec<[f32; 4]>) {
+    let n = maps.k.pixel_count();
+    (vec![0.5; n], vec![[0.5, 0.0, 0.0, f32::NAN]; n])
+}
+
+fn reduce_gpu(gpu: &Gpu, maps: &Maps, p: &(TrackParams, TrackState)) -> Vec<f32> {
+    let (intensity, previous) = depth_only_inputs(maps);
+    let i = ReduceInputs { vertex: &maps.vertex, normal: &maps.normal, predicted_vertex: &maps.predicted_vertex, predicted_normal: &maps.predicted_normal, intensity: &intensity, previous: &previous };
+    reduce_gpu_with(gpu, &p.0, &p.1, &i)
+}
+
+fn reduce_cpu(maps: &Maps, p: &(TrackParams, TrackState)) -> Vec<f32> {
+    let (intensity, previous) = depth_only_inputs(maps);
+    let i = ReduceInputs { vertex: &maps.vertex, normal: &maps.normal, predicted_vertex: &maps.predicted_vertex, predicted_normal: &maps.predicted_normal, intensity: &intensity, previous: &previous };
+    reduce_cpu_with(&p.0, &p.1, &i)
 }
 
 /// Compares two sets of partial sums by the system they add up to (see the tolerances above).
@@ -101,7 +146,7 @@ fn compare_systems(gpu: &[f32], cpu: &[f32]) -> Result<(), String> {
         }
     }
     if gpu.chunks(SUM_FLOATS).any(|b| b[29..].iter().any(|&v| v != 0.0)) {
-        return Err("padding floats written".into());
+        return Err("photometric statistics or padding written by a depth-only reduction".into());
     }
     Ok(())
 }
@@ -172,7 +217,8 @@ fn gauss_newton_on_gpu_sums_recovers_a_known_perturbation() {
         let p = params(&m, &estimate, &truth, 0.1, 20.0);
         let g = reduce_gpu(&gpu, &m, &p);
         compare_systems(&g, &reduce_cpu(&m, &p)).unwrap_or_else(|e| panic!("GPU vs CPU during Gauss-Newton: {e}"));
-        estimate = twist_exp(&NormalEquations::from_partial_sums(&g).solve().expect("solvable")) * estimate;
+        let x = NormalEquations::from_partial_sums(&g).solve().expect("solvable");
+        estimate = twist_exp(DVec3::new(x[0], x[1], x[2]), DVec3::new(x[3], x[4], x[5])) * estimate;
     }
     let error = truth.inverse() * estimate;
     let (mm, deg) = (error.translation_m.length() * 1e3, error.rotation_angle_rad().to_degrees());
@@ -186,7 +232,7 @@ fn rejection_thresholds_reject() {
     let m = room_maps(&truth);
     let gpu = gpu();
     let off = perturbed(&truth, 5.0, 30.0);
-    let count = |p: &IcpReduceParams| {
+    let count = |p: &(TrackParams, TrackState)| {
         let (g, c) = (reduce_gpu(&gpu, &m, p), reduce_cpu(&m, p));
         compare_systems(&g, &c).unwrap_or_else(|e| panic!("{e}"));
         NormalEquations::from_partial_sums(&g).inliers

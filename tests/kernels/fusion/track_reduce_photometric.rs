@@ -1,7 +1,10 @@
 // SPDX-License-Identifier: MIT
-//! `rgb_reduce`: photometric normal equations, one block of `SUM_FLOATS` partial sums per
-//! workgroup (JᵀJ upper triangle, Jᵀr, Σr², count, three zeros), against the CPU reference
-//! that walks the pixels and reduces the workgroup in the kernel's exact order.
+//! `track_reduce`, its photometric rows (normals are invalid here, so no point-to-plane row is
+//! added, and the photometric weight is 1, so the rows are the plain DVO rows): one block of
+//! `SUM_FLOATS` partial sums per workgroup (JᵀJ upper triangle, Jᵀr, the geometric statistics
+//! (0 here), Σr², count, a zero), against the CPU reference that walks the pixels and reduces
+//! the workgroup in the kernel's exact order. The reference frame's intensity gradient comes
+//! from `keep_previous` (its CPU twin here), as in the tracker.
 //!
 //! Oracles: GPU vs CPU on two real TUM frames, within a per-slot error budget derived from the
 //! warp's rounding (JᵀJ and Jᵀr terms have both signs and cancel, so a tolerance relative to
@@ -11,18 +14,21 @@
 //! negative control on every partial-sum comparison.
 
 use glam::{DQuat, DVec3};
+use webfusion_core::cpu::fusion::track_reduce::{TrackInputs, track_rows};
 use webfusion_core::cpu::preprocess::chain::preprocess;
-use webfusion_core::cpu::{self, rgb_reduce::rgb_row};
-use webfusion_core::fusion::{DEFAULT_RGB_MAX_DEPTH_DIFF_M, DEFAULT_RGB_MAX_RESIDUAL, NormalEquations, twist_exp};
+use webfusion_core::cpu::{self};
+use webfusion_core::fusion::tracker::track_params;
+use webfusion_core::fusion::{DEFAULT_RGB_MAX_DEPTH_DIFF_M, DEFAULT_RGB_MAX_RESIDUAL, IcpConfig, NormalEquations, twist_exp};
 use webfusion_core::io::tum::TumDataset;
-use webfusion_core::kernels::icp_reduce::{SUM_FLOATS, WORKGROUP_THREADS, WORKGROUPS};
-use webfusion_core::kernels::rgb_reduce::RgbReduceParams;
+use webfusion_core::kernels::keep_previous::KeepPreviousParams;
+use webfusion_core::kernels::track_reduce::{DEFAULT_WORKGROUPS as WORKGROUPS, SUM_FLOATS, TrackParams, TrackState, WORKGROUP_THREADS};
 use webfusion_core::kernels::{GpuIntrinsics, vertex_map::VertexMapParams};
 use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_core::source::FrameSource;
 use webfusion_core::{Gpu, PinholeIntrinsics, Se3};
-use webfusion_tests::{SENTINEL_F32, Tolerance, cast, compare_f32, finish, gpu, run_kernel, tum_dir};
+use webfusion_tests::{SENTINEL_F32, Tolerance, compare_f32, finish, gpu, tum_dir};
 
+use crate::fusion::track_reduce::{ReduceInputs, reduce_cpu_with, reduce_gpu_with, state_at};
 use crate::preprocess::chain::real_cpu_chain;
 use crate::synthetic::{Room, UNITS_PER_M};
 
@@ -33,10 +39,10 @@ const THREADS: u32 = WORKGROUPS * WORKGROUP_THREADS;
 const DIAG: [usize; 6] = [0, 6, 11, 15, 18, 20];
 /// First Jᵀr slot.
 const JTR: usize = 21;
-/// Σr² slot.
-const R2: usize = 27;
-/// Count slot.
-const COUNT: usize = 28;
+/// Photometric Σr² slot.
+const R2: usize = 29;
+/// Photometric count slot.
+const COUNT: usize = 30;
 
 /// Synthetic camera: 320x240, TUM freiburg1 focal lengths at half resolution.
 const K_QVGA: PinholeIntrinsics = PinholeIntrinsics { fx_px: 258.65, fy_px: 258.25, cx_px: 159.05, cy_px: 127.4, width_px: 320, height_px: 240 };
@@ -52,32 +58,52 @@ struct Frames {
     prev_depth_m: Vec<f32>,
 }
 
-fn params(f: &Frames, world_from_camera: &Se3, world_from_camera_prev: &Se3, max_depth_diff_m: f32, max_residual: f32) -> RgbReduceParams {
-    RgbReduceParams {
-        intrinsics: GpuIntrinsics::from(f.k),
-        world_from_camera: world_from_camera.to_mat4().to_cols_array_2d(),
-        camera_prev_from_world: world_from_camera_prev.inverse().to_mat4().to_cols_array_2d(),
-        world_from_camera_prev: world_from_camera_prev.to_mat4().to_cols_array_2d(),
-        max_depth_diff_m,
-        max_residual,
-        thread_count: THREADS,
-        _pad0: 0,
-    }
+/// The tracker's parameters for photometric rows alone (weight 1, so the rows are unscaled)
+/// and the state holding the estimate and the reference (the previous frame's pose).
+type Params = (TrackParams, TrackState);
+
+fn params(f: &Frames, world_from_camera: &Se3, world_from_camera_prev: &Se3, max_depth_diff_m: f32, max_residual: f32) -> Params {
+    let config = IcpConfig { rgb_weight: 1.0, rgb_max_depth_diff_m: max_depth_diff_m, rgb_max_residual: max_residual, ..IcpConfig::default() };
+    let p = track_params(&config, 0, f.k, 0);
+    assert_eq!(p.thread_count, THREADS, "the tracker's dispatch size");
+    (p, state_at(world_from_camera, world_from_camera_prev))
+}
+
+/// `keep_previous`'s (intensity, gradient, depth) of a previous frame (CPU twin).
+fn previous(k: &PinholeIntrinsics, prev_intensity: &[f32], prev_depth_m: &[f32]) -> Vec<[f32; 4]> {
+    let mut out = vec![[0.0; 4]; k.pixel_count()];
+    let p = KeepPreviousParams { width_px: k.width_px, height_px: k.height_px, ..Default::default() };
+    cpu::keep_previous(&p, &webfusion_core::cpu::shared::camera_pose(&webfusion_core::cpu::shared::IDENTITY, 1), prev_intensity, prev_depth_m, &mut out);
+    out
+}
+
+/// The photometric row of every pixel (`[J (6), r]`), `None` where rejected.
+fn rgb_rows(p: &Params, f: &Frames) -> Vec<Option<[f32; 7]>> {
+    let no_normals = vec![[f32::NAN; 4]; f.vertex_in_camera.len()];
+    let prev = previous(&f.k, &f.prev_intensity, &f.prev_depth_m);
+    let inputs = TrackInputs { vertex_in_camera: &f.vertex_in_camera, normal_in_camera: &no_normals, predicted_vertex_in_world: &no_normals, predicted_normal_in_world: &no_normals, intensity: &f.intensity, previous: &prev };
+    (0..f.k.pixel_count()).map(|ix| track_rows(&p.0, &p.1, &inputs, ix).1.map(|(row, _)| row)).collect()
 }
 
 /// GPU and CPU partial sums (`WORKGROUPS` blocks of `SUM_FLOATS`).
-fn run(gpu: &Gpu, p: &RgbReduceParams, f: &Frames) -> (Vec<f32>, Vec<f32>) {
-    let n_floats = WORKGROUPS as usize * SUM_FLOATS;
-    let inputs: [&[u8]; 4] = [
-        bytemuck::cast_slice(&f.vertex_in_camera),
-        bytemuck::cast_slice(&f.intensity),
-        bytemuck::cast_slice(&f.prev_intensity),
-        bytemuck::cast_slice(&f.prev_depth_m),
-    ];
-    let out = run_kernel(gpu, &gpu.kernels.rgb_reduce, p, &inputs, &[4 * n_floats], [p.thread_count, 1, 1]);
-    let mut c = vec![SENTINEL_F32; n_floats];
-    cpu::rgb_reduce(p, &f.vertex_in_camera, &f.intensity, &f.prev_intensity, &f.prev_depth_m, &mut c);
-    (cast(&out[0]), c)
+fn run(gpu: &Gpu, p: &Params, f: &Frames) -> (Vec<f32>, Vec<f32>) {
+    let no_normals = vec![[f32::NAN; 4]; f.vertex_in_camera.len()];
+    let prev = previous(&f.k, &f.prev_intensity, &f.prev_depth_m);
+    let i = ReduceInputs { vertex: &f.vertex_in_camera, normal: &no_normals, predicted_vertex: &no_normals, predicted_normal: &no_normals, intensity: &f.intensity, previous: &prev };
+    let g = reduce_gpu_with(gpu, &p.0, &p.1, &i);
+    let c = reduce_cpu_with(&p.0, &p.1, &i);
+    assert!(c.iter().all(|v| *v != SENTINEL_F32), "the CPU twin fills every slot");
+    (g, c)
+}
+
+/// RMS of the photometric residuals of a set of partial sums.
+fn rgb_rms(partials: &[f32]) -> f64 {
+    let (mut r2, mut n) = (0.0f64, 0.0f64);
+    for b in partials.chunks_exact(SUM_FLOATS) {
+        r2 += f64::from(b[R2]);
+        n += f64::from(b[COUNT]);
+    }
+    if n == 0.0 { 0.0 } else { (r2 / n).sqrt() }
 }
 
 /// Bound on the GPU's error in the warped pixel position (|δu| + |δv|, pixels). The warp is
@@ -109,7 +135,7 @@ const PRODUCT_REL: f64 = 1e-6;
 /// position come from `rgb_row` itself on two ramp images: I = x gives g = (1, 0) and
 /// r = u - I_cur, I = y gives g = (0, 1) and r = v - I_cur. Counts and the padding zeros are
 /// exact.
-fn error_budget(p: &RgbReduceParams, f: &Frames) -> Vec<[Tolerance; SUM_FLOATS]> {
+fn error_budget(p: &Params, f: &Frames) -> Vec<[Tolerance; SUM_FLOATS]> {
     let (w, h) = (f.k.width_px as usize, f.k.height_px as usize);
     let img = &f.prev_intensity;
     // Largest step from each pixel to its right and lower neighbours.
@@ -134,12 +160,14 @@ fn error_budget(p: &RgbReduceParams, f: &Frames) -> Vec<[Tolerance; SUM_FLOATS]>
     };
     let ramp_x: Vec<f32> = (0..w * h).map(|i| (i % w) as f32).collect();
     let ramp_y: Vec<f32> = (0..w * h).map(|i| (i / w) as f32).collect();
-    let geometry_only = RgbReduceParams { max_residual: f32::INFINITY, ..*p };
+    let geometry_only = (TrackParams { rgb_max_residual: f32::INFINITY, ..p.0 }, p.1);
     let mut budget = vec![[0.0f64; SUM_FLOATS]; WORKGROUPS as usize];
+    let with_image = |img: Vec<f32>| Frames { prev_intensity: img, ..f.clone() };
+    let (actual, along_x, along_y) = (rgb_rows(p, f), rgb_rows(&geometry_only, &with_image(ramp_x)), rgb_rows(&geometry_only, &with_image(ramp_y)));
     for ix in 0..f.k.pixel_count() {
-        let Some(row) = rgb_row(p, ix, &f.vertex_in_camera, &f.intensity, &f.prev_intensity, &f.prev_depth_m) else { continue };
-        let cx = rgb_row(&geometry_only, ix, &f.vertex_in_camera, &f.intensity, &ramp_x, &f.prev_depth_m).expect("same geometry, same acceptance");
-        let cy = rgb_row(&geometry_only, ix, &f.vertex_in_camera, &f.intensity, &ramp_y, &f.prev_depth_m).expect("same geometry, same acceptance");
+        let Some(row) = actual[ix] else { continue };
+        let cx = along_x[ix].expect("same geometry, same acceptance");
+        let cy = along_y[ix].expect("same geometry, same acceptance");
         let eps = POSITION_ERR_PX * local_step(cx[6] + f.intensity[ix], cy[6] + f.intensity[ix]) + SAMPLE_ERR;
         // Values and their error bounds: J₀..J₅ then r.
         let v: [f64; 7] = row.map(f64::from);
@@ -227,7 +255,7 @@ fn assert_partial_sums_negative_control(what: &str, gpu: &[f32], cpu: &[f32], bu
 }
 
 /// Runs GPU and CPU and compares them within the error budget.
-fn run_and_compare(gpu: &Gpu, what: &str, p: &RgbReduceParams, f: &Frames) -> (Vec<f32>, Vec<f32>, Vec<[Tolerance; SUM_FLOATS]>, PartialStats) {
+fn run_and_compare(gpu: &Gpu, what: &str, p: &Params, f: &Frames) -> (Vec<f32>, Vec<f32>, Vec<[Tolerance; SUM_FLOATS]>, PartialStats) {
     let (g, c) = run(gpu, p, f);
     let budget = error_budget(p, f);
     let stats = compare_partial_sums(what, &g, &c, &budget).unwrap();
@@ -291,12 +319,13 @@ fn real_frames_match_cpu() {
         // The host's f64 sum and Cholesky solve of both: the same update to well within the
         // tracker's convergence threshold (1e-6).
         let (sg, sc) = (NormalEquations::from_partial_sums(&g), NormalEquations::from_partial_sums(&c));
-        assert_eq!(sg.inliers, sc.inliers, "{what}: inliers");
+        assert_eq!(sg.rgb_pairs, sc.rgb_pairs, "{what}: pairs");
+        assert_eq!(sg.inliers, 0, "{what}: no point-to-plane rows without normals");
         let (ug, uc) = (sg.solve().expect("GPU system solves"), sc.solve().expect("CPU system solves"));
         let diff = (ug - uc).amax();
-        eprintln!("{what}: RMS residual {:.4}, update {:?}, GPU - CPU {diff:e}", sc.rms_residual_m(), uc.as_slice());
+        eprintln!("{what}: RMS residual {:.4}, update {:?}, GPU - CPU {diff:e}", rgb_rms(&c), uc.as_slice());
         assert!(diff < 1e-7, "{what}: updates differ by {diff:e}: GPU {ug:?} vs CPU {uc:?}");
-        rms.push(sc.rms_residual_m());
+        rms.push(rgb_rms(&c));
     }
     finish(&gpu);
     assert!(rms[1] < rms[0], "the ground-truth pose explains the intensities better than identity: RMS {} vs {}", rms[1], rms[0]);
@@ -402,18 +431,14 @@ fn synthetic_room_has_zero_residual_at_the_true_pose() {
     assert_partial_sums_negative_control(what, &g, &c, &budget);
     let valid = frames.vertex_in_camera.iter().filter(|v| !v[2].is_nan()).count() as u64;
     assert!(stats.count > valid * 9 / 10, "nearly every unmasked pixel pairs up at the true pose: {} of {valid}", stats.count);
-    let system = NormalEquations::from_partial_sums(&g);
-    let rms = system.rms_residual_m();
-    let max_abs_r = (0..frames.k.pixel_count())
-        .filter_map(|ix| rgb_row(&p, ix, &frames.vertex_in_camera, &frames.intensity, &frames.prev_intensity, &frames.prev_depth_m))
-        .map(|row| row[6].abs())
-        .fold(0.0f32, f32::max);
+    let rms = rgb_rms(&g);
+    let max_abs_r = rgb_rows(&p, &frames).into_iter().flatten().map(|row| row[6].abs()).fold(0.0f32, f32::max);
     // Negative control of the property: at identity (the motion not applied) residuals are
     // far larger.
     let p0 = params(&frames, &Se3::IDENTITY, &Se3::IDENTITY, DEFAULT_RGB_MAX_DEPTH_DIFF_M, SYNTHETIC_MAX_RESIDUAL);
     let (g0, _, _, s0) = run_and_compare(&gpu, "partial_sums at identity", &p0, &frames);
     finish(&gpu);
-    let rms0 = NormalEquations::from_partial_sums(&g0).rms_residual_m();
+    let rms0 = rgb_rms(&g0);
     eprintln!("true pose: {stats:?} of {valid} unmasked, RMS residual {rms:e}, max |r| {max_abs_r:e}; identity: {s0:?}, RMS {rms0:e}");
     assert!(rms < TRUE_POSE_MAX_RMS, "RMS residual at the true pose {rms:e} >= {TRUE_POSE_MAX_RMS:e}");
     assert!(rms0 > 10.0 * rms, "identity has a much larger RMS residual: {rms0:e} vs {rms:e}");
@@ -440,9 +465,9 @@ fn gauss_newton_from_identity_recovers_the_synthetic_motion() {
         let (g, _, _, stats) = run_and_compare(&gpu, &format!("partial_sums at iteration {it}"), &p, &frames);
         let system = NormalEquations::from_partial_sums(&g);
         let update = system.solve().expect("the textured room constrains all six degrees of freedom");
-        estimate = twist_exp(&update) * estimate;
+        estimate = twist_exp(DVec3::new(update[0], update[1], update[2]), DVec3::new(update[3], update[4], update[5])) * estimate;
         let (angle, translation) = pose_error(&estimate, &truth);
-        eprintln!("iteration {it}: {stats:?}, RMS {:.3e}, then error {:.2e}° {:.2e} mm", system.rms_residual_m(), angle.to_degrees(), 1e3 * translation);
+        eprintln!("iteration {it}: {stats:?}, RMS {:.3e}, then error {:.2e}° {:.2e} mm", rgb_rms(&g), angle.to_degrees(), 1e3 * translation);
         errors.push((angle, translation));
     }
     finish(&gpu);

@@ -1,0 +1,578 @@
+// SPDX-License-Identifier: MIT
+//! KinectFusion (000-digest §1.3, §2.3) as a short composition of stages that own their
+//! buffers and record into one command encoder per frame:
+//!
+//! ```text
+//! preprocess   DepthPreprocessor     depth → filtered pyramid, vertices, normals, intensity
+//! track        IcpTracker            ICP + photometric, solved on the GPU, outcome decided there
+//! integrate    Mapper                TSDF fusion at the tracker's pose (skipped when lost)
+//! predict      Predictor             raycast at that pose, coarser levels downsampled;
+//!              IcpTracker            keep the frame as the next reference (when tracked)
+//! readback     ReadbackRing          the TrackState and GPU timestamps, collected late
+//! ```
+//!
+//! A frame is one submission with no host wait inside it: poses, convergence and the lost-frame
+//! checks stay on the GPU, and the host learns each frame's outcome from one small readback
+//! that completes a frame or more later ([`KinectFusion::submit_frame`],
+//! [`KinectFusion::poll_reports`]). The same stages recombine into other pipelines:
+//! [`pose_driven::PoseDrivenMapper`] fuses at given poses without tracking.
+//!
+//! Everything is async so the same code drives the browser (WebGPU) and native (Vulkan) builds.
+
+pub mod mapper;
+pub mod normal_equations;
+pub mod pose_driven;
+pub mod predictor;
+pub mod tracker;
+
+use std::collections::VecDeque;
+
+use web_time::Instant;
+
+pub use mapper::Mapper;
+pub use normal_equations::NormalEquations;
+pub use predictor::{Predictor, RaycastTarget};
+pub use tracker::IcpTracker;
+
+use crate::cpu::fusion::track_finish::outcome;
+use crate::engine::{FrameEncoder, ReadbackRing, StageTime, StageTimer};
+use crate::gpu::GpuCounts;
+use crate::kernels::track_solve::TrackState;
+use crate::preprocess::{DepthPreprocessor, PreprocessConfig};
+use crate::tsdf::{DenseTsdfVolume, TsdfConfig, TsdfStore};
+use crate::{Error, Gpu, Result, RgbdCalibration, RgbdFrame, Se3};
+
+pub use crate::pose::twist_exp;
+
+/// Default ICP iterations per pyramid level, finest first: at most KinectFusion's 10/5/4; a
+/// level stops as soon as it converges ([`DEFAULT_CONVERGED_UPDATE_M`]), so these are caps.
+pub const DEFAULT_ICP_ITERATIONS: [u32; 3] = [10, 5, 4];
+/// Default largest distance between corresponding points, metres.
+pub const DEFAULT_ICP_DIST_THRESH_M: f32 = 0.10;
+/// Default largest angle between corresponding normals, radians (20°).
+pub const DEFAULT_ICP_ANGLE_THRESH_RAD: f32 = 20.0 * std::f32::consts::PI / 180.0;
+/// Default smallest fraction of the finest level's pixels that must pair up for a frame to
+/// count as tracked.
+pub const DEFAULT_MIN_INLIER_FRACTION: f64 = 0.05;
+/// Default largest condition number (largest over smallest eigenvalue) of a level's scaled
+/// JᵀJ (rotation columns weighed by [`DEFAULT_ROTATION_SCALE_M`], normalised to trace 6 so its
+/// eigenvalues average 1): the numerical gate. f32 resolves the eigenvalues of that matrix to
+/// about 1e-6 (6 · 2⁻²³ of rounding per entry), so above 1e5 the smallest is a decade from
+/// being lost in rounding: the system is rank-deficient for an f32 solve (a single plane, a
+/// lone sphere's rotations), and its step is not taken.
+pub const DEFAULT_MAX_CONDITION: f32 = 1e5;
+/// Default largest condition number of the translation block of JᵀJ (its lower-right 3 × 3:
+/// the surface normals' outer products, plus the photometric gradients'): the geometric gate.
+/// A direction of translation no surface faces (along a corridor, across a single wall) still
+/// picks up the normals' orientation noise: normals δ off put about δ² of a faced direction's
+/// information into it. With δ ≈ 6° RMS (range-dependent Kinect normals), δ² ≈ 1 %: a
+/// translation direction with less than 1 % of the best one's information, a condition number
+/// above 100, is not observed, its step is not taken and, at the finest level, the frame is
+/// lost as ill-conditioned. For calibration, not tuning: a synthetic open corridor measures
+/// 2.0e2, the synthetic room 4.8; TUM fr1/rpy frames 7-14 and fr3/teddy up to 33 (photometric
+/// gradients, which favour the image plane, included; 6 without them).
+pub const DEFAULT_MAX_TRANSLATION_CONDITION: f32 = 100.0;
+/// Default length that scales JᵀJ's rotation columns for the conditioning check, metres (1 m:
+/// a radian weighs like a metre, the convention of KinectFusion-style gates).
+pub const DEFAULT_ROTATION_SCALE_M: f32 = 1.0;
+/// Default largest plausible translation between consecutive frames, metres.
+pub const DEFAULT_MAX_JUMP_M: f32 = 0.20;
+/// Default largest plausible rotation between consecutive frames, radians (25°).
+pub const DEFAULT_MAX_JUMP_RAD: f32 = 25.0 * std::f32::consts::PI / 180.0;
+/// Default Huber threshold on point-to-plane residuals, metres.
+pub const DEFAULT_HUBER_DELTA_M: f32 = 0.03;
+/// Default weight of the photometric term against the geometric one (0: depth only). The
+/// geometric rows are in metres and the photometric ones in intensity units ([0, 1]).
+pub const DEFAULT_RGB_WEIGHT: f32 = 0.03;
+/// Default largest accepted intensity residual.
+pub const DEFAULT_RGB_MAX_RESIDUAL: f32 = 0.3;
+/// Default largest depth disagreement for a photometric pair (visibility test), metres.
+pub const DEFAULT_RGB_MAX_DEPTH_DIFF_M: f32 = 0.05;
+/// A level of the full-resolution image converges once a Gauss-Newton update moves no point
+/// within [`DEFAULT_REFERENCE_DEPTH_M`] by more than this, metres: 0.1 mm is an order of
+/// magnitude below the Kinect's axial noise at its nearest range (σ ≈ 1.2 mm at 0.5 m), so
+/// further updates only chase noise. Level l uses 2^l times this (its pixels are 2^l wider).
+pub const DEFAULT_CONVERGED_UPDATE_M: f32 = 1e-4;
+/// Depth at which an update's rotation is turned into a displacement for the convergence test,
+/// metres (the far end of a room-scale Kinect view).
+pub const DEFAULT_REFERENCE_DEPTH_M: f32 = 3.0;
+/// Frames whose readback may be in flight before the host waits for the oldest.
+pub const MAX_FRAMES_IN_FLIGHT: usize = 2;
+
+/// ICP tracking settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IcpConfig {
+    /// Most iterations per pyramid level, finest (level 0) first; its length is the number of
+    /// levels used, at most the preprocessing pyramid's.
+    pub iterations_per_level: Vec<u32>,
+    /// Largest distance between corresponding points, metres.
+    pub dist_thresh_m: f32,
+    /// Largest angle between corresponding normals, radians.
+    pub angle_thresh_rad: f32,
+    /// Smallest fraction of level-0 pixels that must pair up.
+    pub min_inlier_fraction: f64,
+    /// Largest condition number of a scaled JᵀJ whose step is taken; at level 0, of a tracked
+    /// frame.
+    pub max_condition: f32,
+    /// Largest condition number of the translation block of a JᵀJ whose step is taken; at
+    /// level 0, of a tracked frame.
+    pub max_translation_condition: f32,
+    /// Length that scales the rotation columns for the condition number, metres.
+    pub rotation_scale_m: f32,
+    /// Largest plausible inter-frame translation, metres.
+    pub max_jump_m: f32,
+    /// Largest plausible inter-frame rotation, radians.
+    pub max_jump_rad: f32,
+    /// Huber threshold on point-to-plane residuals, metres (0: plain least squares).
+    pub huber_delta_m: f32,
+    /// Weight pairs by the Kinect axial noise model (far points count less).
+    pub noise_weighting: bool,
+    /// Weight of the photometric (previous-frame intensity) term; 0 turns it off.
+    pub rgb_weight: f32,
+    /// Largest accepted intensity residual of the photometric term.
+    pub rgb_max_residual: f32,
+    /// Largest depth disagreement of a photometric pair, metres.
+    pub rgb_max_depth_diff_m: f32,
+    /// Convergence: the level-0 update bound below which a level stops, metres.
+    pub converged_update_m: f32,
+    /// Depth at which rotations become displacements for the convergence test, metres.
+    pub reference_depth_m: f32,
+    /// Start each frame from the previous pose advanced by the last inter-frame motion
+    /// (constant velocity) instead of the previous pose.
+    pub constant_velocity: bool,
+}
+
+impl Default for IcpConfig {
+    fn default() -> Self {
+        Self {
+            iterations_per_level: DEFAULT_ICP_ITERATIONS.to_vec(),
+            dist_thresh_m: DEFAULT_ICP_DIST_THRESH_M,
+            angle_thresh_rad: DEFAULT_ICP_ANGLE_THRESH_RAD,
+            min_inlier_fraction: DEFAULT_MIN_INLIER_FRACTION,
+            max_condition: DEFAULT_MAX_CONDITION,
+            max_translation_condition: DEFAULT_MAX_TRANSLATION_CONDITION,
+            rotation_scale_m: DEFAULT_ROTATION_SCALE_M,
+            max_jump_m: DEFAULT_MAX_JUMP_M,
+            max_jump_rad: DEFAULT_MAX_JUMP_RAD,
+            constant_velocity: false,
+            huber_delta_m: DEFAULT_HUBER_DELTA_M,
+            rgb_weight: DEFAULT_RGB_WEIGHT,
+            rgb_max_residual: DEFAULT_RGB_MAX_RESIDUAL,
+            rgb_max_depth_diff_m: DEFAULT_RGB_MAX_DEPTH_DIFF_M,
+            converged_update_m: DEFAULT_CONVERGED_UPDATE_M,
+            reference_depth_m: DEFAULT_REFERENCE_DEPTH_M,
+            noise_weighting: true,
+        }
+    }
+}
+
+/// Settings of the whole pipeline.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct FusionConfig {
+    /// Depth preprocessing.
+    pub preprocess: PreprocessConfig,
+    /// The TSDF volume.
+    pub tsdf: TsdfConfig,
+    /// Tracking.
+    pub icp: IcpConfig,
+}
+
+impl FusionConfig {
+    /// Rejects settings the pipeline cannot honour, naming the offending one.
+    pub fn validate(&self) -> Result<()> {
+        self.preprocess.validate()?;
+        // The device's binding limit is checked again when the volume is allocated.
+        self.tsdf.validate(u64::MAX)?;
+        let icp = &self.icp;
+        let levels = icp.iterations_per_level.len();
+        let bad = |m: String| Err(Error::InvalidConfig(m));
+        if levels == 0 || levels > self.preprocess.pyramid_levels {
+            return bad(format!("ICP uses {levels} levels but preprocessing builds {}", self.preprocess.pyramid_levels));
+        }
+        if icp.iterations_per_level.iter().all(|&n| n == 0) {
+            return bad("ICP needs at least one iteration".into());
+        }
+        if icp.iterations_per_level.iter().any(|&n| n > 100) {
+            return bad(format!("ICP iterations {:?}: at most 100 per level", icp.iterations_per_level));
+        }
+        let positive = |v: f32| v > 0.0 && v.is_finite();
+        let non_negative = |v: f32| v >= 0.0 && v.is_finite();
+        if !non_negative(icp.huber_delta_m) {
+            return bad(format!("the Huber threshold must be >= 0 m, got {}", icp.huber_delta_m));
+        }
+        if !positive(icp.dist_thresh_m) || !positive(icp.angle_thresh_rad) {
+            return bad(format!("ICP thresholds must be positive, got {} m and {} rad", icp.dist_thresh_m, icp.angle_thresh_rad));
+        }
+        if !non_negative(icp.rgb_weight) || !positive(icp.rgb_max_residual) || !positive(icp.rgb_max_depth_diff_m) {
+            return bad(format!("photometric weight {} must be >= 0 and its thresholds positive", icp.rgb_weight));
+        }
+        if !positive(icp.converged_update_m) || !positive(icp.reference_depth_m) {
+            return bad("the convergence threshold and reference depth must be positive".into());
+        }
+        if !(icp.min_inlier_fraction >= 0.0 && icp.min_inlier_fraction <= 1.0) {
+            return bad(format!("the inlier fraction {} must be in [0, 1]", icp.min_inlier_fraction));
+        }
+        if !positive(icp.max_condition) || !positive(icp.max_translation_condition) || !positive(icp.max_jump_m) || !positive(icp.max_jump_rad) || !positive(icp.rotation_scale_m) {
+            return bad("the lost-frame limits must be positive".into());
+        }
+        Ok(())
+    }
+}
+
+/// Why a frame was not tracked.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LostReason {
+    /// Too few correspondences at the finest level.
+    TooFewInliers {
+        /// Pairs found.
+        inliers: u64,
+        /// Pairs required.
+        required: u64,
+    },
+    /// The finest level's scaled normal equations were (nearly) singular: the geometry does
+    /// not constrain all six degrees of freedom (e.g. a single plane, a corridor).
+    IllConditioned {
+        /// Largest / smallest eigenvalue of the scaled JᵀJ (see [`DEFAULT_MAX_CONDITION`]).
+        condition: f64,
+        /// Largest / smallest eigenvalue of its translation block (see
+        /// [`DEFAULT_MAX_TRANSLATION_CONDITION`]).
+        translation_condition: f64,
+    },
+    /// The estimated motion since the last tracked frame is implausibly large.
+    ImplausibleJump {
+        /// Translation, metres.
+        translation_m: f64,
+        /// Rotation, radians.
+        rotation_rad: f64,
+    },
+}
+
+/// Outcome of tracking one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TrackingState {
+    /// The first frame: it defines the world frame.
+    Initialised,
+    /// Tracked.
+    Tracked,
+    /// Tracked again after one or more lost frames.
+    Recovered,
+    /// Not tracked: the pose is the last good one and the frame was not fused.
+    Lost(LostReason),
+}
+
+impl TrackingState {
+    /// Whether the frame was not fused.
+    pub fn is_lost(&self) -> bool {
+        matches!(self, Self::Lost(_))
+    }
+
+    /// Short name for logs and status JSON.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Initialised => "initialised",
+            Self::Tracked => "tracked",
+            Self::Recovered => "recovered",
+            Self::Lost(_) => "lost",
+        }
+    }
+}
+
+/// ICP statistics of one pyramid level.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct IcpLevelStats {
+    /// Pyramid level (0 = full resolution).
+    pub level: usize,
+    /// Iterations run.
+    pub iterations: u32,
+    /// Correspondences in the last iteration.
+    pub inliers: u64,
+    /// Photometric pairs in the last iteration.
+    pub rgb_pairs: u64,
+    /// RMS point-to-plane residual of the last iteration, metres.
+    pub rms_residual_m: f64,
+    /// Condition number of the last iteration's scaled system.
+    pub condition: f64,
+    /// Condition number of its translation block.
+    pub translation_condition: f64,
+    /// Bound on the last update's displacement, metres.
+    pub last_update_m: f64,
+}
+
+/// Time of each stage of one frame, milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageTimesMs {
+    /// Preprocessing.
+    pub preprocess: f64,
+    /// Tracking (every level and iteration, the solves included).
+    pub track: f64,
+    /// TSDF integration.
+    pub integrate: f64,
+    /// Surface prediction and keeping the reference.
+    pub raycast: f64,
+    /// The whole frame.
+    pub total: f64,
+}
+
+impl StageTimesMs {
+    /// From the GPU times of the frame's stages.
+    pub fn from_stages(stages: &[StageTime]) -> Self {
+        let get = |name: &str| stages.iter().filter(|s| s.name == name).map(|s| s.gpu_ms).sum::<f64>();
+        Self { preprocess: get("preprocess"), track: get("track"), integrate: get("integrate"), raycast: get("predict"), total: stages.iter().map(|s| s.gpu_ms).sum() }
+    }
+}
+
+/// What the pipeline reports about one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameReport {
+    /// The frame's index in its source.
+    pub index: u64,
+    /// The camera pose used for this frame (the last good one when lost).
+    pub world_from_camera: Se3,
+    /// Tracking outcome.
+    pub state: TrackingState,
+    /// ICP statistics, coarsest level first (empty for the first frame).
+    pub icp: Vec<IcpLevelStats>,
+    /// GPU time per stage from timestamp queries, when the device has them.
+    pub gpu_ms: Option<StageTimesMs>,
+    /// Host time to upload, record and submit the frame, milliseconds.
+    pub encode_ms: f64,
+    /// Wall clock from the start of the submission to the report's collection, milliseconds
+    /// (includes the time the report waited for the next frame's submission to be collected).
+    pub latency_ms: f64,
+    /// What the host did with the GPU while submitting this frame: submissions, waits (0
+    /// unless every readback slot was in flight) and readbacks (1: its summary).
+    pub host: GpuCounts,
+}
+
+/// What a frame's readback slot carries besides its bytes.
+#[derive(Debug)]
+struct FrameTag {
+    index: u64,
+    run: u64,
+    stages: Vec<&'static str>,
+    submitted_at: Instant,
+    encode_ms: f64,
+    host: GpuCounts,
+}
+
+/// Byte offset of the timestamps in a frame's readback (after the `TrackState`).
+const TIMESTAMPS_OFFSET: u64 = tracker::TRACK_STATE_BYTES.next_multiple_of(8);
+
+/// The KinectFusion pipeline on one GPU, for one camera.
+#[derive(Debug)]
+pub struct KinectFusion {
+    config: FusionConfig,
+    preprocessor: DepthPreprocessor,
+    tracker: IcpTracker,
+    mapper: Mapper,
+    predictor: Predictor,
+    timer: Option<StageTimer>,
+    readbacks: ReadbackRing<FrameTag>,
+    reports: VecDeque<FrameReport>,
+    run: u64,
+    frames_submitted: usize,
+    last_pose: Se3,
+}
+
+impl KinectFusion {
+    /// Allocates the pipeline for `calibration`'s camera. The first frame's camera defines the
+    /// world frame, and the volume is placed relative to it by the config's placement.
+    pub fn new(gpu: &Gpu, calibration: RgbdCalibration, config: FusionConfig) -> Result<Self> {
+        config.validate()?;
+        let preprocessor = DepthPreprocessor::new(gpu, calibration, config.preprocess)?;
+        // The tracker's state buffer is the pose source of the mapper and predictor: they are
+        // built around it, then the tracker around the predictor's maps.
+        let state = tracker::state_buffer(gpu);
+        let origin = config.tsdf.origin_for_first_camera(&Se3::IDENTITY);
+        let mapper = Mapper::new(gpu, config.tsdf, origin, &preprocessor, &state)?;
+        let depth_range = (config.preprocess.min_depth_m, config.preprocess.max_depth_m);
+        let predictor = Predictor::new(gpu, mapper.volume(), preprocessor.levels[0].intrinsics, config.icp.iterations_per_level.len(), &state, Some(Mapper::fused_depth(&preprocessor)), depth_range);
+        let tracker = IcpTracker::new(gpu, &config.icp, &preprocessor, &predictor, state)?;
+        let timer = StageTimer::new(gpu, "core.fusion");
+        let readbacks = ReadbackRing::new(gpu, "core.fusion", TIMESTAMPS_OFFSET + StageTimer::BYTES, MAX_FRAMES_IN_FLIGHT);
+        Ok(Self { config, preprocessor, tracker, mapper, predictor, timer, readbacks, reports: VecDeque::new(), run: 0, frames_submitted: 0, last_pose: Se3::IDENTITY })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &FusionConfig {
+        &self.config
+    }
+
+    /// The TSDF store (for mesh extraction and free-view raycasts).
+    pub fn volume(&self) -> &DenseTsdfVolume {
+        self.mapper.volume()
+    }
+
+    /// The preprocessing chain (its buffers feed the views).
+    pub fn preprocessor(&self) -> &DepthPreprocessor {
+        &self.preprocessor
+    }
+
+    /// The predicted surface at full resolution, rendered from the last tracked pose.
+    pub fn prediction(&self) -> &RaycastTarget {
+        self.predictor.finest()
+    }
+
+    /// The tracker (its state buffer holds the current pose on the GPU).
+    pub fn tracker(&self) -> &IcpTracker {
+        &self.tracker
+    }
+
+    /// The pose of the last frame whose report was collected (the last good one after a loss).
+    pub fn world_from_camera(&self) -> Se3 {
+        self.last_pose
+    }
+
+    /// Frames submitted since the last reset.
+    pub fn frames_submitted(&self) -> usize {
+        self.frames_submitted
+    }
+
+    /// Whether reports carry GPU stage times (the device has timestamp queries).
+    pub fn timer_available(&self) -> bool {
+        self.timer.is_some()
+    }
+
+    /// Frames whose readback is still in flight.
+    pub fn frames_in_flight(&self) -> usize {
+        self.readbacks.in_flight()
+    }
+
+    /// Forgets the model and the trajectory: the next frame starts a new world frame. Reports
+    /// of frames still in flight are dropped.
+    pub fn reset(&mut self, gpu: &Gpu) {
+        self.mapper.volume().reset(gpu);
+        self.tracker.reset(gpu);
+        self.run += 1;
+        self.frames_submitted = 0;
+        self.reports.clear();
+        self.last_pose = Se3::IDENTITY;
+    }
+
+    /// Starts the next frame's tracking from `world_from_camera` (e.g. given poses used as an
+    /// initial guess).
+    pub fn set_initial_guess(&self, gpu: &Gpu, world_from_camera: &Se3) {
+        self.tracker.set_guess(gpu, world_from_camera);
+    }
+
+    /// Uploads `frame` and submits its whole pipeline as one command buffer. Never waits for
+    /// the GPU unless [`MAX_FRAMES_IN_FLIGHT`] readbacks are pending (then for the oldest).
+    /// Reports arrive through [`Self::poll_reports`] or [`Self::flush`].
+    pub async fn submit_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<()> {
+        gpu.check_lost()?;
+        let started = Instant::now();
+        let before = gpu.counters.snapshot();
+        while self.readbacks.free_slot().is_none() {
+            if let Some(done) = self.readbacks.wait_oldest(gpu).await? {
+                self.finish_report(done.tag, &done.bytes)?;
+            }
+        }
+        self.preprocessor.upload(gpu, frame)?;
+        let mut fe = FrameEncoder::new(gpu, "core.fusion.frame", self.timer.as_ref());
+        self.preprocessor.encode_in(gpu, &mut fe.stage("preprocess"));
+        self.tracker.encode_in(gpu, &mut fe.stage("track"));
+        self.mapper.encode_in(gpu, &mut fe.stage("integrate"));
+        {
+            let mut pass = fe.stage("predict");
+            self.predictor.encode_in(gpu, &mut pass);
+            self.tracker.encode_keep_previous(gpu, &mut pass);
+        }
+        let (slot, slot_buffer) = self.readbacks.free_slot().expect("a readback slot was freed above");
+        fe.encoder().copy_buffer_to_buffer(self.tracker.state_buffer(), 0, slot_buffer, 0, tracker::TRACK_STATE_BYTES);
+        let (commands, stages) = fe.finish(Some((slot_buffer, TIMESTAMPS_OFFSET)));
+        let submission = gpu.submit([commands]);
+        let mut host = gpu.counters.snapshot() - before;
+        host.readbacks += 1;
+        let tag = FrameTag { index: frame.index, run: self.run, stages, submitted_at: started, encode_ms: ms_since(started), host };
+        self.readbacks.start(gpu, slot, submission, tag);
+        self.frames_submitted += 1;
+        for done in self.readbacks.collect(gpu)? {
+            self.finish_report(done.tag, &done.bytes)?;
+        }
+        Ok(())
+    }
+
+    /// Reports of frames whose readback completed, oldest first (never waits).
+    pub fn poll_reports(&mut self, gpu: &Gpu) -> Result<Vec<FrameReport>> {
+        for done in self.readbacks.collect(gpu)? {
+            self.finish_report(done.tag, &done.bytes)?;
+        }
+        Ok(self.reports.drain(..).collect())
+    }
+
+    /// Waits for every frame in flight and returns all pending reports, oldest first.
+    pub async fn flush(&mut self, gpu: &Gpu) -> Result<Vec<FrameReport>> {
+        while let Some(done) = self.readbacks.wait_oldest(gpu).await? {
+            self.finish_report(done.tag, &done.bytes)?;
+        }
+        Ok(self.reports.drain(..).collect())
+    }
+
+    /// Tracks, fuses and predicts one frame and waits for its report (one host wait per frame:
+    /// for tests and one-shot tools; streaming callers use [`Self::submit_frame`]).
+    pub async fn process_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<FrameReport> {
+        self.submit_frame(gpu, frame).await?;
+        let reports = self.flush(gpu).await?;
+        reports.into_iter().rev().find(|r| r.index == frame.index).ok_or_else(|| Error::Poll(format!("frame {} produced no report", frame.index)))
+    }
+
+    fn finish_report(&mut self, tag: FrameTag, bytes: &[u8]) -> Result<()> {
+        if tag.run != self.run {
+            return Ok(());
+        }
+        let state: TrackState = bytemuck::pod_read_unaligned(&bytes[..tracker::TRACK_STATE_BYTES as usize]);
+        let gpu_ms = self.timer.as_ref().map(|timer| {
+            let n = 2 * tag.stages.len();
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[TIMESTAMPS_OFFSET as usize..][..8 * n]);
+            StageTimesMs::from_stages(&timer.stage_times(&tag.stages, &ticks))
+        });
+        let report = report_from_state(&state, &self.config, self.preprocessor.levels[0].intrinsics.pixel_count(), tag.index, gpu_ms, tag.encode_ms, ms_since(tag.submitted_at), tag.host);
+        self.last_pose = report.world_from_camera;
+        self.reports.push_back(report);
+        Ok(())
+    }
+}
+
+/// The frame report a read-back `TrackState` describes.
+#[expect(clippy::too_many_arguments, reason = "the state plus what the host measured around it")]
+pub fn report_from_state(state: &TrackState, config: &FusionConfig, pixels: usize, index: u64, gpu_ms: Option<StageTimesMs>, encode_ms: f64, latency_ms: f64, host: GpuCounts) -> FrameReport {
+    let finest = state.levels[0];
+    let tracking = match state.outcome {
+        outcome::INITIALISED => TrackingState::Initialised,
+        outcome::TRACKED => TrackingState::Tracked,
+        outcome::RECOVERED => TrackingState::Recovered,
+        outcome::LOST_TOO_FEW_INLIERS => {
+            let required = (config.icp.min_inlier_fraction * pixels as f64).ceil() as u64;
+            TrackingState::Lost(LostReason::TooFewInliers { inliers: u64::from(finest.inliers), required })
+        }
+        outcome::LOST_ILL_CONDITIONED => {
+            TrackingState::Lost(LostReason::IllConditioned { condition: f64::from(finest.condition), translation_condition: f64::from(finest.translation_condition) })
+        }
+        _ => TrackingState::Lost(LostReason::ImplausibleJump { translation_m: f64::from(state.jump_translation_m), rotation_rad: f64::from(state.jump_rotation_rad) }),
+    };
+    let icp = if tracking == TrackingState::Initialised {
+        Vec::new()
+    } else {
+        (0..config.icp.iterations_per_level.len())
+            .rev()
+            .map(|l| {
+                let s = state.levels[l];
+                IcpLevelStats {
+                    level: l,
+                    iterations: s.iterations,
+                    inliers: u64::from(s.inliers),
+                    rgb_pairs: u64::from(s.rgb_pairs),
+                    rms_residual_m: f64::from(s.rms_residual_m),
+                    condition: f64::from(s.condition),
+                    translation_condition: f64::from(s.translation_condition),
+                    last_update_m: f64::from(s.last_update_m),
+                }
+            })
+            .collect()
+    };
+    FrameReport { index, world_from_camera: Se3::from_cols_f32(&state.pose.world_from_camera), state: tracking, icp, gpu_ms, encode_ms, latency_ms, host }
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}

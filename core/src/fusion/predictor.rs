@@ -1,0 +1,211 @@
+// SPDX-License-Identifier: MIT
+//! The predictor stage: raycasts the map at any pose and intrinsics ([`RaycastTarget`]), and
+//! the prediction pyramid the tracker aligns against ([`Predictor`]: the finest level raycast,
+//! the coarser ones downsampled from it by `prediction_down`, as KinectFusion does).
+
+use crate::kernels::prediction_down::{self, PredictionDownParams};
+use crate::kernels::raycast::{self, CameraPose, DEFAULT_MAX_STEPS, DEFAULT_STEP_FACTOR, RaycastParams};
+use crate::kernels::GpuIntrinsics;
+use crate::tsdf::TsdfStore;
+use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
+
+/// A storage buffer holding one [`CameraPose`], written by the host.
+pub fn pose_buffer(gpu: &Gpu, label: &str, world_from_camera: Option<&Se3>) -> wgpu::Buffer {
+    let buffer = gpu.storage_buffer::<CameraPose>(label, 1);
+    gpu.write_buffer(&buffer, &[camera_pose(world_from_camera)]);
+    buffer
+}
+
+/// The [`CameraPose`] of `world_from_camera`, or a disabled one for `None`.
+pub fn camera_pose(world_from_camera: Option<&Se3>) -> CameraPose {
+    match world_from_camera {
+        Some(p) => crate::cpu::shared::camera_pose(&p.to_cols_f32(), 1),
+        None => CameraPose::default(),
+    }
+}
+
+/// Images `raycast` renders at one resolution, bound to a store and a pose buffer.
+#[derive(Debug)]
+pub struct RaycastTarget {
+    /// Intrinsics of the images.
+    pub intrinsics: PinholeIntrinsics,
+    /// Surface points (x, y, z, 1), world frame.
+    pub vertex_in_world: wgpu::Buffer,
+    /// Unit normals, world frame.
+    pub normal_in_world: wgpu::Buffer,
+    /// Depth along the camera's z, metres (NaN: no surface): the virtual depth sensor.
+    pub depth_m: wgpu::Buffer,
+    /// Model colour, RGBA8 per pixel.
+    pub color_rgba8: wgpu::Buffer,
+    params: wgpu::Buffer,
+    pose: wgpu::Buffer,
+    owns_pose: bool,
+    hint_margin_m: Option<f32>,
+    bind_group: wgpu::BindGroup,
+}
+
+impl RaycastTarget {
+    /// Images for `intrinsics`, rendered from a pose this target owns ([`Self::set_pose`]).
+    pub fn new(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, label: &str) -> Self {
+        let pose = pose_buffer(gpu, &format!("core.raycast.{label}.pose"), None);
+        Self::build(gpu, store, intrinsics, pose, true, None, label)
+    }
+
+    /// Images for `intrinsics`, rendered from the pose another stage writes into `pose` (a
+    /// `CameraPose` at offset 0: the tracker's state). With `depth_hint`, the depth just fused
+    /// at that pose and the truncation distance, each ray starts near the measured surface.
+    pub fn with_pose_buffer(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, pose: &wgpu::Buffer, depth_hint: Option<&wgpu::Buffer>, label: &str) -> Self {
+        match depth_hint {
+            Some(hint) => Self::build(gpu, store, intrinsics, pose.clone(), false, Some((hint, store.desc().truncation_m)), label),
+            None => Self::build(gpu, store, intrinsics, pose.clone(), false, None, label),
+        }
+    }
+
+    fn build(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, pose: wgpu::Buffer, owns_pose: bool, hint: Option<(&wgpu::Buffer, f32)>, label: &str) -> Self {
+        let n = intrinsics.pixel_count();
+        let name = |what: &str| format!("core.raycast.{label}.{what}");
+        let vertex_in_world = gpu.storage_buffer::<[f32; 4]>(&name("vertex_in_world"), n);
+        let normal_in_world = gpu.storage_buffer::<[f32; 4]>(&name("normal_in_world"), n);
+        let depth_m = gpu.storage_buffer::<f32>(&name("depth_m"), n);
+        let color_rgba8 = gpu.storage_buffer::<u32>(&name("color_rgba8"), n);
+        let params = gpu.uniform_buffer(&name("params"), &RaycastParams::default());
+        let placeholder;
+        let depth_hint_m = match hint {
+            Some((buffer, _)) => buffer,
+            None => {
+                placeholder = gpu.storage_buffer::<f32>(&name("no_depth_hint"), 1);
+                &placeholder
+            }
+        };
+        let bind_group = raycast::Bindings {
+            params: &params,
+            pose: &pose,
+            tsdf_volume: store.voxels(),
+            color_volume: store.colors(),
+            vertex_in_world: &vertex_in_world,
+            normal_in_world: &normal_in_world,
+            depth_m: &depth_m,
+            color_rgba8: &color_rgba8,
+            depth_hint_m,
+        }
+        .bind_group(gpu);
+        Self { intrinsics, vertex_in_world, normal_in_world, depth_m, color_rgba8, params, pose, owns_pose, hint_margin_m: hint.map(|h| h.1), bind_group }
+    }
+
+    /// Sets the volume description and depth range the kernel marches with.
+    pub fn set_params(&self, gpu: &Gpu, store: &dyn TsdfStore, depth_range_m: (f32, f32)) {
+        let p = RaycastParams {
+            volume: store.desc(),
+            intrinsics: GpuIntrinsics::from(self.intrinsics),
+            min_depth_m: depth_range_m.0,
+            max_depth_m: depth_range_m.1,
+            step_factor: DEFAULT_STEP_FACTOR,
+            max_steps: DEFAULT_MAX_STEPS,
+            use_depth_hint: u32::from(self.hint_margin_m.is_some()),
+            hint_margin_m: self.hint_margin_m.unwrap_or(0.0),
+            ..Default::default()
+        };
+        gpu.write_buffer(&self.params, std::slice::from_ref(&p));
+    }
+
+    /// Sets the pose of a target that owns its pose buffer.
+    pub fn set_pose(&self, gpu: &Gpu, world_from_camera: &Se3) -> Result<()> {
+        if !self.owns_pose {
+            return Err(Error::InvalidConfig("this raycast target renders from another stage's pose; it cannot be set".into()));
+        }
+        gpu.write_buffer(&self.pose, &[camera_pose(Some(world_from_camera))]);
+        Ok(())
+    }
+
+    /// Records the raycast into an open compute pass.
+    pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        gpu.kernels.raycast.dispatch_in(pass, &self.bind_group, [self.intrinsics.width_px, self.intrinsics.height_px, 1]);
+    }
+
+    /// Renders `store` from `world_from_camera` (a target that owns its pose): sets the
+    /// parameters and pose, and records the raycast in a pass of its own.
+    pub fn render(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, store: &dyn TsdfStore, world_from_camera: &Se3, depth_range_m: (f32, f32)) -> Result<()> {
+        self.set_params(gpu, store, depth_range_m);
+        self.set_pose(gpu, world_from_camera)?;
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.raycast"), timestamp_writes: None });
+        self.encode_in(gpu, &mut pass);
+        Ok(())
+    }
+}
+
+/// The predicted surface of one coarser pyramid level.
+#[derive(Debug)]
+pub struct PredictedLevel {
+    /// Intrinsics of this level.
+    pub intrinsics: PinholeIntrinsics,
+    /// Predicted vertices, world frame.
+    pub vertex_in_world: wgpu::Buffer,
+    /// Predicted normals, world frame.
+    pub normal_in_world: wgpu::Buffer,
+    _params: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+}
+
+/// The prediction pyramid: level 0 raycast from a pose buffer, the others downsampled.
+#[derive(Debug)]
+pub struct Predictor {
+    finest: RaycastTarget,
+    coarser: Vec<PredictedLevel>,
+}
+
+impl Predictor {
+    /// `levels` levels of `intrinsics` (level 0 = full resolution), rendered from the pose in
+    /// `pose`; `depth_hint` is the depth fused at that pose (see
+    /// [`RaycastTarget::with_pose_buffer`]).
+    pub fn new(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, levels: usize, pose: &wgpu::Buffer, depth_hint: Option<&wgpu::Buffer>, depth_range_m: (f32, f32)) -> Self {
+        let finest = RaycastTarget::with_pose_buffer(gpu, store, intrinsics, pose, depth_hint, "predicted[0]");
+        finest.set_params(gpu, store, depth_range_m);
+        let mut coarser: Vec<PredictedLevel> = Vec::new();
+        for l in 1..levels.max(1) {
+            let (fine_k, k) = (intrinsics.pyramid_level(l - 1), intrinsics.pyramid_level(l));
+            let n = k.pixel_count();
+            let vertex_in_world = gpu.storage_buffer::<[f32; 4]>(&format!("core.predicted[{l}].vertex_in_world"), n);
+            let normal_in_world = gpu.storage_buffer::<[f32; 4]>(&format!("core.predicted[{l}].normal_in_world"), n);
+            let p = PredictionDownParams { src_width_px: fine_k.width_px, src_height_px: fine_k.height_px, dst_width_px: k.width_px, dst_height_px: k.height_px };
+            let params = gpu.uniform_buffer(&format!("core.prediction_down.params[{l}]"), &p);
+            let (vertex_fine, normal_fine) = match coarser.last() {
+                Some(c) => (&c.vertex_in_world, &c.normal_in_world),
+                None => (&finest.vertex_in_world, &finest.normal_in_world),
+            };
+            let bind_group = prediction_down::Bindings { params: &params, vertex_fine, normal_fine, vertex_coarse: &vertex_in_world, normal_coarse: &normal_in_world }.bind_group(gpu);
+            coarser.push(PredictedLevel { intrinsics: k, vertex_in_world, normal_in_world, _params: params, bind_group });
+        }
+        Self { finest, coarser }
+    }
+
+    /// The raycast images of the finest level (vertex, normal, depth, shaded, colour).
+    pub fn finest(&self) -> &RaycastTarget {
+        &self.finest
+    }
+
+    /// Levels, finest first.
+    pub fn levels(&self) -> usize {
+        1 + self.coarser.len()
+    }
+
+    /// The predicted vertex and normal maps of `level`.
+    pub fn level(&self, level: usize) -> (&wgpu::Buffer, &wgpu::Buffer) {
+        match level {
+            0 => (&self.finest.vertex_in_world, &self.finest.normal_in_world),
+            l => (&self.coarser[l - 1].vertex_in_world, &self.coarser[l - 1].normal_in_world),
+        }
+    }
+
+    /// Changes the depth range of the raycast.
+    pub fn set_depth_range(&self, gpu: &Gpu, store: &dyn TsdfStore, depth_range_m: (f32, f32)) {
+        self.finest.set_params(gpu, store, depth_range_m);
+    }
+
+    /// Records the raycast (skipped on the GPU when the pose is disabled) and the downsampling.
+    pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        self.finest.encode_in(gpu, pass);
+        for c in &self.coarser {
+            gpu.kernels.prediction_down.dispatch_in(pass, &c.bind_group, [c.intrinsics.width_px, c.intrinsics.height_px, 1]);
+        }
+    }
+}
