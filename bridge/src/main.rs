@@ -104,6 +104,10 @@ struct BenchArgs {
     /// Untimed runs first (the first pass over new buffers is slow on lavapipe).
     #[arg(long, default_value_t = 5)]
     warmup: usize,
+    /// Frames fused with the default KinectFusion pipeline before its stages are timed one
+    /// by one on the next frame (0: preprocessing only).
+    #[arg(long, default_value_t = 10)]
+    fusion_frames: usize,
     #[command(flatten)]
     calibration: CalibrationArgs,
 }
@@ -317,6 +321,49 @@ fn bench(options: &GpuOptions, args: &BenchArgs) -> anyhow::Result<()> {
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
     println!("preprocessing kernels at {}x{} on {}", k.width_px, k.height_px, gpu.adapter_summary());
     println!("wall-clock per submission (submit + wait), median of {} after {} warm-up runs", args.iterations, args.warmup);
+    times.print();
+    if args.fusion_frames > 0 {
+        bench_fusion(&gpu, source.as_mut(), args)?;
+    }
+    Ok(())
+}
+
+/// Fuses the first frames with the default pipeline, then times each stage of the next frame
+/// alone (one submission each, repeated): what a frame's GPU time is made of.
+fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> anyhow::Result<()> {
+    use webfusion_core::fusion::{FusionConfig, KinectFusion};
+    let n = args.fusion_frames.min(source.frame_count().saturating_sub(1));
+    let mut fusion = KinectFusion::new(gpu, source.calibration(), FusionConfig::default())?;
+    for i in 0..n {
+        pollster::block_on(fusion.submit_frame(gpu, &source.read_frame(i)?))?;
+    }
+    pollster::block_on(fusion.flush(gpu))?;
+    let frame = source.read_frame(n)?;
+    fusion.preprocessor().upload(gpu, &frame)?;
+    type Stage<'a> = (&'static str, Box<dyn Fn(&mut wgpu::ComputePass<'_>) + 'a>);
+    let stages: Vec<Stage> = vec![
+        ("preprocess (whole chain)", Box::new(|p| fusion.preprocessor().encode_in(gpu, p))),
+        ("track (every level, to convergence)", Box::new(|p| fusion.tracker().encode_in(gpu, p))),
+        ("integrate", Box::new(|p| fusion.mapper().encode_in(gpu, p))),
+        ("raycast + prediction pyramid", Box::new(|p| fusion.predictor().encode_in(gpu, p))),
+        ("keep the reference", Box::new(|p| fusion.tracker().encode_keep_previous(gpu, p))),
+    ];
+    let mut times = StageTimes::default();
+    for iteration in 0..args.warmup + args.iterations {
+        for (name, encode) in &stages {
+            let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("webfusion.bench.fusion") });
+            encode(&mut encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(name), timestamp_writes: None }));
+            let sw = Stopwatch::start();
+            pollster::block_on(gpu.submit_and_wait(encoder))?;
+            if iteration >= args.warmup {
+                times.record(name, sw.ms());
+            }
+        }
+    }
+    let errors = gpu.take_errors();
+    anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
+    let t = &fusion.config().tsdf;
+    println!("\nKinectFusion stages after {n} fused frames, default settings ({}³ voxels of {:.1} mm), each stage alone", t.dims_voxels[0], t.voxel_size_m * 1e3);
     times.print();
     Ok(())
 }

@@ -105,6 +105,11 @@ pub struct TsdfSample {
     pub valid: bool,
 }
 
+/// Twin of WGSL `mix(a, b, t)`.
+pub fn mix(a: f32, b: f32, t: f32) -> f32 {
+    a * (1.0 - t) + b * t
+}
+
 /// Twin of `sample_tsdf()`, reading `tsdf_volume`.
 pub fn sample_tsdf(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> TsdfSample {
     let origin = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
@@ -117,19 +122,15 @@ pub fn sample_tsdf(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> Ts
     }
     let b = base_f.map(|v| v as u32);
     let f: [f32; 3] = std::array::from_fn(|i| g[i] - base_f[i]);
-    let mut acc = 0.0f32;
-    for corner in 0..8u32 {
-        let o = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
-        let word = tsdf_volume[voxel_index(d, b[0] + o[0], b[1] + o[1], b[2] + o[2]) as usize];
-        if voxel_weight(word) == 0 {
-            return invalid;
-        }
-        let wx = if o[0] == 1 { f[0] } else { 1.0 - f[0] };
-        let wy = if o[1] == 1 { f[1] } else { 1.0 - f[1] };
-        let wz = if o[2] == 1 { f[2] } else { 1.0 - f[2] };
-        acc += wx * wy * wz * voxel_tsdf(word);
-    }
-    TsdfSample { tsdf: acc, valid: true }
+    let at = |dx: u32, dy: u32, dz: u32| tsdf_volume[voxel_index(d, b[0] + dx, b[1] + dy, b[2] + dz) as usize];
+    let w = [at(0, 0, 0), at(1, 0, 0), at(0, 1, 0), at(1, 1, 0), at(0, 0, 1), at(1, 0, 1), at(0, 1, 1), at(1, 1, 1)];
+    let observed = w.iter().copied().min().unwrap_or(0) >= 0x1_0000;
+    let t = w.map(voxel_tsdf);
+    let x00 = mix(t[0], t[1], f[0]);
+    let x10 = mix(t[2], t[3], f[0]);
+    let x01 = mix(t[4], t[5], f[0]);
+    let x11 = mix(t[6], t[7], f[0]);
+    TsdfSample { tsdf: mix(mix(x00, x10, f[1]), mix(x01, x11, f[1]), f[2]), valid: observed }
 }
 
 /// `m * v` for a column-major 4x4 matrix, as WGSL `mat4x4<f32> * vec4<f32>`.

@@ -5,6 +5,7 @@
 
 use crate::kernels::prediction_down::{self, PredictionDownParams};
 use crate::kernels::raycast::{self, CameraPose, DEFAULT_MAX_STEPS, DEFAULT_STEP_FACTOR, RaycastParams};
+use crate::kernels::surface_normals::{self, SurfaceNormalsParams};
 use crate::kernels::GpuIntrinsics;
 use crate::tsdf::TsdfStore;
 use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
@@ -24,7 +25,12 @@ pub fn camera_pose(world_from_camera: Option<&Se3>) -> CameraPose {
     }
 }
 
-/// Images `raycast` renders at one resolution, bound to a store and a pose buffer.
+/// Squared norm of a surface normal's cross product (m⁴) at or below which none is emitted:
+/// well under any real surface patch (1 mm x 1 mm neighbour differences give 1e-12).
+pub const MIN_NORMAL_CROSS_NORM_SQ: f32 = 1e-20;
+
+/// Images `raycast` renders at one resolution (and `surface_normals` completes), bound to a
+/// store and a pose buffer.
 #[derive(Debug)]
 pub struct RaycastTarget {
     /// Intrinsics of the images.
@@ -42,6 +48,8 @@ pub struct RaycastTarget {
     owns_pose: bool,
     hint_margin_m: Option<f32>,
     bind_group: wgpu::BindGroup,
+    _normals_params: wgpu::Buffer,
+    normals_bind_group: wgpu::BindGroup,
 }
 
 impl RaycastTarget {
@@ -83,13 +91,28 @@ impl RaycastTarget {
             tsdf_volume: store.voxels(),
             color_volume: store.colors(),
             vertex_in_world: &vertex_in_world,
-            normal_in_world: &normal_in_world,
             depth_m: &depth_m,
             color_rgba8: &color_rgba8,
             depth_hint_m,
         }
         .bind_group(gpu);
-        Self { intrinsics, vertex_in_world, normal_in_world, depth_m, color_rgba8, params, pose, owns_pose, hint_margin_m: hint.map(|h| h.1), bind_group }
+        let np = SurfaceNormalsParams { width_px: intrinsics.width_px, height_px: intrinsics.height_px, min_cross_norm_sq: MIN_NORMAL_CROSS_NORM_SQ, ..Default::default() };
+        let normals_params = gpu.uniform_buffer(&name("normals_params"), &np);
+        let normals_bind_group = surface_normals::Bindings { params: &normals_params, pose: &pose, vertex_in_world: &vertex_in_world, normal_in_world: &normal_in_world }.bind_group(gpu);
+        Self {
+            intrinsics,
+            vertex_in_world,
+            normal_in_world,
+            depth_m,
+            color_rgba8,
+            params,
+            pose,
+            owns_pose,
+            hint_margin_m: hint.map(|h| h.1),
+            bind_group,
+            _normals_params: normals_params,
+            normals_bind_group,
+        }
     }
 
     /// Sets the volume description and depth range the kernel marches with.
@@ -117,9 +140,11 @@ impl RaycastTarget {
         Ok(())
     }
 
-    /// Records the raycast into an open compute pass.
+    /// Records the raycast and the normals into an open compute pass.
     pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
-        gpu.kernels.raycast.dispatch_in(pass, &self.bind_group, [self.intrinsics.width_px, self.intrinsics.height_px, 1]);
+        let size = [self.intrinsics.width_px, self.intrinsics.height_px, 1];
+        gpu.kernels.raycast.dispatch_in(pass, &self.bind_group, size);
+        gpu.kernels.surface_normals.dispatch_in(pass, &self.normals_bind_group, size);
     }
 
     /// Renders `store` from `world_from_camera` (a target that owns its pose): sets the

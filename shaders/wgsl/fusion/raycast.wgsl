@@ -6,15 +6,16 @@
 //! surface is far: unobserved space and the truncated band (TSDF within `FAR_TSDF` of +1, at
 //! least μ - ½√3 voxel from any surface) are crossed in steps of `step_factor * μ` with one read
 //! per step. Nearer the surface it samples the trilinear TSDF and steps by the sampled distance
-//! (at least half a voxel), until the TSDF changes sign from + to -; the surface point is the
+//! (at least half a voxel), until the TSDF changes sign from + to - (a ray that reaches negative
+//! space any other way, from unobserved space or starting inside an object, ends there: only a
+//! back face could follow); the surface point is the
 //! linear interpolation of the crossing (the sample before it re-read trilinearly when it was a
-//! nearest-voxel one), its normal the normalised TSDF gradient (central differences, one voxel
-//! apart). Writes the world-frame vertex and normal, the depth (camera z) a virtual sensor at
-//! this pose would see and the model colour (nearest voxel). Misses, back faces and unobserved
-//! space give NaN / 0. A prediction rendered at the pose a depth image was just fused at may
-//! start each ray at that pixel's measured depth minus μ + 3σ (Kinect noise) instead of the near
-//! plane: the fused surface lies there, and a model surface further in front is one the new
-//! measurement sees through.
+//! nearest-voxel one). Writes the world-frame vertex, the depth (camera z) a virtual sensor at
+//! this pose would see and the model colour (nearest voxel); `surface_normals` then derives the
+//! normals from the vertices. Misses, back faces and unobserved space give NaN / 0. A prediction rendered at the pose a depth image was just fused at may
+//! search each ray only within μ + 3σ (Kinect noise) of that pixel's measured depth instead of
+//! the whole depth range: the fused surface lies there, and a model surface further in front is
+//! one the new measurement sees through.
 #import invalid
 #import camera
 #import camera_pose
@@ -55,21 +56,18 @@ const FAR_TSDF: f32 = 0.999;
 @group(0) @binding(3) var<storage, read> color_volume: array<u32>;
 // Out: surface points (x, y, z, 1), world frame.
 @group(0) @binding(4) var<storage, read_write> vertex_in_world: array<vec4<f32>>;
-// Out: unit normals (nx, ny, nz, 0), world frame.
-@group(0) @binding(5) var<storage, read_write> normal_in_world: array<vec4<f32>>;
 // Out: depth along the camera's z, metres.
-@group(0) @binding(6) var<storage, read_write> depth_m: array<f32>;
+@group(0) @binding(5) var<storage, read_write> depth_m: array<f32>;
 // Out: model colour, RGBA8.
-@group(0) @binding(7) var<storage, read_write> color_rgba8: array<u32>;
+@group(0) @binding(6) var<storage, read_write> color_rgba8: array<u32>;
 // Depth measured at each pixel from this pose, metres (NaN: none), when `use_depth_hint` is set;
 // one placeholder word otherwise.
-@group(0) @binding(8) var<storage, read> depth_hint_m: array<f32>;
+@group(0) @binding(7) var<storage, read> depth_hint_m: array<f32>;
 
 const OPAQUE: u32 = 0xff000000u;
 
 fn write_miss(ix: u32) {
     vertex_in_world[ix] = invalid_vec4();
-    normal_in_world[ix] = invalid_vec4();
     depth_m[ix] = invalid_f32();
     color_rgba8[ix] = 0u;
 }
@@ -81,6 +79,36 @@ fn nearest_word(d: VolumeDesc, p_world: vec3<f32>) -> u32 {
         return 0u;
     }
     return tsdf_volume[voxel_index(d, u32(g.x), u32(g.y), u32(g.z))];
+}
+
+// The range of depths (nearest, farthest) the surface at pixel `xy` may lie at: its own measured
+// depth twice, or where it has none (a dropout, an edge) the range of the depths measured 2 and
+// 4 pixels away along x and y, so that a pixel beside a silhouette searches both surfaces; NaN
+// when all of those are missing too.
+fn depth_hint_range(xy: vec2<u32>) -> vec2<f32> {
+    let k = params.intrinsics;
+    let own = depth_hint_m[xy.y * k.width_px + xy.x];
+    if is_valid_f32(own) {
+        return vec2<f32>(own);
+    }
+    var range = vec2<f32>(invalid_f32());
+    for (var r = 2u; r <= 4u; r += 2u) {
+        let xs = array<u32, 4>(xy.x + r, xy.x - min(r, xy.x), xy.x, xy.x);
+        let ys = array<u32, 4>(xy.y, xy.y, xy.y + r, xy.y - min(r, xy.y));
+        for (var i = 0u; i < 4u; i++) {
+            if xs[i] < k.width_px && ys[i] < k.height_px {
+                let h = depth_hint_m[ys[i] * k.width_px + xs[i]];
+                if is_valid_f32(h) {
+                    if is_valid_f32(range.x) {
+                        range = vec2<f32>(min(range.x, h), max(range.y, h));
+                    } else {
+                        range = vec2<f32>(h);
+                    }
+                }
+            }
+        }
+    }
+    return range;
 }
 
 @compute @workgroup_size(16, 16, 1)
@@ -110,11 +138,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t_near = min(t0, t1);
     let t_far = max(t0, t1);
     var t = max(max(max(t_near.x, t_near.y), t_near.z), params.min_depth_m / z_per_t);
-    let t_end = min(min(min(t_far.x, t_far.y), t_far.z), params.max_depth_m / z_per_t);
+    var t_end = min(min(min(t_far.x, t_far.y), t_far.z), params.max_depth_m / z_per_t);
     if params.use_depth_hint != 0u {
-        let hint = depth_hint_m[ix];
-        if is_valid_f32(hint) {
-            t = max(t, (hint - params.hint_margin_m - 3.0 * kinect_sigma_m(hint)) / z_per_t);
+        let hint = depth_hint_range(gid.xy);
+        if is_valid_f32(hint.x) {
+            // The search window: μ + 3σ either side of the measured surface(s).
+            t = max(t, (hint.x - params.hint_margin_m - 3.0 * kinect_sigma_m(hint.x)) / z_per_t);
+            t_end = min(t_end, (hint.y + params.hint_margin_m + 3.0 * kinect_sigma_m(hint.y)) / z_per_t);
         }
     }
     if !(t < t_end) {
@@ -147,8 +177,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             continue;
         }
         let s = sample_tsdf(d, p);
-        if s.valid && prev.valid {
-            if prev.tsdf > 0.0 && s.tsdf <= 0.0 {
+        if s.valid && s.tsdf <= 0.0 {
+            // A crossing from + to -: the surface. Without a positive sample before it (a ray
+            // starting inside an object, or entering it from unobserved space) no front face
+            // can follow before the back one, so the ray sees nothing here.
+            if prev.valid && prev.tsdf > 0.0 {
                 var before = prev;
                 if prev_nearest {
                     let exact = sample_tsdf(d, origin + dir * prev_t);
@@ -158,11 +191,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
                 t_hit = prev_t + (t - prev_t) * before.tsdf / (before.tsdf - s.tsdf);
                 hit = true;
-                break;
             }
-            if prev.tsdf < 0.0 && s.tsdf > 0.0 {
-                break;
-            }
+            break;
         }
         prev = s;
         prev_nearest = false;
@@ -178,26 +208,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let p = origin + dir * t_hit;
-    let h = d.voxel_size_m;
-    let sx0 = sample_tsdf(d, p - vec3<f32>(h, 0.0, 0.0));
-    let sx1 = sample_tsdf(d, p + vec3<f32>(h, 0.0, 0.0));
-    let sy0 = sample_tsdf(d, p - vec3<f32>(0.0, h, 0.0));
-    let sy1 = sample_tsdf(d, p + vec3<f32>(0.0, h, 0.0));
-    let sz0 = sample_tsdf(d, p - vec3<f32>(0.0, 0.0, h));
-    let sz1 = sample_tsdf(d, p + vec3<f32>(0.0, 0.0, h));
-    if !(sx0.valid && sx1.valid && sy0.valid && sy1.valid && sz0.valid && sz1.valid) {
-        write_miss(ix);
-        return;
-    }
-    let grad = vec3<f32>(sx1.tsdf - sx0.tsdf, sy1.tsdf - sy0.tsdf, sz1.tsdf - sz0.tsdf);
-    let grad_len = length(grad);
-    if !(grad_len > 1e-6) {
-        write_miss(ix);
-        return;
-    }
-    let n = grad / grad_len;
     vertex_in_world[ix] = vec4<f32>(p, 1.0);
-    normal_in_world[ix] = vec4<f32>(n, 0.0);
     depth_m[ix] = t_hit * z_per_t;
     // Nearest voxel centre's colour.
     let g = (p - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m;

@@ -11,7 +11,9 @@ struct TsdfSample {
     valid: bool,
 }
 
-// TSDF at a world point, trilinearly interpolated between the 8 surrounding voxel centres.
+// TSDF at a world point, trilinearly interpolated between the 8 surrounding voxel centres:
+// the 8 words are read unconditionally and blended by x, then y, then z (no loop and no early
+// exit, so SIMD implementations keep all lanes together and nothing spills to local memory).
 fn sample_tsdf(d: VolumeDesc, p_world: vec3<f32>) -> TsdfSample {
     let g = (p_world - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m - vec3<f32>(0.5);
     let base_f = floor(g);
@@ -23,19 +25,21 @@ fn sample_tsdf(d: VolumeDesc, p_world: vec3<f32>) -> TsdfSample {
     }
     let b = vec3<u32>(base_f);
     let f = g - base_f;
-    var acc = 0.0;
-    for (var corner = 0u; corner < 8u; corner++) {
-        let o = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
-        let word = tsdf_volume[voxel_index(d, b.x + o.x, b.y + o.y, b.z + o.z)];
-        if voxel_weight(word) == 0u {
-            return out;
-        }
-        let wx = select(1.0 - f.x, f.x, o.x == 1u);
-        let wy = select(1.0 - f.y, f.y, o.y == 1u);
-        let wz = select(1.0 - f.z, f.z, o.z == 1u);
-        acc += wx * wy * wz * voxel_tsdf(word);
-    }
-    out.tsdf = acc;
-    out.valid = true;
+    let w000 = tsdf_volume[voxel_index(d, b.x, b.y, b.z)];
+    let w100 = tsdf_volume[voxel_index(d, b.x + 1u, b.y, b.z)];
+    let w010 = tsdf_volume[voxel_index(d, b.x, b.y + 1u, b.z)];
+    let w110 = tsdf_volume[voxel_index(d, b.x + 1u, b.y + 1u, b.z)];
+    let w001 = tsdf_volume[voxel_index(d, b.x, b.y, b.z + 1u)];
+    let w101 = tsdf_volume[voxel_index(d, b.x + 1u, b.y, b.z + 1u)];
+    let w011 = tsdf_volume[voxel_index(d, b.x, b.y + 1u, b.z + 1u)];
+    let w111 = tsdf_volume[voxel_index(d, b.x + 1u, b.y + 1u, b.z + 1u)];
+    // A weight of 0 (never observed) has all high bits 0.
+    let observed = min(min(min(w000, w100), min(w010, w110)), min(min(w001, w101), min(w011, w111))) >= 0x10000u;
+    let x00 = mix(voxel_tsdf(w000), voxel_tsdf(w100), f.x);
+    let x10 = mix(voxel_tsdf(w010), voxel_tsdf(w110), f.x);
+    let x01 = mix(voxel_tsdf(w001), voxel_tsdf(w101), f.x);
+    let x11 = mix(voxel_tsdf(w011), voxel_tsdf(w111), f.x);
+    out.tsdf = mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z);
+    out.valid = observed;
     return out;
 }

@@ -1,12 +1,13 @@
 // SPDX-License-Identifier: MIT
-//! `raycast`: an analytic TSDF (a plane and a sphere) renders to its exact depth and normals,
-//! the GPU matches the CPU reference for every output, and rays that meet nothing give NaN / 0.
+//! `raycast`: an analytic TSDF (a plane and a sphere) renders to its exact depth (and, through
+//! `surface_normals`' twin, its exact normals), the GPU matches the CPU reference for every
+//! output, and rays that meet nothing give NaN / 0.
 //!
 //! Starting each ray at a measured depth (the prediction's depth hint) finds the same surface,
 //! and a disabled pose renders nothing.
 //!
-//! Tolerances: where both sides hit, vertex and depth within 1e-4 m, normal components within
-//! 1e-3, colour bytes within 1 level. The march accumulates t in f32 and the
+//! Tolerances: where both sides hit, vertex and depth within 1e-4 m, colour bytes within 1
+//! level. The march accumulates t in f32 and the
 //! zero-crossing test is a comparison, so under FMA contraction a ray grazing a silhouette can
 //! hit on one side and miss on the other: at most 0.5 % of the pixels may disagree that way.
 
@@ -49,7 +50,6 @@ fn scene() -> (VolumeDesc, Vec<u32>, Vec<u32>) {
 #[derive(Clone)]
 struct Images {
     vertex: Vec<[f32; 4]>,
-    normal: Vec<[f32; 4]>,
     depth: Vec<f32>,
     color: Vec<u32>,
 }
@@ -84,12 +84,12 @@ fn render(s: &Setup, voxels: &[u32], colors: &[u32]) -> (Images, Images) {
     // Bindings: params, pose, volume, colours, then the outputs, then the depth hint.
     let inputs: [&[u8]; 3] = [bytemuck::bytes_of(&s.pose), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)];
     use webfusion_tests::Slot::{In, Out};
-    let slots = [In(inputs[0]), In(inputs[1]), In(inputs[2]), Out(16 * n), Out(16 * n), Out(4 * n), Out(4 * n), In(bytemuck::cast_slice(hint))];
+    let slots = [In(inputs[0]), In(inputs[1]), In(inputs[2]), Out(16 * n), Out(4 * n), Out(4 * n), In(bytemuck::cast_slice(hint))];
     let out = webfusion_tests::run_kernel_slots(&gpu, &gpu.kernels.raycast, p, &slots, [p.intrinsics.width_px, p.intrinsics.height_px, 1]);
     finish(&gpu);
-    let g = Images { vertex: cast(&out[0]), normal: cast(&out[1]), depth: cast(&out[2]), color: cast(&out[3]) };
-    let mut c = Images { vertex: vec![[0.0; 4]; n], normal: vec![[0.0; 4]; n], depth: vec![0.0; n], color: vec![0; n] };
-    cpu::raycast(p, &s.pose, voxels, colors, &mut c.vertex, &mut c.normal, &mut c.depth, &mut c.color, hint);
+    let g = Images { vertex: cast(&out[0]), depth: cast(&out[1]), color: cast(&out[2]) };
+    let mut c = Images { vertex: vec![[0.0; 4]; n], depth: vec![0.0; n], color: vec![0; n] };
+    cpu::raycast(p, &s.pose, voxels, colors, &mut c.vertex, &mut c.depth, &mut c.color, hint);
     (g, c)
 }
 
@@ -103,11 +103,10 @@ fn disagreements(g: &Images, c: &Images) -> usize {
                 return true;
             }
             if !ch {
-                return !(g.vertex[i].iter().all(|v| v.is_nan()) && g.normal[i].iter().all(|v| v.is_nan()) && g.color[i] == 0);
+                return !(g.vertex[i].iter().all(|v| v.is_nan()) && g.color[i] == 0);
             }
             let close = |a: &[f32; 4], b: &[f32; 4], tol: f32| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol);
             !(close(&g.vertex[i], &c.vertex[i], 1e-4)
-                && close(&g.normal[i], &c.normal[i], 1e-3)
                 && (g.depth[i] - c.depth[i]).abs() <= 1e-4
                 && bytes_close(g.color[i], c.color[i]))
         })
@@ -139,11 +138,18 @@ fn analytic_hit(k: &PinholeIntrinsics, x: u32, y: u32) -> (f32, f32) {
 
 #[test]
 fn plane_and_sphere_render_to_their_true_depth_and_normals() {
+    use webfusion_core::kernels::surface_normals::SurfaceNormalsParams;
     let (desc, voxels, colors) = scene();
     let k = K_SMALL;
-    let (g, c) = render(&params(desc, k, &Se3::IDENTITY), &voxels, &colors);
+    let setup = params(desc, k, &Se3::IDENTITY);
+    let (g, c) = render(&setup, &voxels, &colors);
     assert_agree("identity", &g, &c);
+    // Normals as the predictor derives them from the rendered vertices.
+    let np = SurfaceNormalsParams { width_px: k.width_px, height_px: k.height_px, min_cross_norm_sq: 1e-20, ..Default::default() };
+    let mut normal = vec![[0.0f32; 4]; k.pixel_count()];
+    cpu::surface_normals(&np, &setup.pose, &g.vertex, &mut normal);
     let (mut plane, mut sphere) = (0, 0);
+    let mut angles_deg = Vec::new();
     for y in 0..k.height_px {
         for x in 0..k.width_px {
             let i = (y * k.width_px + x) as usize;
@@ -155,19 +161,27 @@ fn plane_and_sphere_render_to_their_true_depth_and_normals() {
                 // interpolation are exact up to the 16-bit quantisation.
                 plane += 1;
                 assert!((got - PLANE_Z_M).abs() < 1e-4, "plane pixel ({x}, {y}): depth {got}");
-                let n = g.normal[i];
-                assert!(n[0].abs() < 1e-3 && n[1].abs() < 1e-3 && (n[2] + 1.0).abs() < 1e-5, "plane normal {n:?}");
+                let n = normal[i];
+                let border = x == 0 || y == 0 || x + 1 == k.width_px || y + 1 == k.height_px;
+                assert!(border || (n[0].abs() < 1e-3 && n[1].abs() < 1e-3 && (n[2] + 1.0).abs() < 1e-5), "plane normal {n:?} at ({x}, {y})");
             } else if closest < SPHERE_RADIUS_M - 0.02 {
                 sphere += 1;
                 assert!((got - depth).abs() < 5e-3, "sphere pixel ({x}, {y}): depth {got} vs {depth}");
                 let p = g.vertex[i];
                 let radial = [p[0] - SPHERE_CENTRE[0], p[1] - SPHERE_CENTRE[1], p[2] - SPHERE_CENTRE[2]];
                 let len = (radial[0] * radial[0] + radial[1] * radial[1] + radial[2] * radial[2]).sqrt();
-                let cos = (0..3).map(|a| radial[a] / len * g.normal[i][a]).sum::<f32>();
-                assert!(cos > (2.0f32).to_radians().cos(), "sphere normal within 2° of radial at ({x}, {y}): cos {cos}");
+                let cos = (0..3).map(|a| radial[a] / len * normal[i][a]).sum::<f32>();
+                angles_deg.push(cos.clamp(-1.0, 1.0).acos().to_degrees());
             }
         }
     }
+    // Normals from vertex differences across 2 pixels (about 2 cm on the sphere here) carry
+    // the few millimetres of error of the crossing interpolation on 4 cm voxels: the median
+    // within 2° of the radial direction and every one within 5°.
+    angles_deg.sort_by(f32::total_cmp);
+    let (median, worst) = (angles_deg[angles_deg.len() / 2], angles_deg[angles_deg.len() - 1]);
+    eprintln!("sphere normals vs radial: median {median:.2}°, worst {worst:.2}°");
+    assert!(median < 2.0 && worst < 5.0, "sphere normals: median {median}°, worst {worst}°");
     assert!(plane > 500 && sphere > 100, "both surfaces covered ({plane} plane, {sphere} sphere pixels)");
 }
 
@@ -187,9 +201,9 @@ fn gpu_matches_cpu_at_a_rotated_pose_and_the_comparison_can_fail() {
     bad.depth[i] += 1e-3;
     assert_eq!(disagreements(&bad, &c), base + 1, "a depth 1 mm off is counted");
     bad.depth[i] = g.depth[i];
-    bad.normal[i][0] += 0.01;
-    assert_eq!(disagreements(&bad, &c), base + 1, "a tilted normal is counted");
-    bad.normal[i] = g.normal[i];
+    bad.vertex[i][0] += 1e-3;
+    assert_eq!(disagreements(&bad, &c), base + 1, "a moved vertex is counted");
+    bad.vertex[i] = g.vertex[i];
     bad.color[i] ^= 0x04;
     assert_eq!(disagreements(&bad, &c), base + 1, "a colour 4 levels off is counted");
     bad.color[i] = g.color[i];
@@ -210,7 +224,7 @@ fn rays_that_meet_nothing_are_invalid() {
         for i in 0..g.depth.len() {
             assert!(g.depth[i].is_nan() && c.depth[i].is_nan(), "{what}: pixel {i} should miss");
             assert_eq!(g.depth[i].to_bits(), 0x7fc0_0000, "{what}: the invalid marker bit pattern");
-            assert!(g.vertex[i].iter().chain(&g.normal[i]).all(|v| v.to_bits() == 0x7fc0_0000), "{what}: vertex/normal invalid");
+            assert!(g.vertex[i].iter().all(|v| v.to_bits() == 0x7fc0_0000), "{what}: vertex invalid");
             assert_eq!(g.color[i], 0, "{what}: no colour on a miss");
         }
     }

@@ -20,6 +20,29 @@ pub fn nearest_word(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> u
     tsdf_volume[voxel_index(d, g[0] as u32, g[1] as u32, g[2] as u32) as usize]
 }
 
+/// Twin of `depth_hint_range()`: (nearest, farthest) depth, NaN when there is none.
+pub fn depth_hint_range(params: &RaycastParams, depth_hint_m: &[f32], x: u32, y: u32) -> (f32, f32) {
+    let k = &params.intrinsics;
+    let own = depth_hint_m[(y * k.width_px + x) as usize];
+    if is_valid_f32(own) {
+        return (own, own);
+    }
+    let mut range = (INVALID, INVALID);
+    for r in [2u32, 4] {
+        let xs = [x + r, x - r.min(x), x, x];
+        let ys = [y, y, y + r, y - r.min(y)];
+        for i in 0..4 {
+            if xs[i] < k.width_px && ys[i] < k.height_px {
+                let h = depth_hint_m[(ys[i] * k.width_px + xs[i]) as usize];
+                if is_valid_f32(h) {
+                    range = if is_valid_f32(range.0) { (range.0.min(h), range.1.max(h)) } else { (h, h) };
+                }
+            }
+        }
+    }
+    range
+}
+
 /// Casts every pixel's ray as one invocation of the kernel does.
 #[expect(clippy::too_many_arguments, reason = "one argument per WGSL binding, in binding order")]
 pub fn raycast(
@@ -28,7 +51,6 @@ pub fn raycast(
     tsdf_volume: &[u32],
     color_volume: &[u32],
     vertex_in_world: &mut [[f32; 4]],
-    normal_in_world: &mut [[f32; 4]],
     depth_m: &mut [f32],
     color_rgba8: &mut [u32],
     depth_hint_m: &[f32],
@@ -43,7 +65,6 @@ pub fn raycast(
             let ix = (gy * k.width_px + gx) as usize;
             let mut miss = || {
                 vertex_in_world[ix] = INVALID_VEC4;
-                normal_in_world[ix] = INVALID_VEC4;
                 depth_m[ix] = INVALID;
                 color_rgba8[ix] = 0;
             };
@@ -62,11 +83,12 @@ pub fn raycast(
             let t_near: [f32; 3] = std::array::from_fn(|i| t0[i].min(t1[i]));
             let t_far: [f32; 3] = std::array::from_fn(|i| t0[i].max(t1[i]));
             let mut t = t_near[0].max(t_near[1]).max(t_near[2]).max(params.min_depth_m / z_per_t);
-            let t_end = t_far[0].min(t_far[1]).min(t_far[2]).min(params.max_depth_m / z_per_t);
+            let mut t_end = t_far[0].min(t_far[1]).min(t_far[2]).min(params.max_depth_m / z_per_t);
             if params.use_depth_hint != 0 {
-                let hint = depth_hint_m[ix];
-                if is_valid_f32(hint) {
-                    t = t.max((hint - params.hint_margin_m - 3.0 * kinect_sigma_m(hint)) / z_per_t);
+                let (near, far) = depth_hint_range(params, depth_hint_m, gx, gy);
+                if is_valid_f32(near) {
+                    t = t.max((near - params.hint_margin_m - 3.0 * kinect_sigma_m(near)) / z_per_t);
+                    t_end = t_end.min((far + params.hint_margin_m + 3.0 * kinect_sigma_m(far)) / z_per_t);
                 }
             }
             if !(t < t_end) {
@@ -101,8 +123,10 @@ pub fn raycast(
                     continue;
                 }
                 let s = sample_tsdf(tsdf_volume, d, at(t));
-                if s.valid && prev.valid {
-                    if prev.tsdf > 0.0 && s.tsdf <= 0.0 {
+                if s.valid && s.tsdf <= 0.0 {
+                    // A crossing from + to -, or (no positive sample before it) a ray that
+                    // starts inside an object or enters it from unobserved space: it ends.
+                    if prev.valid && prev.tsdf > 0.0 {
                         let mut before = prev;
                         if prev_nearest {
                             let exact = sample_tsdf(tsdf_volume, d, at(prev_t));
@@ -112,11 +136,8 @@ pub fn raycast(
                         }
                         t_hit = prev_t + (t - prev_t) * before.tsdf / (before.tsdf - s.tsdf);
                         hit = true;
-                        break;
                     }
-                    if prev.tsdf < 0.0 && s.tsdf > 0.0 {
-                        break;
-                    }
+                    break;
                 }
                 prev = s;
                 prev_nearest = false;
@@ -133,26 +154,7 @@ pub fn raycast(
                 continue;
             }
             let p: [f32; 3] = at(t_hit);
-            let h = d.voxel_size_m;
-            let offset = |axis: usize, s: f32| {
-                let mut q = p;
-                q[axis] += s * h;
-                sample_tsdf(tsdf_volume, d, q)
-            };
-            let (sx0, sx1, sy0, sy1, sz0, sz1) = (offset(0, -1.0), offset(0, 1.0), offset(1, -1.0), offset(1, 1.0), offset(2, -1.0), offset(2, 1.0));
-            if !(sx0.valid && sx1.valid && sy0.valid && sy1.valid && sz0.valid && sz1.valid) {
-                miss();
-                continue;
-            }
-            let grad = [sx1.tsdf - sx0.tsdf, sy1.tsdf - sy0.tsdf, sz1.tsdf - sz0.tsdf];
-            let grad_len = dot3(grad, grad).sqrt();
-            if !(grad_len > 1e-6) {
-                miss();
-                continue;
-            }
-            let n = grad.map(|g| g / grad_len);
             vertex_in_world[ix] = [p[0], p[1], p[2], 1.0];
-            normal_in_world[ix] = [n[0], n[1], n[2], 0.0];
             depth_m[ix] = t_hit * z_per_t;
             let origin_v = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
             let c: [u32; 3] = std::array::from_fn(|i| (((p[i] - origin_v[i]) / d.voxel_size_m).max(0.0) as u32).min(dims[i] - 1));
