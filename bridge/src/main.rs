@@ -331,6 +331,7 @@ fn bench(options: &GpuOptions, args: &BenchArgs) -> anyhow::Result<()> {
 /// Fuses the first frames with the default pipeline, then times each stage of the next frame
 /// alone (one submission each, repeated): what a frame's GPU time is made of.
 fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> anyhow::Result<()> {
+    use webfusion_core::engine::FrameEncoder;
     use webfusion_core::fusion::{FusionConfig, KinectFusion};
     let n = args.fusion_frames.min(source.frame_count().saturating_sub(1));
     let mut fusion = KinectFusion::new(gpu, source.calibration(), FusionConfig::default())?;
@@ -340,21 +341,23 @@ fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> an
     pollster::block_on(fusion.flush(gpu))?;
     let frame = source.read_frame(n)?;
     fusion.preprocessor().upload(gpu, &frame)?;
-    type Stage<'a> = (&'static str, Box<dyn Fn(&mut wgpu::ComputePass<'_>) + 'a>);
+    type Stage<'a> = (&'static str, Box<dyn Fn(&mut FrameEncoder<'_>) + 'a>);
     let stages: Vec<Stage> = vec![
-        ("preprocess (whole chain)", Box::new(|p| fusion.preprocessor().encode_in(gpu, p))),
-        ("track (every level, to convergence)", Box::new(|p| fusion.tracker().encode_in(gpu, p))),
-        ("integrate", Box::new(|p| fusion.mapper().encode_in(gpu, p))),
-        ("raycast + prediction pyramid", Box::new(|p| fusion.predictor().encode_in(gpu, p))),
-        ("keep the reference", Box::new(|p| fusion.tracker().encode_keep_previous(gpu, p))),
+        ("preprocess (whole chain)", Box::new(|fe| fusion.preprocessor().encode_in(gpu, &mut fe.stage("preprocess")))),
+        ("track (every level, to convergence)", Box::new(|fe| fusion.tracker().encode_in(gpu, &mut fe.stage("track")))),
+        ("keep the reference", Box::new(|fe| fusion.tracker().encode_keep_previous(gpu, &mut fe.stage("keep")))),
+        ("integrate", Box::new(|fe| fusion.mapper().encode_in(gpu, &mut fe.stage("integrate")))),
+        ("raycast + prediction pyramid", Box::new(|fe| fusion.predictor().encode(gpu, fe, "predict"))),
     ];
     let mut times = StageTimes::default();
     for iteration in 0..args.warmup + args.iterations {
         for (name, encode) in &stages {
-            let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("webfusion.bench.fusion") });
-            encode(&mut encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(name), timestamp_writes: None }));
+            let mut fe = FrameEncoder::new(gpu, "webfusion.bench.fusion", None);
+            encode(&mut fe);
+            let (commands, _) = fe.finish(None);
             let sw = Stopwatch::start();
-            pollster::block_on(gpu.submit_and_wait(encoder))?;
+            let index = gpu.submit([commands]);
+            pollster::block_on(gpu.wait(Some(index)))?;
             if iteration >= args.warmup {
                 times.record(name, sw.ms());
             }

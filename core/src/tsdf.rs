@@ -73,9 +73,10 @@ impl TsdfConfig {
         self.dims_voxels.map(|d| d as f32 * self.voxel_size_m)
     }
 
-    /// Bytes of GPU memory the dense store takes (TSDF words plus colour words).
+    /// Bytes of GPU memory the dense store takes (TSDF words, colour words, surface bricks).
     pub fn memory_bytes(&self) -> u64 {
-        self.voxel_count() * 4 * if self.color { 2 } else { 1 }
+        let bricks: u64 = self.dims_voxels.iter().map(|&d| u64::from(d.div_ceil(8))).product();
+        self.voxel_count() * 4 * if self.color { 2 } else { 1 } + bricks * 4
     }
 
     /// Rejects settings the kernels cannot honour.
@@ -140,6 +141,11 @@ impl VolumeDesc {
         self.dim_x as usize * self.dim_y as usize * self.dim_z as usize
     }
 
+    /// Bricks of 8³ voxels (`cpu::shared::brick_dims`) covering the volume.
+    pub fn brick_count(&self) -> usize {
+        crate::cpu::shared::brick_dims(self).iter().map(|&b| b as usize).product()
+    }
+
     /// World-space corners (min, max) of the volume, metres.
     pub fn bounds_in_world(&self) -> ([f32; 3], [f32; 3]) {
         let lo = [self.origin_x_m, self.origin_y_m, self.origin_z_m];
@@ -156,6 +162,9 @@ pub trait TsdfStore {
     fn voxels(&self) -> &wgpu::Buffer;
     /// Colour words (RGB8), or a one-word placeholder when colour is off.
     fn colors(&self) -> &wgpu::Buffer;
+    /// One word per brick of 8³ voxels, non-zero once a voxel in it has held a TSDF below
+    /// `FAR_TSDF` (integration marks them; the raycast skips the others).
+    fn surface_bricks(&self) -> &wgpu::Buffer;
     /// Whether colour is fused.
     fn has_color(&self) -> bool;
     /// Forgets everything fused so far.
@@ -171,6 +180,7 @@ pub struct DenseTsdfVolume {
     desc: VolumeDesc,
     voxels: wgpu::Buffer,
     colors: wgpu::Buffer,
+    surface_bricks: wgpu::Buffer,
 }
 
 impl DenseTsdfVolume {
@@ -180,7 +190,9 @@ impl DenseTsdfVolume {
         let n = config.voxel_count() as usize;
         let voxels = gpu.storage_buffer::<u32>("core.tsdf.voxels", n);
         let colors = gpu.storage_buffer::<u32>("core.tsdf.colors", if config.color { n } else { 1 });
-        let volume = Self { config, desc: config.desc(origin_in_world), voxels, colors };
+        let desc = config.desc(origin_in_world);
+        let surface_bricks = gpu.storage_buffer::<u32>("core.tsdf.surface_bricks", desc.brick_count());
+        let volume = Self { config, desc, voxels, colors, surface_bricks };
         volume.reset(gpu);
         Ok(volume)
     }
@@ -201,6 +213,9 @@ impl TsdfStore for DenseTsdfVolume {
     fn colors(&self) -> &wgpu::Buffer {
         &self.colors
     }
+    fn surface_bricks(&self) -> &wgpu::Buffer {
+        &self.surface_bricks
+    }
     fn has_color(&self) -> bool {
         self.config.color
     }
@@ -208,9 +223,10 @@ impl TsdfStore for DenseTsdfVolume {
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.tsdf.reset") });
         encoder.clear_buffer(&self.voxels, 0, None);
         encoder.clear_buffer(&self.colors, 0, None);
+        encoder.clear_buffer(&self.surface_bricks, 0, None);
         gpu.queue.submit([encoder.finish()]);
     }
     fn memory_bytes(&self) -> u64 {
-        self.voxels.size() + self.colors.size()
+        self.voxels.size() + self.colors.size() + self.surface_bricks.size()
     }
 }

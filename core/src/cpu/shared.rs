@@ -55,6 +55,41 @@ use crate::tsdf::VolumeDesc;
 /// Twin of `TSDF_SCALE` in `shared/tsdf.wgsl`.
 pub const TSDF_SCALE: f32 = 32767.0;
 
+/// Twin of `FAR_TSDF`.
+pub const FAR_TSDF: f32 = 0.999;
+
+/// Twin of `BRICK_SHIFT`: bricks of 8³ voxels.
+pub const BRICK_SHIFT: u32 = 3;
+
+/// Twin of `brick_dims()`.
+pub fn brick_dims(d: &VolumeDesc) -> [u32; 3] {
+    [d.dim_x, d.dim_y, d.dim_z].map(|v| v.div_ceil(1 << BRICK_SHIFT))
+}
+
+/// Twin of `brick_index()`.
+pub fn brick_index(d: &VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
+    let b = brick_dims(d);
+    (x >> BRICK_SHIFT) + b[0] * ((y >> BRICK_SHIFT) + b[1] * (z >> BRICK_SHIFT))
+}
+
+/// The surface-brick words of a volume given voxel by voxel (what integrating it would have
+/// marked): 1 for each brick holding an observed voxel with TSDF below [`FAR_TSDF`].
+pub fn surface_bricks(d: &VolumeDesc, tsdf_volume: &[u32]) -> Vec<u32> {
+    let b = brick_dims(d);
+    let mut out = vec![0u32; (b[0] * b[1] * b[2]) as usize];
+    for z in 0..d.dim_z {
+        for y in 0..d.dim_y {
+            for x in 0..d.dim_x {
+                let word = tsdf_volume[voxel_index(d, x, y, z) as usize];
+                if voxel_weight(word) > 0 && voxel_tsdf(word) < FAR_TSDF {
+                    out[brick_index(d, x, y, z) as usize] = 1;
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Twin of `voxel_index()`.
 pub fn voxel_index(d: &VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
     x + d.dim_x * (y + d.dim_y * z)

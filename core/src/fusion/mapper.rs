@@ -32,7 +32,7 @@ impl Mapper {
         let params = gpu.uniform_buffer("core.tsdf_integrate.params", &p);
         let depth_m = Self::fused_depth(preprocessor);
         let bind_group =
-            tsdf_integrate::Bindings { params: &params, pose, depth_m, color: &preprocessor.color, tsdf_volume: volume.voxels(), color_volume: volume.colors() }.bind_group(gpu);
+            tsdf_integrate::Bindings { params: &params, pose, depth_m, color: &preprocessor.color, tsdf_volume: volume.voxels(), color_volume: volume.colors(), surface_bricks: volume.surface_bricks() }.bind_group(gpu);
         Ok(Self { volume, _params: params, bind_group })
     }
 

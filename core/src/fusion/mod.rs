@@ -31,7 +31,7 @@ use web_time::Instant;
 
 pub use mapper::Mapper;
 pub use normal_equations::NormalEquations;
-pub use predictor::{Predictor, RaycastTarget};
+pub use predictor::{DepthHint, Predictor, RaycastTarget};
 pub use tracker::IcpTracker;
 
 use crate::cpu::fusion::track_finish::outcome;
@@ -397,7 +397,7 @@ impl KinectFusion {
         let origin = config.tsdf.origin_for_first_camera(&Se3::IDENTITY);
         let mapper = Mapper::new(gpu, config.tsdf, origin, &preprocessor, &state)?;
         let depth_range = (config.preprocess.min_depth_m, config.preprocess.max_depth_m);
-        let predictor = Predictor::new(gpu, mapper.volume(), preprocessor.levels[0].intrinsics, config.icp.iterations_per_level.len(), &state, Some(Mapper::fused_depth(&preprocessor)), depth_range);
+        let predictor = Predictor::new(gpu, mapper.volume(), preprocessor.levels[0].intrinsics, config.icp.iterations_per_level.len(), &state, Some(DepthHint::from_preprocessor(&preprocessor)), depth_range);
         let tracker = IcpTracker::new(gpu, &config.icp, &preprocessor, &predictor, state)?;
         let timer = StageTimer::new(gpu, "core.fusion");
         let readbacks = ReadbackRing::new(gpu, "core.fusion", TIMESTAMPS_OFFSET + StageTimer::BYTES, MAX_FRAMES_IN_FLIGHT);
@@ -491,13 +491,14 @@ impl KinectFusion {
         self.preprocessor.upload(gpu, frame)?;
         let mut fe = FrameEncoder::new(gpu, "core.fusion.frame", self.timer.as_ref());
         self.preprocessor.encode_in(gpu, &mut fe.stage("preprocess"));
-        self.tracker.encode_in(gpu, &mut fe.stage("track"));
-        self.mapper.encode_in(gpu, &mut fe.stage("integrate"));
         {
-            let mut pass = fe.stage("predict");
-            self.predictor.encode_in(gpu, &mut pass);
+            // Tracking, then the tracker keeps this frame as the next one's reference.
+            let mut pass = fe.stage("track");
+            self.tracker.encode_in(gpu, &mut pass);
             self.tracker.encode_keep_previous(gpu, &mut pass);
         }
+        self.mapper.encode_in(gpu, &mut fe.stage("integrate"));
+        self.predictor.encode(gpu, &mut fe, "predict");
         let (slot, slot_buffer) = self.readbacks.free_slot().expect("a readback slot was freed above");
         fe.encoder().copy_buffer_to_buffer(self.tracker.state_buffer(), 0, slot_buffer, 0, tracker::TRACK_STATE_BYTES);
         let (commands, stages) = fe.finish(Some((slot_buffer, TIMESTAMPS_OFFSET)));

@@ -12,7 +12,7 @@
 
 use crate::engine::FrameEncoder;
 use crate::fusion::mapper::Mapper;
-use crate::fusion::predictor::{Predictor, camera_pose, pose_buffer};
+use crate::fusion::predictor::{DepthHint, Predictor, camera_pose, pose_buffer};
 use crate::preprocess::{DepthPreprocessor, PreprocessConfig};
 use crate::tsdf::{DenseTsdfVolume, TsdfConfig};
 use crate::{Gpu, Result, RgbdCalibration, RgbdFrame, Se3};
@@ -35,7 +35,7 @@ impl PoseDrivenMapper {
         let preprocessor = DepthPreprocessor::new(gpu, calibration, preprocess)?;
         let pose = pose_buffer(gpu, "core.pose_driven.pose", None);
         let mapper = Mapper::new(gpu, tsdf, tsdf.origin_for_first_camera(first_world_from_camera), &preprocessor, &pose)?;
-        let predictor = predict.then(|| Predictor::new(gpu, mapper.volume(), calibration.intrinsics, 1, &pose, Some(Mapper::fused_depth(&preprocessor)), (preprocess.min_depth_m, preprocess.max_depth_m)));
+        let predictor = predict.then(|| Predictor::new(gpu, mapper.volume(), calibration.intrinsics, 1, &pose, Some(DepthHint::from_preprocessor(&preprocessor)), (preprocess.min_depth_m, preprocess.max_depth_m)));
         Ok(Self { preprocessor, pose, mapper, predictor })
     }
 
@@ -58,7 +58,7 @@ impl PoseDrivenMapper {
         self.preprocessor.encode_in(gpu, &mut fe.stage("preprocess"));
         self.mapper.encode_in(gpu, &mut fe.stage("integrate"));
         if let Some(p) = &self.predictor {
-            p.encode_in(gpu, &mut fe.stage("predict"));
+            p.encode(gpu, &mut fe, "predict");
         }
         let (commands, _) = fe.finish(None);
         gpu.submit([commands]);

@@ -4,9 +4,12 @@
 //! the coarser ones downsampled from it by `prediction_down`, as KinectFusion does).
 
 use crate::kernels::prediction_down::{self, PredictionDownParams};
+use crate::engine::FrameEncoder;
 use crate::kernels::raycast::{self, CameraPose, DEFAULT_MAX_STEPS, DEFAULT_STEP_FACTOR, RaycastParams};
+use crate::kernels::raycast_range::{self, RaycastRangeParams};
 use crate::kernels::surface_normals::{self, SurfaceNormalsParams};
 use crate::kernels::GpuIntrinsics;
+use crate::preprocess::DepthPreprocessor;
 use crate::tsdf::TsdfStore;
 use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
 
@@ -29,6 +32,28 @@ pub fn camera_pose(world_from_camera: Option<&Se3>) -> CameraPose {
 /// well under any real surface patch (1 mm x 1 mm neighbour differences give 1e-12).
 pub const MIN_NORMAL_CROSS_NORM_SQ: f32 = 1e-20;
 
+/// The depth a prediction's rays search around: the raw sensor depth (u16 per pixel, packed
+/// two per word as the preprocessor uploads it) fused at the pose the prediction renders from.
+#[derive(Clone, Copy, Debug)]
+pub struct DepthHint<'a> {
+    /// The raw depth buffer.
+    pub depth_raw: &'a wgpu::Buffer,
+    /// Metres per raw unit.
+    pub metres_per_unit: f32,
+}
+
+impl<'a> DepthHint<'a> {
+    /// The raw depth the preprocessor uploaded last.
+    pub fn from_preprocessor(preprocessor: &'a DepthPreprocessor) -> Self {
+        Self { depth_raw: &preprocessor.depth_raw, metres_per_unit: preprocessor.calibration().metres_per_depth_unit() }
+    }
+}
+
+/// Pixels along each edge of a tile of the depth-range image (`raycast_range`): small enough
+/// that a tile's interval stays tight at silhouettes, large enough that a brick near the
+/// camera touches tens of tiles rather than thousands.
+pub const RANGE_TILE_PX: u32 = 8;
+
 /// Images `raycast` renders at one resolution (and `surface_normals` completes), bound to a
 /// store and a pose buffer.
 #[derive(Debug)]
@@ -46,8 +71,14 @@ pub struct RaycastTarget {
     params: wgpu::Buffer,
     pose: wgpu::Buffer,
     owns_pose: bool,
-    hint_margin_m: Option<f32>,
+    hint: Option<(f32, f32)>,
     bind_group: wgpu::BindGroup,
+    /// Per tile, the depth interval surface bricks cover (`raycast_range`, cleared each render).
+    depth_range_tiles: wgpu::Buffer,
+    range_params: wgpu::Buffer,
+    range_bind_group: wgpu::BindGroup,
+    /// Bricks of the store along each axis (one `raycast_range` invocation each).
+    bricks: [u32; 3],
     _normals_params: wgpu::Buffer,
     normals_bind_group: wgpu::BindGroup,
 }
@@ -60,16 +91,14 @@ impl RaycastTarget {
     }
 
     /// Images for `intrinsics`, rendered from the pose another stage writes into `pose` (a
-    /// `CameraPose` at offset 0: the tracker's state). With `depth_hint`, the depth just fused
-    /// at that pose and the truncation distance, each ray starts near the measured surface.
-    pub fn with_pose_buffer(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, pose: &wgpu::Buffer, depth_hint: Option<&wgpu::Buffer>, label: &str) -> Self {
-        match depth_hint {
-            Some(hint) => Self::build(gpu, store, intrinsics, pose.clone(), false, Some((hint, store.desc().truncation_m)), label),
-            None => Self::build(gpu, store, intrinsics, pose.clone(), false, None, label),
-        }
+    /// `CameraPose` at offset 0: the tracker's state). With `depth_hint`, the raw depth just
+    /// fused at that pose, each ray searches only within the truncation distance (plus the
+    /// sensor's noise) of the measured surface.
+    pub fn with_pose_buffer(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, pose: &wgpu::Buffer, depth_hint: Option<DepthHint<'_>>, label: &str) -> Self {
+        Self::build(gpu, store, intrinsics, pose.clone(), false, depth_hint, label)
     }
 
-    fn build(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, pose: wgpu::Buffer, owns_pose: bool, hint: Option<(&wgpu::Buffer, f32)>, label: &str) -> Self {
+    fn build(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, pose: wgpu::Buffer, owns_pose: bool, hint: Option<DepthHint<'_>>, label: &str) -> Self {
         let n = intrinsics.pixel_count();
         let name = |what: &str| format!("core.raycast.{label}.{what}");
         let vertex_in_world = gpu.storage_buffer::<[f32; 4]>(&name("vertex_in_world"), n);
@@ -77,11 +106,15 @@ impl RaycastTarget {
         let depth_m = gpu.storage_buffer::<f32>(&name("depth_m"), n);
         let color_rgba8 = gpu.storage_buffer::<u32>(&name("color_rgba8"), n);
         let params = gpu.uniform_buffer(&name("params"), &RaycastParams::default());
+        let tiles = Self::tiles(intrinsics);
+        let depth_range_tiles = gpu.storage_buffer::<[u32; 2]>(&name("depth_range_tiles"), (tiles[0] * tiles[1]) as usize);
+        let range_params = gpu.uniform_buffer(&name("range_params"), &RaycastRangeParams::default());
+        let range_bind_group = raycast_range::Bindings { params: &range_params, pose: &pose, surface_bricks: store.surface_bricks(), depth_range_tiles: &depth_range_tiles }.bind_group(gpu);
         let placeholder;
-        let depth_hint_m = match hint {
-            Some((buffer, _)) => buffer,
+        let depth_hint_raw = match &hint {
+            Some(h) => h.depth_raw,
             None => {
-                placeholder = gpu.storage_buffer::<f32>(&name("no_depth_hint"), 1);
+                placeholder = gpu.storage_buffer::<u32>(&name("no_depth_hint"), 1);
                 &placeholder
             }
         };
@@ -93,7 +126,8 @@ impl RaycastTarget {
             vertex_in_world: &vertex_in_world,
             depth_m: &depth_m,
             color_rgba8: &color_rgba8,
-            depth_hint_m,
+            depth_hint_raw,
+            depth_range_tiles: &depth_range_tiles,
         }
         .bind_group(gpu);
         let np = SurfaceNormalsParams { width_px: intrinsics.width_px, height_px: intrinsics.height_px, min_cross_norm_sq: MIN_NORMAL_CROSS_NORM_SQ, ..Default::default() };
@@ -108,15 +142,25 @@ impl RaycastTarget {
             params,
             pose,
             owns_pose,
-            hint_margin_m: hint.map(|h| h.1),
+            hint: hint.map(|h| (store.desc().truncation_m, h.metres_per_unit)),
             bind_group,
+            depth_range_tiles,
+            range_params,
+            range_bind_group,
+            bricks: crate::cpu::shared::brick_dims(&store.desc()),
             _normals_params: normals_params,
             normals_bind_group,
         }
     }
 
-    /// Sets the volume description and depth range the kernel marches with.
+    /// Tiles of [`RANGE_TILE_PX`] along x and y.
+    fn tiles(k: PinholeIntrinsics) -> [u32; 2] {
+        [k.width_px.div_ceil(RANGE_TILE_PX), k.height_px.div_ceil(RANGE_TILE_PX)]
+    }
+
+    /// Sets the volume description and depth range the kernels march with.
     pub fn set_params(&self, gpu: &Gpu, store: &dyn TsdfStore, depth_range_m: (f32, f32)) {
+        let tiles = Self::tiles(self.intrinsics);
         let p = RaycastParams {
             volume: store.desc(),
             intrinsics: GpuIntrinsics::from(self.intrinsics),
@@ -124,11 +168,25 @@ impl RaycastTarget {
             max_depth_m: depth_range_m.1,
             step_factor: DEFAULT_STEP_FACTOR,
             max_steps: DEFAULT_MAX_STEPS,
-            use_depth_hint: u32::from(self.hint_margin_m.is_some()),
-            hint_margin_m: self.hint_margin_m.unwrap_or(0.0),
+            use_depth_hint: u32::from(self.hint.is_some()),
+            hint_margin_m: self.hint.map_or(0.0, |h| h.0),
+            hint_metres_per_unit: self.hint.map_or(0.0, |h| h.1),
+            range_tile_px: RANGE_TILE_PX,
+            range_tiles_x: tiles[0],
             ..Default::default()
         };
         gpu.write_buffer(&self.params, std::slice::from_ref(&p));
+        let r = RaycastRangeParams {
+            volume: store.desc(),
+            intrinsics: GpuIntrinsics::from(self.intrinsics),
+            tile_px: RANGE_TILE_PX,
+            tiles_x: tiles[0],
+            tiles_y: tiles[1],
+            min_depth_m: depth_range_m.0,
+            max_depth_m: depth_range_m.1,
+            ..Default::default()
+        };
+        gpu.write_buffer(&self.range_params, std::slice::from_ref(&r));
     }
 
     /// Sets the pose of a target that owns its pose buffer.
@@ -140,20 +198,34 @@ impl RaycastTarget {
         Ok(())
     }
 
-    /// Records the raycast and the normals into an open compute pass.
-    pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+    /// Clears the depth-range tiles: recorded before [`Self::dispatch_in`]'s pass.
+    fn clear(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.clear_buffer(&self.depth_range_tiles, 0, None);
+    }
+
+    /// Records the range tiles, the raycast and the normals into an open compute pass (the
+    /// tiles cleared before it).
+    fn dispatch_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        gpu.kernels.raycast_range.dispatch_in(pass, &self.range_bind_group, self.bricks);
         let size = [self.intrinsics.width_px, self.intrinsics.height_px, 1];
         gpu.kernels.raycast.dispatch_in(pass, &self.bind_group, size);
         gpu.kernels.surface_normals.dispatch_in(pass, &self.normals_bind_group, size);
     }
 
+    /// Records the render as stage `stage` of a frame.
+    pub fn encode(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
+        self.clear(frame.encoder());
+        self.dispatch_in(gpu, &mut frame.stage(stage));
+    }
+
     /// Renders `store` from `world_from_camera` (a target that owns its pose): sets the
-    /// parameters and pose, and records the raycast in a pass of its own.
+    /// parameters and pose, and records the render into `encoder`.
     pub fn render(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, store: &dyn TsdfStore, world_from_camera: &Se3, depth_range_m: (f32, f32)) -> Result<()> {
         self.set_params(gpu, store, depth_range_m);
         self.set_pose(gpu, world_from_camera)?;
+        self.clear(encoder);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.raycast"), timestamp_writes: None });
-        self.encode_in(gpu, &mut pass);
+        self.dispatch_in(gpu, &mut pass);
         Ok(())
     }
 }
@@ -182,7 +254,7 @@ impl Predictor {
     /// `levels` levels of `intrinsics` (level 0 = full resolution), rendered from the pose in
     /// `pose`; `depth_hint` is the depth fused at that pose (see
     /// [`RaycastTarget::with_pose_buffer`]).
-    pub fn new(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, levels: usize, pose: &wgpu::Buffer, depth_hint: Option<&wgpu::Buffer>, depth_range_m: (f32, f32)) -> Self {
+    pub fn new(gpu: &Gpu, store: &dyn TsdfStore, intrinsics: PinholeIntrinsics, levels: usize, pose: &wgpu::Buffer, depth_hint: Option<DepthHint<'_>>, depth_range_m: (f32, f32)) -> Self {
         let finest = RaycastTarget::with_pose_buffer(gpu, store, intrinsics, pose, depth_hint, "predicted[0]");
         finest.set_params(gpu, store, depth_range_m);
         let mut coarser: Vec<PredictedLevel> = Vec::new();
@@ -226,11 +298,14 @@ impl Predictor {
         self.finest.set_params(gpu, store, depth_range_m);
     }
 
-    /// Records the raycast (skipped on the GPU when the pose is disabled) and the downsampling.
-    pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
-        self.finest.encode_in(gpu, pass);
+    /// Records the raycast (skipped on the GPU when the pose is disabled) and the downsampling
+    /// as stage `stage` of a frame.
+    pub fn encode(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
+        self.finest.clear(frame.encoder());
+        let mut pass = frame.stage(stage);
+        self.finest.dispatch_in(gpu, &mut pass);
         for c in &self.coarser {
-            gpu.kernels.prediction_down.dispatch_in(pass, &c.bind_group, [c.intrinsics.width_px, c.intrinsics.height_px, 1]);
+            gpu.kernels.prediction_down.dispatch_in(&mut pass, &c.bind_group, [c.intrinsics.width_px, c.intrinsics.height_px, 1]);
         }
     }
 }

@@ -15,7 +15,9 @@
 //! normals from the vertices. Misses, back faces and unobserved space give NaN / 0. A prediction rendered at the pose a depth image was just fused at may
 //! search each ray only within μ + 3σ (Kinect noise) of that pixel's measured depth instead of
 //! the whole depth range: the fused surface lies there, and a model surface further in front is
-//! one the new measurement sees through.
+//! one the new measurement sees through. Rays without such a measurement (or every ray, for a
+//! free view) search only the depth interval `raycast_range` found for their tile, and a tile
+//! no surface brick covers is a miss without a step.
 #import invalid
 #import camera
 #import camera_pose
@@ -35,17 +37,23 @@ struct RaycastParams {
     step_factor: f32,
     // Cap on march steps per ray.
     max_steps: u32,
-    // Non-zero: start each ray near the depth `depth_hint_m` measured at its pixel (a
-    // prediction at the pose that depth was just fused at), at hint - (hint_margin_m + 3σ(hint)).
+    // Non-zero: search each ray only near the depth `depth_hint_raw` measured at its pixel (a
+    // prediction at the pose that depth was just fused at), within hint_margin_m + 3σ of it.
     use_depth_hint: u32,
-    // The truncation distance μ the hint's search window starts in front of it, metres.
+    // The truncation distance μ the hint's search window extends either side of it, metres.
     hint_margin_m: f32,
+    // Metres per raw unit of `depth_hint_raw`.
+    hint_metres_per_unit: f32,
+    // Pixels along each edge of a `depth_range_tiles` tile; 0: no range tiles (every ray
+    // without a hint searches the whole depth range).
+    range_tile_px: u32,
+    // Tiles along x.
+    range_tiles_x: u32,
     _pad0: u32,
     _pad1: u32,
+    _pad2: u32,
 }
 
-// A nearest voxel at least this close to +1 (truncation units) is treated as far from any surface.
-const FAR_TSDF: f32 = 0.999;
 
 @group(0) @binding(0) var<uniform> params: RaycastParams;
 // The pose to render from.
@@ -60,9 +68,15 @@ const FAR_TSDF: f32 = 0.999;
 @group(0) @binding(5) var<storage, read_write> depth_m: array<f32>;
 // Out: model colour, RGBA8.
 @group(0) @binding(6) var<storage, read_write> color_rgba8: array<u32>;
-// Depth measured at each pixel from this pose, metres (NaN: none), when `use_depth_hint` is set;
-// one placeholder word otherwise.
-@group(0) @binding(7) var<storage, read> depth_hint_m: array<f32>;
+// The raw sensor depth measured at each pixel from this pose (u16 units, two per word, low half
+// first; 0: no return), when `use_depth_hint` is set; one placeholder word otherwise. Raw, not
+// the range-clipped metres: a return beyond the depth range still says that nothing stands in
+// front of it.
+@group(0) @binding(7) var<storage, read> depth_hint_raw: array<u32>;
+// Per tile of `range_tile_px`², the camera-depth interval where surfaces may lie (written by
+// `raycast_range`: !bits(nearest z), bits(farthest z); 0 farthest: none), when
+// `range_tile_px` is non-zero; one placeholder word otherwise.
+@group(0) @binding(8) var<storage, read> depth_range_tiles: array<u32>;
 
 const OPAQUE: u32 = 0xff000000u;
 
@@ -81,13 +95,22 @@ fn nearest_word(d: VolumeDesc, p_world: vec3<f32>) -> u32 {
     return tsdf_volume[voxel_index(d, u32(g.x), u32(g.y), u32(g.z))];
 }
 
+// The depth measured at pixel `ix`, metres, or NaN where the sensor gave no return.
+fn hint_at(ix: u32) -> f32 {
+    let raw_units = (depth_hint_raw[ix / 2u] >> ((ix & 1u) * 16u)) & 0xffffu;
+    if raw_units == 0u {
+        return invalid_f32();
+    }
+    return f32(raw_units) * params.hint_metres_per_unit;
+}
+
 // The range of depths (nearest, farthest) the surface at pixel `xy` may lie at: its own measured
 // depth twice, or where it has none (a dropout, an edge) the range of the depths measured 2 and
 // 4 pixels away along x and y, so that a pixel beside a silhouette searches both surfaces; NaN
 // when all of those are missing too.
 fn depth_hint_range(xy: vec2<u32>) -> vec2<f32> {
     let k = params.intrinsics;
-    let own = depth_hint_m[xy.y * k.width_px + xy.x];
+    let own = hint_at(xy.y * k.width_px + xy.x);
     if is_valid_f32(own) {
         return vec2<f32>(own);
     }
@@ -97,7 +120,7 @@ fn depth_hint_range(xy: vec2<u32>) -> vec2<f32> {
         let ys = array<u32, 4>(xy.y, xy.y, xy.y + r, xy.y - min(r, xy.y));
         for (var i = 0u; i < 4u; i++) {
             if xs[i] < k.width_px && ys[i] < k.height_px {
-                let h = depth_hint_m[ys[i] * k.width_px + xs[i]];
+                let h = hint_at(ys[i] * k.width_px + xs[i]);
                 if is_valid_f32(h) {
                     if is_valid_f32(range.x) {
                         range = vec2<f32>(min(range.x, h), max(range.y, h));
@@ -139,19 +162,33 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t_far = max(t0, t1);
     var t = max(max(max(t_near.x, t_near.y), t_near.z), params.min_depth_m / z_per_t);
     var t_end = min(min(min(t_far.x, t_far.y), t_far.z), params.max_depth_m / z_per_t);
+    let max_step = params.step_factor * d.truncation_m;
+    var hinted = false;
     if params.use_depth_hint != 0u {
         let hint = depth_hint_range(gid.xy);
         if is_valid_f32(hint.x) {
             // The search window: μ + 3σ either side of the measured surface(s).
             t = max(t, (hint.x - params.hint_margin_m - 3.0 * kinect_sigma_m(hint.x)) / z_per_t);
             t_end = min(t_end, (hint.y + params.hint_margin_m + 3.0 * kinect_sigma_m(hint.y)) / z_per_t);
+            hinted = true;
         }
+    }
+    if !hinted && params.range_tile_px != 0u {
+        // No measurement here: search where surface bricks lie along this tile's rays, one
+        // step either side (the positive sample before a crossing may fall just outside).
+        let tile = (gid.y / params.range_tile_px) * params.range_tiles_x + gid.x / params.range_tile_px;
+        let far_word = depth_range_tiles[2u * tile + 1u];
+        if far_word == 0u {
+            write_miss(ix);
+            return;
+        }
+        t = max(t, bitcast<f32>(~depth_range_tiles[2u * tile]) / z_per_t - max_step);
+        t_end = min(t_end, bitcast<f32>(far_word) / z_per_t + max_step);
     }
     if !(t < t_end) {
         write_miss(ix);
         return;
     }
-    let max_step = params.step_factor * d.truncation_m;
     let min_step = 0.5 * d.voxel_size_m;
     var prev_t = t;
     var prev = TsdfSample(0.0, false);

@@ -8,7 +8,9 @@
 //! surface), skips voxels outside the image, without depth, or more than μ behind the surface,
 //! and folds min(1, sdf / μ) into the running weighted average, weight capped at `max_weight`.
 //! With colour on, voxels within the truncation band also average the pixel's colour with the
-//! same weights. Nothing is fused when the pose is inactive (a lost frame).
+//! same weights. A voxel left with a TSDF below FAR_TSDF marks its brick in `surface_bricks`
+//! (for the raycast's empty-space skipping). Nothing is fused when the pose is inactive (a
+//! lost frame).
 #import invalid
 #import camera
 #import camera_pose
@@ -38,6 +40,8 @@ struct TsdfIntegrateParams {
 @group(0) @binding(4) var<storage, read_write> tsdf_volume: array<u32>;
 // Colour words (RGB8), updated in place (one placeholder word when colour is off).
 @group(0) @binding(5) var<storage, read_write> color_volume: array<u32>;
+// One word per brick, set to 1 when a voxel in it takes a TSDF below FAR_TSDF.
+@group(0) @binding(6) var<storage, read_write> surface_bricks: array<atomic<u32>>;
 
 // The z-index interval [lo, hi] of column points a + k b (camera frame) inside the frustum, as
 // floats (empty when lo > hi). Each condition is c0 + k c1 >= 0 (or > 0).
@@ -114,6 +118,12 @@ fn integrate_voxel(d: VolumeDesc, x: u32, y: u32, z: u32) {
     let w = voxel_weight(word);
     let updated = (voxel_tsdf(word) * f32(w) + tsdf) / f32(w + 1u);
     tsdf_volume[ix] = pack_voxel(updated, min(w + 1u, d.max_weight));
+    if voxel_tsdf(pack_voxel(updated, 1u)) < FAR_TSDF {
+        let b = brick_index(d, x, y, z);
+        if atomicLoad(&surface_bricks[b]) == 0u {
+            atomicStore(&surface_bricks[b], 1u);
+        }
+    }
     if params.color_enabled != 0u && tsdf < 1.0 {
         let c_old = unpack_rgb8(color_volume[ix]);
         let c_new = (c_old * f32(w) + color[pixel].rgb) / f32(w + 1u);

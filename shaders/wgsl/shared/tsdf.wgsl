@@ -31,6 +31,25 @@ struct VolumeDesc {
 
 const TSDF_SCALE: f32 = 32767.0;
 
+// A voxel whose TSDF is at least this close to +1 (truncation units) is far from any surface:
+// at least μ - ½√3 voxel in front of one.
+const FAR_TSDF: f32 = 0.999;
+
+// The volume is tiled into bricks of 8³ voxels for empty-space skipping: one word per brick
+// (x fastest), non-zero once a voxel in it has held a TSDF below FAR_TSDF (a surface or its
+// truncation band may lie in it; never cleared until the volume is reset).
+const BRICK_SHIFT: u32 = 3u;
+
+fn brick_dims(d: VolumeDesc) -> vec3<u32> {
+    return (vec3<u32>(d.dim_x, d.dim_y, d.dim_z) + vec3<u32>((1u << BRICK_SHIFT) - 1u)) >> vec3<u32>(BRICK_SHIFT);
+}
+
+// The brick of voxel (x, y, z).
+fn brick_index(d: VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
+    let b = brick_dims(d);
+    return (x >> BRICK_SHIFT) + b.x * ((y >> BRICK_SHIFT) + b.y * (z >> BRICK_SHIFT));
+}
+
 fn voxel_index(d: VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
     return x + d.dim_x * (y + d.dim_y * z);
 }

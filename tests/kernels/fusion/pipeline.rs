@@ -240,6 +240,7 @@ fn a_pose_driven_mapper_recombines_the_stages() {
     let desc = mapper.volume().desc();
     let mut voxels = vec![0u32; desc.voxel_count()];
     let mut colors = vec![0u32; desc.voxel_count()];
+    let mut bricks = vec![0u32; desc.brick_count()];
     for (i, pose) in poses.iter().enumerate() {
         let f = frame(i);
         mapper.submit_frame(&gpu, &f, pose).expect("fuse");
@@ -252,8 +253,11 @@ fn a_pose_driven_mapper_recombines_the_stages() {
             max_depth_m: config.preprocess.max_depth_m,
             ..Default::default()
         };
-        webfusion_core::cpu::tsdf_integrate(&p, &webfusion_core::fusion::predictor::camera_pose(Some(pose)), &chain.depth_unfiltered_m, &chain.color, &mut voxels, &mut colors);
+        webfusion_core::cpu::tsdf_integrate(&p, &webfusion_core::fusion::predictor::camera_pose(Some(pose)), &chain.depth_unfiltered_m, &chain.color, &mut voxels, &mut colors, &mut bricks);
     }
+    let gpu_bricks: Vec<u32> = pollster::block_on(gpu.read_buffer(mapper.volume().surface_bricks(), desc.brick_count())).expect("read the bricks");
+    let brick_diff = gpu_bricks.iter().zip(&bricks).filter(|(g, c)| g != c).count();
+    assert!(brick_diff * 100 <= bricks.iter().filter(|&&b| b != 0).count(), "surface bricks: {brick_diff} differ from the twins'");
     let gpu_voxels: Vec<u32> = pollster::block_on(gpu.read_buffer(mapper.volume().voxels(), desc.voxel_count())).expect("read the map");
     let touched = voxels.iter().filter(|&&w| w >> 16 > 0).count();
     let differ = gpu_voxels.iter().zip(&voxels).filter(|&(&g, &c)| (g >> 16) != (c >> 16) || ((g as u16 as i16) as i32 - (c as u16 as i16) as i32).abs() > 2).count();

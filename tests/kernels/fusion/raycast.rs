@@ -12,9 +12,11 @@
 //! hit on one side and miss on the other: at most 0.5 % of the pixels may disagree that way.
 
 use glam::{DQuat, DVec3};
-use webfusion_core::cpu::{self, shared::pack_rgb8};
+use webfusion_core::cpu::{self, shared::{pack_rgb8, pack_u16_pairs}};
 use webfusion_core::kernels::GpuIntrinsics;
+use webfusion_core::fusion::predictor::RANGE_TILE_PX;
 use webfusion_core::kernels::raycast::{CameraPose, DEFAULT_MAX_STEPS, DEFAULT_STEP_FACTOR, RaycastParams};
+use webfusion_core::kernels::raycast_range::RaycastRangeParams;
 use webfusion_core::mesh::tsdf_from_sdf;
 use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
 use webfusion_core::{PinholeIntrinsics, Se3};
@@ -26,6 +28,8 @@ const PLANE_Z_M: f32 = 1.5;
 const SPHERE_CENTRE: [f32; 3] = [0.3, 0.1, 1.0];
 const SPHERE_RADIUS_M: f32 = 0.2;
 const MAX_DISAGREEING_FRACTION: f64 = 5e-3;
+/// Raw units per metre of the depth hint (TUM's scale).
+const HINT_UNITS_PER_M: f32 = 5000.0;
 
 fn scene_sdf(p: [f32; 3]) -> f32 {
     let d = [p[0] - SPHERE_CENTRE[0], p[1] - SPHERE_CENTRE[1], p[2] - SPHERE_CENTRE[2]];
@@ -54,11 +58,13 @@ struct Images {
     color: Vec<u32>,
 }
 
-/// Raycast parameters and pose; `hint`: each ray starts near a measured depth.
+/// Raycast parameters and pose; `hint`: each ray starts near a measured depth; `range_tiles`:
+/// the depth-range tiles (`raycast_range`'s output) rays without a hint search within.
 struct Setup {
     params: RaycastParams,
     pose: CameraPose,
     hint: Option<Vec<f32>>,
+    range_tiles: Option<Vec<u32>>,
 }
 
 fn params(desc: VolumeDesc, k: PinholeIntrinsics, world_from_camera: &Se3) -> Setup {
@@ -71,25 +77,32 @@ fn params(desc: VolumeDesc, k: PinholeIntrinsics, world_from_camera: &Se3) -> Se
         max_steps: DEFAULT_MAX_STEPS,
         ..Default::default()
     };
-    Setup { params, pose: webfusion_core::fusion::predictor::camera_pose(Some(world_from_camera)), hint: None }
+    Setup { params, pose: webfusion_core::fusion::predictor::camera_pose(Some(world_from_camera)), hint: None, range_tiles: None }
 }
 
 fn render(s: &Setup, voxels: &[u32], colors: &[u32]) -> (Images, Images) {
     let gpu = gpu();
     let p = &s.params;
     let n = (p.intrinsics.width_px * p.intrinsics.height_px) as usize;
-    let no_hint = vec![f32::NAN];
-    let hint = s.hint.as_ref().unwrap_or(&no_hint);
-    let p = &RaycastParams { use_depth_hint: u32::from(s.hint.is_some()), hint_margin_m: p.volume.truncation_m, ..*p };
-    // Bindings: params, pose, volume, colours, then the outputs, then the depth hint.
+    // The hint as the sensor gives it: raw units (0: no return), two per word.
+    let hint: Vec<u32> = match &s.hint {
+        Some(h) => pack_u16_pairs(&h.iter().map(|&d| if d.is_nan() { 0 } else { (d * HINT_UNITS_PER_M).round() as u16 }).collect::<Vec<_>>()),
+        None => vec![0],
+    };
+    let hint = &hint;
+    let p = &RaycastParams { use_depth_hint: u32::from(s.hint.is_some()), hint_margin_m: p.volume.truncation_m, hint_metres_per_unit: 1.0 / HINT_UNITS_PER_M, ..*p };
+    let no_tiles = vec![0u32];
+    let tiles = s.range_tiles.as_ref().unwrap_or(&no_tiles);
+    let p = &RaycastParams { range_tile_px: if s.range_tiles.is_some() { RANGE_TILE_PX } else { 0 }, range_tiles_x: p.intrinsics.width_px.div_ceil(RANGE_TILE_PX), ..*p };
+    // Bindings: params, pose, volume, colours, then the outputs, the depth hint, the tiles.
     let inputs: [&[u8]; 3] = [bytemuck::bytes_of(&s.pose), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)];
     use webfusion_tests::Slot::{In, Out};
-    let slots = [In(inputs[0]), In(inputs[1]), In(inputs[2]), Out(16 * n), Out(4 * n), Out(4 * n), In(bytemuck::cast_slice(hint))];
+    let slots = [In(inputs[0]), In(inputs[1]), In(inputs[2]), Out(16 * n), Out(4 * n), Out(4 * n), In(bytemuck::cast_slice(hint)), In(bytemuck::cast_slice(tiles))];
     let out = webfusion_tests::run_kernel_slots(&gpu, &gpu.kernels.raycast, p, &slots, [p.intrinsics.width_px, p.intrinsics.height_px, 1]);
     finish(&gpu);
     let g = Images { vertex: cast(&out[0]), depth: cast(&out[1]), color: cast(&out[2]) };
     let mut c = Images { vertex: vec![[0.0; 4]; n], depth: vec![0.0; n], color: vec![0; n] };
-    cpu::raycast(p, &s.pose, voxels, colors, &mut c.vertex, &mut c.depth, &mut c.color, hint);
+    cpu::raycast(p, &s.pose, voxels, colors, &mut c.vertex, &mut c.depth, &mut c.color, hint, tiles);
     (g, c)
 }
 
@@ -242,28 +255,79 @@ fn starting_at_the_measured_depth_finds_the_same_surface() {
     let hinted = Setup { hint: Some(hint), ..params(desc, k, &Se3::IDENTITY) };
     let (g, c) = render(&hinted, &voxels, &colors);
     assert_agree("hinted GPU vs CPU", &g, &c);
-    // The march visits other sample points, so the crossing moves by a fraction of a voxel;
-    // only rays grazing a silhouette (a neighbour's depth 10 cm or more away), where the TSDF
-    // dips below zero for less than a step, may find another surface.
+    assert_same_surfaces("hinted", k, desc, &full, &g);
+    // A hint far behind every surface: the ray starts past them and sees nothing in front. The
+    // same for a return beyond the depth range (5 m here): the sensor saw through everything.
+    for far_m in [4.5, 5.5] {
+        let behind = Setup { hint: Some(vec![far_m; k.pixel_count()]), ..params(desc, k, &Se3::IDENTITY) };
+        let (g, c) = render(&behind, &voxels, &colors);
+        assert!(g.depth.iter().chain(&c.depth).all(|d| d.is_nan()), "a ray hinted at {far_m} m meets only the surfaces' backs");
+    }
+}
+
+/// `got` (a march that starts elsewhere than `full`'s) finds `full`'s surfaces: the march
+/// visits other sample points, so a crossing moves by a fraction of a voxel; only rays grazing
+/// a silhouette (a neighbour within 2 pixels whose full-march depth is 10 cm or more away, or
+/// which is a miss where this one hits, or a hit where this one misses), where the TSDF dips
+/// below zero for less than a step, may find another surface or none, and at most 2 % of the
+/// pixels do.
+fn assert_same_surfaces(what: &str, k: PinholeIntrinsics, desc: VolumeDesc, full: &Images, got: &Images) {
     let (w, h) = (k.width_px as usize, k.height_px as usize);
     let silhouette = |i: usize| {
         let (x, y) = (i % w, i / w);
-        (y.saturating_sub(2)..(y + 3).min(h)).any(|yy| (x.saturating_sub(2)..(x + 3).min(w)).any(|xx| !((full.depth[yy * w + xx] - full.depth[i]).abs() < 0.1)))
+        (y.saturating_sub(2)..(y + 3).min(h)).any(|yy| {
+            (x.saturating_sub(2)..(x + 3).min(w)).any(|xx| {
+                let (a, b) = (full.depth[yy * w + xx], full.depth[i]);
+                a.is_nan() != b.is_nan() || (a - b).abs() >= 0.1
+            })
+        })
     };
     let quarter_voxel = desc.voxel_size_m / 4.0;
     let mut off_surface = 0;
-    for i in (0..full.depth.len()).filter(|&i| !full.depth[i].is_nan()) {
-        if !((g.depth[i] - full.depth[i]).abs() <= quarter_voxel) {
+    for i in 0..full.depth.len() {
+        let (f, g) = (full.depth[i], got.depth[i]);
+        let same = if f.is_nan() { g.is_nan() } else { (g - f).abs() <= quarter_voxel };
+        if !same {
             off_surface += 1;
-            assert!(silhouette(i), "pixel ({}, {}) away from any silhouette: hinted {} vs full march {}", i % w, i / w, g.depth[i], full.depth[i]);
+            assert!(silhouette(i), "{what}: pixel ({}, {}) away from any silhouette: {g} vs full march {f}", i % w, i / w);
         }
     }
-    eprintln!("hinted vs full march: {off_surface} of {} hits differ by more than a quarter voxel, all at silhouettes", full.depth.len());
-    assert!(off_surface * 50 < full.depth.len(), "at most 2 % of the pixels ({off_surface})");
-    // A hint far behind every surface: the ray starts past them and sees nothing in front.
-    let behind = Setup { hint: Some(vec![4.5; k.pixel_count()]), ..params(desc, k, &Se3::IDENTITY) };
-    let (g, _) = render(&behind, &voxels, &colors);
-    assert!(g.depth.iter().all(|d| d.is_nan()), "a ray starting behind the surface meets only its back");
+    eprintln!("{what} vs full march: {off_surface} of {} pixels differ (by more than a quarter voxel, or hit vs miss), all at silhouettes", full.depth.len());
+    assert!(off_surface * 50 < full.depth.len(), "{what}: at most 2 % of the pixels ({off_surface})");
+}
+
+/// The depth-range tiles of `voxels` seen from `s`, by the CPU twin of `raycast_range` (whose
+/// own test compares it with the GPU).
+fn range_tiles(desc: VolumeDesc, voxels: &[u32], s: &Setup) -> Vec<u32> {
+    let k = s.params.intrinsics;
+    let (tiles_x, tiles_y) = (k.width_px.div_ceil(RANGE_TILE_PX), k.height_px.div_ceil(RANGE_TILE_PX));
+    let rp = RaycastRangeParams { volume: desc, intrinsics: k, tile_px: RANGE_TILE_PX, tiles_x, tiles_y, min_depth_m: s.params.min_depth_m, max_depth_m: s.params.max_depth_m, ..Default::default() };
+    let mut tiles = vec![0u32; (2 * tiles_x * tiles_y) as usize];
+    cpu::raycast_range(&rp, &s.pose, &cpu::shared::surface_bricks(&desc, voxels), &mut tiles);
+    tiles
+}
+
+#[test]
+fn range_tiles_find_the_full_marchs_surfaces_and_empty_tiles_miss() {
+    let (desc, voxels, colors) = scene();
+    let k = PinholeIntrinsics { fx_px: 129.4, fy_px: 129.2, cx_px: 79.6, cy_px: 63.8, width_px: 160, height_px: 120 };
+    let rotated = Se3::new(DQuat::from_axis_angle(DVec3::new(0.3, 1.0, -0.2).normalize(), 0.25), DVec3::new(0.2, -0.1, 0.1));
+    for (what, pose) in [("identity", Se3::IDENTITY), ("rotated", rotated)] {
+        let plain = params(desc, k, &pose);
+        let (full, _) = render(&plain, &voxels, &colors);
+        let tiles = range_tiles(desc, &voxels, &plain);
+        let empty_tiles = tiles.chunks(2).filter(|t| t[1] == 0).count();
+        let ranged = Setup { range_tiles: Some(tiles), ..params(desc, k, &pose) };
+        let (g, c) = render(&ranged, &voxels, &colors);
+        assert_agree(&format!("{what}, range tiles: GPU vs CPU"), &g, &c);
+        assert_same_surfaces(&format!("{what}, range tiles"), k, desc, &full, &g);
+        eprintln!("{what}: {empty_tiles} of {} tiles meet no surface brick", c.depth.len() / (RANGE_TILE_PX * RANGE_TILE_PX) as usize);
+    }
+    // Negative control: tiles that say "no surface brick anywhere" make every ray a miss, so
+    // the kernel does read them.
+    let none = Setup { range_tiles: Some(vec![0; 2 * 20 * 15]), ..params(desc, k, &Se3::IDENTITY) };
+    let (g, c) = render(&none, &voxels, &colors);
+    assert!(g.depth.iter().chain(&c.depth).all(|d| d.is_nan()), "empty tiles: only misses");
 }
 
 #[test]

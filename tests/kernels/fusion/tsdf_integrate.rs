@@ -11,7 +11,7 @@
 //! 0.1 % of the touched voxels may differ beyond that.
 
 use glam::{DQuat, DVec3};
-use webfusion_core::cpu::{self, shared::{voxel_tsdf, voxel_weight}};
+use webfusion_core::cpu::{self, shared::{brick_index, voxel_index, voxel_tsdf, voxel_weight}};
 use webfusion_core::kernels::GpuIntrinsics;
 use webfusion_core::kernels::tsdf_integrate::{CameraPose, TsdfIntegrateParams};
 use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
@@ -34,20 +34,43 @@ fn params(desc: VolumeDesc, k: PinholeIntrinsics, world_from_camera: &Se3, color
     (p, webfusion_core::fusion::predictor::camera_pose(Some(world_from_camera)))
 }
 
-/// Integrates on the GPU and on the CPU; returns (GPU, CPU) voxel and colour words.
+/// Integrates on the GPU and on the CPU; returns (GPU, CPU) voxel and colour words. The
+/// surface bricks start cleared and must come out the same, except bricks holding a voxel the
+/// two updated differently (a pixel-boundary flip); the last GPU bricks are kept in `BRICKS`.
 fn integrate(p: &(TsdfIntegrateParams, CameraPose), depth_m: &[f32], color: &[[f32; 4]], voxels: &[u32], colors: &[u32]) -> ((Vec<u32>, Vec<u32>), (Vec<u32>, Vec<u32>)) {
     let gpu = gpu();
+    let d = &p.0.volume;
+    let bricks = vec![0u32; d.brick_count()];
     let out = run_kernel_in_place(
         &gpu,
         &gpu.kernels.tsdf_integrate,
         &p.0,
-        &[bytemuck::bytes_of(&p.1), bytemuck::cast_slice(depth_m), bytemuck::cast_slice(color), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)],
-        [p.0.volume.dim_x, p.0.volume.dim_y, 1],
+        &[bytemuck::bytes_of(&p.1), bytemuck::cast_slice(depth_m), bytemuck::cast_slice(color), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors), bytemuck::cast_slice(&bricks)],
+        [d.dim_x, d.dim_y, 1],
     );
     finish(&gpu);
-    let (mut cv, mut cc) = (voxels.to_vec(), colors.to_vec());
-    cpu::tsdf_integrate(&p.0, &p.1, depth_m, color, &mut cv, &mut cc);
-    ((cast(&out[3]), cast(&out[4])), (cv, cc))
+    let (mut cv, mut cc, mut cb) = (voxels.to_vec(), colors.to_vec(), bricks);
+    cpu::tsdf_integrate(&p.0, &p.1, depth_m, color, &mut cv, &mut cc, &mut cb);
+    let (gv, gb): (Vec<u32>, Vec<u32>) = (cast(&out[3]), cast(&out[5]));
+    let mut flipped = vec![false; cb.len()];
+    for z in 0..d.dim_z {
+        for y in 0..d.dim_y {
+            for x in 0..d.dim_x {
+                let i = voxel_index(d, x, y, z) as usize;
+                if gv[i] != cv[i] {
+                    flipped[brick_index(d, x, y, z) as usize] = true;
+                }
+            }
+        }
+    }
+    let wrong = (0..cb.len()).filter(|&b| gb[b] != cb[b] && !flipped[b]).count();
+    assert_eq!(wrong, 0, "surface bricks: {wrong} differ from the twin's where no voxel differs");
+    BRICKS.with(|b| *b.borrow_mut() = gb);
+    ((gv, cast(&out[4])), (cv, cc))
+}
+
+thread_local! {
+    static BRICKS: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// The voxels a full sweep of every voxel (no frustum stretch) would update: the kernel's
@@ -119,6 +142,15 @@ fn a_wall_fuses_to_its_signed_distance() {
     for frame in 1..=3u32 {
         let ((gv, gc), (cv, cc)) = integrate(&p, &depth, &color, &voxels, &colors);
         assert_eq!(compare_volumes((&gv, &gc), (&cv, &cc)), Ok(0), "frame {frame}: GPU and CPU agree exactly on a wall");
+        if frame == 1 {
+            // Every observed voxel was updated by this frame: the marked bricks are exactly
+            // those holding a voxel below FAR_TSDF, and the free space in front of the wall's
+            // band (and the space behind it) leaves bricks unmarked.
+            let marked = BRICKS.with(|b| b.borrow().clone());
+            assert_eq!(marked, cpu::shared::surface_bricks(&desc, &gv), "the wall's surface bricks");
+            let n = marked.iter().filter(|&&m| m != 0).count();
+            assert!(n > 0 && n < marked.len() / 2, "some bricks marked, most not ({n} of {})", marked.len());
+        }
         // The central column (x, y = 16) sees the wall head-on.
         for z in 0..desc.dim_z {
             let ix = (16 + 32 * (16 + 32 * z)) as usize;

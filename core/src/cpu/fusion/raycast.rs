@@ -1,13 +1,12 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/fusion/raycast.wgsl`.
 
-use crate::cpu::shared::{INVALID, INVALID_VEC4, TsdfSample, back_project, dot3, is_valid_f32, kinect_sigma_m, sample_tsdf, transform_vector, voxel_index, voxel_tsdf, voxel_weight};
+use crate::cpu::shared::{FAR_TSDF, INVALID, INVALID_VEC4, TsdfSample, back_project, dot3, is_valid_f32, kinect_sigma_m, sample_tsdf, transform_vector, voxel_index, voxel_tsdf, voxel_weight};
+use crate::cpu::fusion::raycast_range::tile_depth_range;
 use crate::kernels::raycast::{CameraPose, RaycastParams};
 use crate::tsdf::VolumeDesc;
 
 const OPAQUE: u32 = 0xff00_0000;
-/// Twin of `FAR_TSDF`.
-pub const FAR_TSDF: f32 = 0.999;
 
 /// Twin of `nearest_word()`.
 pub fn nearest_word(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> u32 {
@@ -20,10 +19,19 @@ pub fn nearest_word(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> u
     tsdf_volume[voxel_index(d, g[0] as u32, g[1] as u32, g[2] as u32) as usize]
 }
 
+/// Twin of `hint_at()`.
+pub fn hint_at(params: &RaycastParams, depth_hint_raw: &[u32], ix: u32) -> f32 {
+    let raw_units = (depth_hint_raw[(ix / 2) as usize] >> ((ix & 1) * 16)) & 0xffff;
+    if raw_units == 0 {
+        return INVALID;
+    }
+    raw_units as f32 * params.hint_metres_per_unit
+}
+
 /// Twin of `depth_hint_range()`: (nearest, farthest) depth, NaN when there is none.
-pub fn depth_hint_range(params: &RaycastParams, depth_hint_m: &[f32], x: u32, y: u32) -> (f32, f32) {
+pub fn depth_hint_range(params: &RaycastParams, depth_hint_raw: &[u32], x: u32, y: u32) -> (f32, f32) {
     let k = &params.intrinsics;
-    let own = depth_hint_m[(y * k.width_px + x) as usize];
+    let own = hint_at(params, depth_hint_raw, y * k.width_px + x);
     if is_valid_f32(own) {
         return (own, own);
     }
@@ -33,7 +41,7 @@ pub fn depth_hint_range(params: &RaycastParams, depth_hint_m: &[f32], x: u32, y:
         let ys = [y, y, y + r, y - r.min(y)];
         for i in 0..4 {
             if xs[i] < k.width_px && ys[i] < k.height_px {
-                let h = depth_hint_m[(ys[i] * k.width_px + xs[i]) as usize];
+                let h = hint_at(params, depth_hint_raw, ys[i] * k.width_px + xs[i]);
                 if is_valid_f32(h) {
                     range = if is_valid_f32(range.0) { (range.0.min(h), range.1.max(h)) } else { (h, h) };
                 }
@@ -53,7 +61,8 @@ pub fn raycast(
     vertex_in_world: &mut [[f32; 4]],
     depth_m: &mut [f32],
     color_rgba8: &mut [u32],
-    depth_hint_m: &[f32],
+    depth_hint_raw: &[u32],
+    depth_range_tiles: &[u32],
 ) {
     let k = &params.intrinsics;
     let d = &params.volume;
@@ -84,18 +93,29 @@ pub fn raycast(
             let t_far: [f32; 3] = std::array::from_fn(|i| t0[i].max(t1[i]));
             let mut t = t_near[0].max(t_near[1]).max(t_near[2]).max(params.min_depth_m / z_per_t);
             let mut t_end = t_far[0].min(t_far[1]).min(t_far[2]).min(params.max_depth_m / z_per_t);
+            let max_step = params.step_factor * d.truncation_m;
+            let mut hinted = false;
             if params.use_depth_hint != 0 {
-                let (near, far) = depth_hint_range(params, depth_hint_m, gx, gy);
+                let (near, far) = depth_hint_range(params, depth_hint_raw, gx, gy);
                 if is_valid_f32(near) {
                     t = t.max((near - params.hint_margin_m - 3.0 * kinect_sigma_m(near)) / z_per_t);
                     t_end = t_end.min((far + params.hint_margin_m + 3.0 * kinect_sigma_m(far)) / z_per_t);
+                    hinted = true;
                 }
+            }
+            if !hinted && params.range_tile_px != 0 {
+                let tile = ((gy / params.range_tile_px) * params.range_tiles_x + gx / params.range_tile_px) as usize;
+                let Some((near, far)) = tile_depth_range([depth_range_tiles[2 * tile], depth_range_tiles[2 * tile + 1]]) else {
+                    miss();
+                    continue;
+                };
+                t = t.max(near / z_per_t - max_step);
+                t_end = t_end.min(far / z_per_t + max_step);
             }
             if !(t < t_end) {
                 miss();
                 continue;
             }
-            let max_step = params.step_factor * d.truncation_m;
             let min_step = 0.5 * d.voxel_size_m;
             let mut prev_t = t;
             let mut prev = TsdfSample { tsdf: 0.0, valid: false };

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/fusion/tsdf_integrate.wgsl`.
 
-use crate::cpu::shared::{is_valid_f32, pack_rgb8, pack_voxel, transform_point, transform_vector, unpack_rgb8, voxel_centre_in_world, voxel_index, voxel_tsdf, voxel_weight};
+use crate::cpu::shared::{FAR_TSDF, brick_index, is_valid_f32, pack_rgb8, pack_voxel, transform_point, transform_vector, unpack_rgb8, voxel_centre_in_world, voxel_index, voxel_tsdf, voxel_weight};
 use crate::kernels::tsdf_integrate::{CameraPose, TsdfIntegrateParams};
 
 /// Twin of `frustum_interval()`: the z-index interval `[lo, hi]` of the column points `a + k b`
@@ -31,7 +31,7 @@ pub fn frustum_interval(params: &TsdfIntegrateParams, a: [f32; 3], b: [f32; 3], 
 }
 
 /// Updates every voxel as the kernel's invocations (one per column, frustum stretch only) do.
-pub fn tsdf_integrate(params: &TsdfIntegrateParams, pose: &CameraPose, depth_m: &[f32], color: &[[f32; 4]], tsdf_volume: &mut [u32], color_volume: &mut [u32]) {
+pub fn tsdf_integrate(params: &TsdfIntegrateParams, pose: &CameraPose, depth_m: &[f32], color: &[[f32; 4]], tsdf_volume: &mut [u32], color_volume: &mut [u32], surface_bricks: &mut [u32]) {
     let d = &params.volume;
     if pose.enabled == 0 {
         return;
@@ -73,6 +73,9 @@ pub fn tsdf_integrate(params: &TsdfIntegrateParams, pose: &CameraPose, depth_m: 
                 let w = voxel_weight(word);
                 let updated = (voxel_tsdf(word) * w as f32 + tsdf) / (w + 1) as f32;
                 tsdf_volume[ix] = pack_voxel(updated, (w + 1).min(d.max_weight));
+                if voxel_tsdf(pack_voxel(updated, 1)) < FAR_TSDF {
+                    surface_bricks[brick_index(d, gx, gy, gz) as usize] = 1;
+                }
                 if params.color_enabled != 0 && tsdf < 1.0 {
                     let c_old = unpack_rgb8(color_volume[ix]);
                     let c = color[pixel];
