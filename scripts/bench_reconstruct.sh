@@ -13,18 +13,19 @@
 #   --threads N        Open3D/OpenMP threads (default: all cores)
 #   --webfusion-out D  score an existing `webfusion reconstruct` output folder instead of
 #                      running the binary (D/trajectory.txt, D/stats.json)
-#   -- ARGS...         passed on to `webfusion reconstruct` (default: --centred --voxel-size 0.02,
-#                      a 5.1 m cube around the first camera, since fr1/rpy turns 90° in place)
+#   -- ARGS...         passed on to `webfusion reconstruct` (default: none, the CLI's defaults)
 #
 # Env: WEBFUSION_BIN (default target/release/webfusion; built with
 # `cargo build --release -p webfusion-bridge` when missing). The peer venv (.venv-peers/,
 # open3d-cpu + evo) is set up by scripts/peers/setup_venv.sh, which this script runs.
+# Both run their own defaults; Open3D takes the TUM calibration of the camera the data path
+# names (fr1/fr2/fr3), as webfusion does.
 # Timing: webfusion's per-frame number is stats.json stages_ms.frame.median; Open3D's is the
 # median of upload + tracking + integration + raycast per frame (PNG decode excluded).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 
-usage() { sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; }
 frames=""; data="${WEBFUSION_TUM_DIR:-$ROOT/../shared/data/tum_fr1_rpy_0-99}"
 out="$ROOT/target/bench-reconstruct"; threads=0; wf_out=""; wf_extra=()
 while [ $# -gt 0 ]; do
@@ -44,7 +45,6 @@ done
 [ -d "$data" ] || { echo "no TUM directory at $data (use --data DIR)" >&2; exit 2; }
 [ -f "$data/groundtruth.txt" ] || { echo "$data/groundtruth.txt missing" >&2; exit 2; }
 data="$(cd "$data" && pwd)"
-[ ${#wf_extra[@]} -gt 0 ] || wf_extra=(--centred --voxel-size 0.02)
 mkdir -p "$out"; out="$(cd "$out" && pwd)"
 if [ -n "$wf_out" ]; then
   [ -d "$wf_out" ] || { echo "--webfusion-out $wf_out: no such directory" >&2; exit 2; }

@@ -2,8 +2,22 @@
 # Runs every test: native unit and GPU tests (Mesa lavapipe) under nextest, the wasm tests in
 # headless Chromium on WebGPU, then the end-to-end test (the trunk-built app against
 # `webfusion serve`, in headless Chromium via playwright-core). Installs what is missing first.
+# Everything it runs stands on the repository alone (real frames come from data/sample).
+#
+#   scripts/test.sh            every test
+#   scripts/test.sh --extras   only the optional checks against the original TUM files the
+#                              sample was made from (`#[ignore]`d tests): they need
+#                              $WEBFUSION_SHARED_DATA, by default ../shared/data
 set -euo pipefail
 cd "$(dirname "$0")/.."
+if [ "${1:-}" = "--extras" ]; then
+  data="${WEBFUSION_SHARED_DATA:-$PWD/../shared/data}"
+  [ -d "$data/tum_fr1_rpy_0-99" ] || { echo "--extras needs the shared TUM excerpt at $data/tum_fr1_rpy_0-99 (set WEBFUSION_SHARED_DATA)" >&2; exit 2; }
+  eval "$(scripts/setup.sh test)"
+  WEBFUSION_SHARED_DATA="$(cd "$data" && pwd)" exec cargo nextest run --workspace --features webfusion-bridge/openni2 --run-ignored only --no-fail-fast
+elif [ $# -gt 0 ]; then
+  echo "usage: scripts/test.sh [--extras]" >&2; exit 2
+fi
 # Set-up installs what is missing and prints the environment (XDG_RUNTIME_DIR for wgpu/Mesa);
 # a failing set-up stops here (an eval of a failed substitution would carry on).
 setup_env=$(scripts/setup.sh test)

@@ -13,7 +13,7 @@
 
 use std::path::PathBuf;
 
-use webfusion_core::io::tum::TumDataset;
+use webfusion_core::recording::RecordingReader;
 use webfusion_core::kernels::KernelPipeline;
 use webfusion_core::source::FrameSource;
 use webfusion_core::{Gpu, GpuOptions, RgbdCalibration, RgbdFrame};
@@ -226,22 +226,19 @@ pub fn cast<T: bytemuck::Pod>(bytes: &[u8]) -> Vec<T> {
     bytemuck::pod_collect_to_vec(bytes)
 }
 
-/// `../shared/data/tum_fr1_rpy_0-99` (real Kinect frames with mocap ground truth). Override
-/// with `WEBFUSION_TUM_DIR`. Panics if missing: these tests never skip silently.
-pub fn tum_dir() -> PathBuf {
-    let dir = std::env::var_os("WEBFUSION_TUM_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/tum_fr1_rpy_0-99"));
-    assert!(dir.join("depth.txt").exists(), "real-data tests need the TUM frames at {} (set WEBFUSION_TUM_DIR)", dir.display());
-    dir
+/// The bundled sample, `data/sample/fr1_rpy.wfr`: TUM `freiburg1_rpy` frames 0-99 (real
+/// Kinect frames, depth bit-exact, colour JPEG) with their motion-capture ground truth. Part
+/// of the repository, so these tests need nothing beside it.
+pub fn sample() -> RecordingReader {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/sample/fr1_rpy.wfr");
+    RecordingReader::open(&path).unwrap_or_else(|e| panic!("opening the bundled sample {}: {e}", path.display()))
 }
 
-/// Frame `index` of the shared TUM sequence with its calibration.
-pub fn tum_frame(index: usize) -> (RgbdCalibration, RgbdFrame) {
-    let mut dataset = TumDataset::open(tum_dir(), None).expect("open shared TUM data");
-    let calibration = dataset.calibration();
-    let frame = dataset.read_frame(index).expect("read TUM frame");
-    (calibration, frame)
+/// Frame `index` of the sample with its calibration.
+pub fn sample_frame(index: usize) -> (RgbdCalibration, RgbdFrame) {
+    let mut sample = sample();
+    let frame = sample.read_frame(index).expect("reading a sample frame");
+    (sample.calibration(), frame)
 }
 
 /// Runs `pipeline` once with `params` at binding 0 and `buffers` (initial bytes, in binding

@@ -342,13 +342,19 @@ fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> an
     let frame = source.read_frame(n)?;
     fusion.preprocessor().upload(gpu, &frame)?;
     type Stage<'a> = (&'static str, Box<dyn Fn(&mut FrameEncoder<'_>) + 'a>);
-    let stages: Vec<Stage> = vec![
+    const ITERATION_NAMES: [&str; 4] =
+        ["one ICP iteration, level 0", "one ICP iteration, level 1", "one ICP iteration, level 2", "one ICP iteration, level 3"];
+    let mut stages: Vec<Stage> = vec![
         ("preprocess (whole chain)", Box::new(|fe| fusion.preprocessor().encode_in(gpu, &mut fe.stage("preprocess")))),
         ("track (every level, to convergence)", Box::new(|fe| fusion.tracker().encode_in(gpu, &mut fe.stage("track")))),
         ("keep the reference", Box::new(|fe| fusion.tracker().encode_keep_previous(gpu, &mut fe.stage("keep")))),
         ("integrate", Box::new(|fe| fusion.mapper().encode_in(gpu, &mut fe.stage("integrate")))),
         ("raycast + prediction pyramid", Box::new(|fe| fusion.predictor().encode(gpu, fe, "predict"))),
     ];
+    let tracker = fusion.tracker();
+    for (level, name) in ITERATION_NAMES.iter().enumerate().take(tracker.levels()) {
+        stages.push((name, Box::new(move |fe| tracker.encode_iteration(gpu, &mut fe.stage("iteration"), level))));
+    }
     let mut times = StageTimes::default();
     for iteration in 0..args.warmup + args.iterations {
         for (name, encode) in &stages {

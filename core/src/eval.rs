@@ -395,11 +395,9 @@ fn rotation_angle_rad(rotation: DQuat) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use std::path::Path;
-
     use super::*;
-    use crate::io::read_tum_trajectory;
-    use crate::io::test_util::TUM_FR1_RPY_DIR;
+    use crate::io::test_util::SAMPLE_RECORDING;
+    use crate::source::FrameSource as _;
 
     const MS: i64 = 1_000_000;
 
@@ -758,7 +756,8 @@ mod tests {
 
     #[test]
     fn evaluates_rigidly_moved_tum_ground_truth() {
-        let gt = read_tum_trajectory(&Path::new(TUM_FR1_RPY_DIR).join("groundtruth.txt")).expect("groundtruth.txt");
+        let sample = crate::recording::RecordingReader::open(SAMPLE_RECORDING).expect("opening the sample");
+        let gt = sample.ground_truth().expect("the sample carries TUM's motion capture").to_vec();
         // Every third pose, 3 ms later, in another world frame.
         let est_from_gt = known_transform();
         let est: Vec<TimedPose> = gt

@@ -768,7 +768,7 @@ mod tests {
     use std::io::Cursor;
 
     use super::*;
-    use crate::io::test_util::{ScratchDir, TUM_FR1_RPY_DIR};
+    use crate::io::test_util::{ScratchDir, shared_tum_fr1_rpy_dir};
     use crate::io::tum::TumDataset;
     use crate::source::open_source;
 
@@ -1093,9 +1093,10 @@ mod tests {
     }
 
     #[test]
+    #[ignore = "optional: needs ../shared/data (scripts/test.sh --extras)"]
     fn sample_recording_matches_the_tum_pngs() {
         let mut recording = RecordingReader::open(SAMPLE_PATH).expect("opening data/sample/fr1_rpy.wfr");
-        let mut tum = TumDataset::open(TUM_FR1_RPY_DIR, None).expect("opening the TUM excerpt");
+        let mut tum = TumDataset::open(shared_tum_fr1_rpy_dir(), None).expect("opening the TUM excerpt");
         assert_eq!(recording.frame_count(), 100, "frames");
         assert_eq!(recording.calibration(), tum.calibration(), "calibration");
         assert_eq!(recording.ground_truth(), tum.ground_truth(), "ground truth passes through exactly");

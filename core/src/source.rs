@@ -97,13 +97,17 @@ fn read_up_to(reader: &mut impl std::io::Read, buffer: &mut [u8]) -> std::io::Re
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::test_util::{ScratchDir, TUM_FR1_RPY_DIR};
+    use crate::io::test_util::{SAMPLE_RECORDING, ScratchDir, sample_as_tum};
 
     #[test]
-    fn opens_a_tum_directory() {
-        let source = open_source(Path::new(TUM_FR1_RPY_DIR), None).expect("opening the TUM excerpt");
-        assert_eq!(source.frame_count(), 100, "frames");
+    fn opens_a_tum_directory_and_a_recording() {
+        let (_scratch, dir) = sample_as_tum(0..3);
+        let source = open_source(&dir, None).expect("opening the TUM directory");
+        assert_eq!(source.frame_count(), 3, "frames");
         assert!(source.ground_truth().is_some(), "ground truth");
+        let recording = open_source(Path::new(SAMPLE_RECORDING), None).expect("opening the sample recording");
+        assert_eq!(recording.frame_count(), 100, "frames");
+        assert_eq!(recording.calibration(), source.calibration(), "both fr1");
     }
 
     #[test]

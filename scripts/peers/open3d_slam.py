@@ -12,7 +12,9 @@ parameters of that example's default config, except depth_scale = 5000 (TUM):
   voxel_size 0.0058 m, block_resolution 16, block_count 40000, depth_scale 5000,
   depth_min 0.1, depth_max 3.0, trunc_voxel_multiplier 8, odometry_distance_thr 0.07,
   device CPU:0.
-Intrinsics: TUM freiburg1 (fx 517.3, fy 516.5, cx 318.6, cy 255.3, 640x480, no undistortion).
+Intrinsics: the published TUM calibration of the camera the path names, found the way
+webfusion finds it (the nearest path component naming freiburg1/fr1, 2 or 3, the resolved path
+first), or --intrinsics fx,fy,cx,cy; 640x480, no undistortion.
 
 --frames A..B is half-open, like `webfusion --frames`: frames A, A+1, .., B-1 of the
 association list ("..B", "A.." and ".." allowed; default: all). Frames come from
@@ -34,7 +36,10 @@ import os
 import sys
 import time
 
-FX, FY, CX, CY, WIDTH, HEIGHT = 517.3, 516.5, 318.6, 255.3, 640, 480
+WIDTH, HEIGHT = 640, 480
+# Published TUM RGB-D calibrations (fx, fy, cx, cy), as core/src/camera.rs has them.
+TUM_CAMERAS = {"1": (517.3, 516.5, 318.6, 255.3), "2": (520.9, 521.0, 325.1, 249.7),
+               "3": (535.4, 539.2, 320.1, 247.6)}
 PARAMS = dict(voxel_size=0.0058, block_resolution=16, block_count=40000, depth_scale=5000.0,
               depth_min=0.1, depth_max=3.0, trunc_voxel_multiplier=8.0,
               odometry_distance_thr=0.07, method="PointToPlane", device="CPU:0")
@@ -49,6 +54,8 @@ def parse_args():
     p.add_argument("--threads", type=int, default=0, help="OpenMP/Open3D threads (default: all cores)")
     p.add_argument("--out-mesh", default=None, help="optional: write the extracted triangle mesh (PLY)")
     p.add_argument("--quiet", action="store_true", help="no per-frame log")
+    p.add_argument("--intrinsics", default=None,
+                   help="fx,fy,cx,cy in pixels (default: the TUM camera the path names)")
     return p.parse_args()
 
 
@@ -126,8 +133,31 @@ def summary(values):
             "max": round(float(v.max()), 3), "n": int(v.size)}
 
 
+def camera_from_path(path):
+    """The TUM camera (fx, fy, cx, cy) the nearest path component names, or None."""
+    import re
+    for candidate in (os.path.realpath(path), os.path.abspath(path)):
+        for part in reversed([p for p in candidate.split(os.sep) if p]):
+            named = {n for n in TUM_CAMERAS if re.search(rf"(freiburg|fr){n}(?![0-9])", part.lower())}
+            if len(named) == 1:
+                return TUM_CAMERAS[named.pop()]
+            if named:
+                break  # ambiguous (fr1_vs_fr2): try the path as given, then give up
+    return None
+
+
 def main():
     args = parse_args()
+    if args.intrinsics:
+        try:
+            fx, fy, cx, cy = (float(v) for v in args.intrinsics.split(","))
+        except ValueError:
+            sys.exit(f"--intrinsics {args.intrinsics!r}: expected fx,fy,cx,cy")
+    else:
+        camera = camera_from_path(args.data)
+        if camera is None:
+            sys.exit(f"{args.data}: the path names no TUM camera (freiburg1/fr1, 2, 3); give --intrinsics fx,fy,cx,cy")
+        fx, fy, cx, cy = camera
     threads = args.threads if args.threads > 0 else len(os.sched_getaffinity(0))
     # OpenMP reads this when the runtime starts, so set it before importing open3d.
     os.environ["OMP_NUM_THREADS"] = str(threads)
@@ -142,7 +172,7 @@ def main():
     frames = frames[start:end]
 
     device = o3c.Device(PARAMS["device"])
-    intrinsic = o3c.Tensor([[FX, 0, CX], [0, FY, CY], [0, 0, 1]], o3c.Dtype.Float64)
+    intrinsic = o3c.Tensor([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], o3c.Dtype.Float64)
     T = o3c.Tensor(np.identity(4))
     model = o3d.t.pipelines.slam.Model(PARAMS["voxel_size"], PARAMS["block_resolution"],
                                        PARAMS["block_count"], T, device)
@@ -226,7 +256,7 @@ def main():
         "lost_frames": lost,
         "active_blocks": int(model.voxel_grid.hashmap().size()),
         "wall_s": round(wall_s, 3),
-        "params": dict(PARAMS, intrinsics=dict(fx=FX, fy=FY, cx=CX, cy=CY, width=WIDTH, height=HEIGHT)),
+        "params": dict(PARAMS, intrinsics=dict(fx=fx, fy=fy, cx=cx, cy=cy, width=WIDTH, height=HEIGHT)),
         "stages_ms": {k: summary(v) for k, v in times.items()},
         "per_frame_ms": [round(x, 3) for x in times["frame"]],
         "note": "frame = upload + tracking + integration + raycast (PNG decode is 'load'); "

@@ -6,34 +6,19 @@
 use wasm_bindgen_test::*;
 use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
-use webfusion_core::{ColorImage, DepthImage, Gpu, GpuOptions, RgbdCalibration, RgbdFrame};
+use webfusion_core::recording::RecordingReader;
+use webfusion_core::source::FrameSource as _;
+use webfusion_core::{Gpu, GpuOptions, RgbdCalibration, RgbdFrame};
 
 wasm_bindgen_test_configure!(run_in_browser);
 
-const DEPTH_PNG: &[u8] = include_bytes!("../../../shared/data/tum_fr1_rpy_0-99/depth/1305031229.528784.png");
-const RGB_PNG: &[u8] = include_bytes!("../../../shared/data/tum_fr1_rpy_0-99/rgb/1305031229.528748.png");
+/// The bundled sample recording (real Kinect frames, TUM fr1/rpy), compiled into the test.
+const SAMPLE_WFR: &[u8] = include_bytes!("../../data/sample/fr1_rpy.wfr");
 
-fn decode_png(bytes: &[u8]) -> (u32, u32, png::BitDepth, Vec<u8>) {
-    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
-    let mut reader = decoder.read_info().expect("png header");
-    let mut buf = vec![0; reader.output_buffer_size().expect("png size")];
-    let info = reader.next_frame(&mut buf).expect("png data");
-    buf.truncate(info.buffer_size());
-    (info.width, info.height, info.bit_depth, buf)
-}
-
+/// Frame 0 of the sample, decoded by the same reader the app uses.
 fn frame() -> RgbdFrame {
-    let (w, h, bits, depth_be) = decode_png(DEPTH_PNG);
-    assert_eq!(bits, png::BitDepth::Sixteen, "TUM depth is 16-bit");
-    let units = depth_be.chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect();
-    let (cw, ch, _, rgb8) = decode_png(RGB_PNG);
-    RgbdFrame {
-        index: 0,
-        depth_timestamp_ns: 1_305_031_229_528_784_000,
-        color_timestamp_ns: 1_305_031_229_528_748_000,
-        depth: DepthImage::new(w, h, units).expect("depth size"),
-        color: ColorImage::new(cw, ch, rgb8).expect("colour size"),
-    }
+    let mut sample = RecordingReader::from_bytes(SAMPLE_WFR.to_vec()).expect("the bundled sample parses");
+    sample.read_frame(0).expect("frame 0 decodes")
 }
 
 /// Largest |a - b| over valid entries, or an error if the NaN masks differ.

@@ -335,9 +335,7 @@ mod tests {
 
     #[test]
     fn deflate_variant_shrinks_real_tum_depth() {
-        let path = std::path::Path::new(crate::io::test_util::TUM_FR1_RPY_DIR).join("depth/1305031229.528784.png");
-        let png = std::fs::read(&path).expect("reading a TUM depth PNG");
-        let depth = crate::codec::png::decode_depth16(&png, 640, 480).expect("decoding the PNG");
+        let depth = crate::io::test_util::sample_frame(0).depth;
         let (rvl, deflated) = (rvl_encode(&depth.units), rvl_deflate_encode(&depth.units));
         assert!(deflated.len() < rvl.len() * 3 / 4, "RVL {} B, RVL+DEFLATE {} B", rvl.len(), deflated.len());
         assert_eq!(rvl_deflate_decode(&deflated, depth.units.len()).expect("decoding"), depth.units, "bit-exact");
@@ -345,10 +343,7 @@ mod tests {
 
     #[test]
     fn round_trips_real_tum_depth() {
-        let depth_dir = std::path::Path::new(crate::io::test_util::TUM_FR1_RPY_DIR).join("depth");
-        let path = depth_dir.join("1305031229.528784.png");
-        let png = std::fs::read(&path).expect("reading a TUM depth PNG");
-        let depth = crate::codec::png::decode_depth16(&png, 640, 480).expect("decoding the PNG");
+        let depth = crate::io::test_util::sample_frame(0).depth;
         let bytes = rvl_encode(&depth.units);
         assert_eq!(rvl_decode(&bytes, depth.units.len()).expect("decoding"), depth.units, "bit-exact round trip");
         assert!(bytes.len() < depth.units.len() * 2, "RVL ({} B) should be smaller than raw", bytes.len());

@@ -153,6 +153,23 @@ impl IcpTracker {
         gpu.kernels.track_finish.dispatch_in(pass, &self.finish, [1, 1, 1]);
     }
 
+    /// Records one Gauss-Newton iteration of `level` (reduce and solve) with a direct dispatch,
+    /// whatever the convergence state: what one iteration costs, for benchmarks. (The solve
+    /// returns early on a level that has converged, so this is the reduction's cost plus a
+    /// solve's fixed overhead.)
+    pub fn encode_iteration(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, level: usize) {
+        let l = &self.levels[level];
+        pass.set_pipeline(&gpu.kernels.track_reduce.pipeline);
+        pass.set_bind_group(0, &l.reduce, &[]);
+        pass.dispatch_workgroups(DEFAULT_WORKGROUPS, 1, 1);
+        gpu.kernels.track_solve.dispatch_in(pass, &l.solve, [32, 1, 1]);
+    }
+
+    /// Pyramid levels tracked.
+    pub fn levels(&self) -> usize {
+        self.levels.len()
+    }
+
     /// Records `keep_previous` for every level (after the predictor; skipped on the GPU when
     /// the frame was lost).
     pub fn encode_keep_previous(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {

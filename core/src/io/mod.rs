@@ -116,8 +116,39 @@ pub(crate) mod test_util {
         }
     }
 
-    /// The 100-frame TUM `freiburg1_rpy` excerpt in `shared/data`.
-    pub(crate) const TUM_FR1_RPY_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/tum_fr1_rpy_0-99");
+    /// The bundled sample recording (TUM `freiburg1_rpy`, frames 0-99, with ground truth):
+    /// what tests read real Kinect frames from.
+    pub(crate) const SAMPLE_RECORDING: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/sample/fr1_rpy.wfr");
+
+    /// The original TUM excerpt the sample was made from, for the optional checks against the
+    /// benchmark's own files (`#[ignore]`d; `scripts/test.sh --extras` runs them):
+    /// `$WEBFUSION_SHARED_DATA/tum_fr1_rpy_0-99`, by default `../shared/data` beside the
+    /// repository.
+    pub(crate) fn shared_tum_fr1_rpy_dir() -> PathBuf {
+        let data = std::env::var_os("WEBFUSION_SHARED_DATA")
+            .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"), PathBuf::from);
+        let dir = data.join("tum_fr1_rpy_0-99");
+        assert!(dir.join("depth.txt").is_file(), "this optional check needs the shared TUM excerpt at {} (set WEBFUSION_SHARED_DATA)", dir.display());
+        dir
+    }
+
+    /// Frames `frames` of the sample recording written as a TUM directory named like the
+    /// benchmark's (`rgbd_dataset_freiburg1_rpy`, so its calibration is found from the path)
+    /// inside a fresh scratch directory; returns both (the directory lives as long as the
+    /// scratch).
+    pub(crate) fn sample_as_tum(frames: std::ops::Range<usize>) -> (ScratchDir, PathBuf) {
+        let scratch = ScratchDir::new("sample-tum");
+        let dir = scratch.path().join("rgbd_dataset_freiburg1_rpy");
+        let mut sample = crate::recording::RecordingReader::open(SAMPLE_RECORDING).expect("opening data/sample/fr1_rpy.wfr");
+        crate::io::tum::write_tum_dataset(&dir, &mut sample, frames).expect("writing the sample as a TUM directory");
+        (scratch, dir)
+    }
+
+    /// Frame `index` of the sample recording.
+    pub(crate) fn sample_frame(index: usize) -> crate::RgbdFrame {
+        use crate::source::FrameSource as _;
+        crate::recording::RecordingReader::open(SAMPLE_RECORDING).expect("opening data/sample/fr1_rpy.wfr").read_frame(index).expect("reading a sample frame")
+    }
 }
 
 #[cfg(test)]

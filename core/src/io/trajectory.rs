@@ -89,7 +89,7 @@ pub fn write_tum_trajectory(path: &Path, poses: &[TimedPose]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::test_util::{ScratchDir, TUM_FR1_RPY_DIR};
+    use crate::io::test_util::{ScratchDir, shared_tum_fr1_rpy_dir};
 
     fn sample_poses() -> Vec<TimedPose> {
         vec![
@@ -124,8 +124,9 @@ mod tests {
     }
 
     #[test]
+    #[ignore = "optional: needs ../shared/data (scripts/test.sh --extras)"]
     fn reads_tum_ground_truth() {
-        let path = Path::new(TUM_FR1_RPY_DIR).join("groundtruth.txt");
+        let path = shared_tum_fr1_rpy_dir().join("groundtruth.txt");
         let poses = read_tum_trajectory(&path).expect("reading groundtruth.txt");
         assert_eq!(poses.len(), 430, "pose lines in groundtruth.txt");
         assert_eq!(poses[0].timestamp_ns, 1_305_031_229_033_100_000, "first timestamp");

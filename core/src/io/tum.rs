@@ -10,7 +10,8 @@ use std::path::{Component, Path, PathBuf};
 
 use super::data_fields;
 use super::parse_timestamp_ns;
-use super::trajectory::{TimedPose, read_tum_trajectory};
+use super::format_timestamp_s;
+use super::trajectory::{TimedPose, read_tum_trajectory, write_tum_trajectory};
 use crate::camera::{TUM_DEPTH_UNITS_PER_METRE, TUM_FREIBURG1, TUM_FREIBURG2, TUM_FREIBURG3};
 use crate::codec::png;
 use crate::source::FrameSource;
@@ -166,6 +167,71 @@ impl FrameSource for TumDataset {
     }
 }
 
+/// Writes frames `frames` of `source` as a TUM RGB-D directory at `dir` (created if missing;
+/// files it would write must not exist yet): `depth/<t>.png` (16-bit, the source's depth units),
+/// `rgb/<t>.png`, `depth.txt`, `rgb.txt` (named by each image's own timestamp, so
+/// [`TumDataset`] pairs them back as they were) and, when the source has ground truth,
+/// `groundtruth.txt` (every pose of the source). Returns the number of frames written.
+///
+/// The directory carries no calibration: [`TumDataset::open`] finds it from a path that names
+/// the camera (`..._freiburg1_...`) or takes an override. An image file that exists already
+/// (two frames with one timestamp, or a directory written before) is [`Error::InvalidConfig`].
+pub fn write_tum_dataset(dir: &Path, source: &mut dyn FrameSource, frames: std::ops::Range<usize>) -> Result<usize> {
+    if frames.end > source.frame_count() || frames.start > frames.end {
+        return Err(Error::InvalidConfig(format!("frames {frames:?} are not within the source's {} frames", source.frame_count())));
+    }
+    let mut depth = ImageListWriter::create(dir, "depth", "# depth images")?;
+    let mut rgb = ImageListWriter::create(dir, "rgb", "# colour images")?;
+    for index in frames.clone() {
+        let frame = source.read_frame(index)?;
+        depth.write(index, frame.depth_timestamp_ns, &png::encode_depth16(&frame.depth)?)?;
+        rgb.write(index, frame.color_timestamp_ns, &png::encode_rgb8(&frame.color)?)?;
+    }
+    depth.finish()?;
+    rgb.finish()?;
+    if let Some(poses) = source.ground_truth() {
+        write_tum_trajectory(&dir.join("groundtruth.txt"), poses)?;
+    }
+    Ok(frames.len())
+}
+
+/// One image folder of a TUM directory being written, and its list file.
+struct ImageListWriter<'a> {
+    dir: &'a Path,
+    sub: &'static str,
+    list: String,
+}
+
+impl<'a> ImageListWriter<'a> {
+    fn create(dir: &'a Path, sub: &'static str, header: &str) -> Result<Self> {
+        let folder = dir.join(sub);
+        std::fs::create_dir_all(&folder).map_err(|source| Error::Io { path: folder, source })?;
+        Ok(Self { dir, sub, list: format!("{header}\n# timestamp filename\n") })
+    }
+
+    /// Writes `<sub>/<t>.png` (never over an existing file) and lists it.
+    fn write(&mut self, index: usize, timestamp_ns: i64, png_bytes: &[u8]) -> Result<()> {
+        use std::io::Write as _;
+        let name = format!("{}/{}.png", self.sub, format_timestamp_s(timestamp_ns));
+        let path = self.dir.join(&name);
+        let io_error = |source| Error::Io { path: path.clone(), source };
+        let mut file = std::fs::OpenOptions::new().write(true).create_new(true).open(&path).map_err(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists => {
+                Error::InvalidConfig(format!("frame {index}: {} exists already (a repeated timestamp, or a directory written before)", path.display()))
+            }
+            _ => io_error(e),
+        })?;
+        file.write_all(png_bytes).map_err(io_error)?;
+        self.list.push_str(&format!("{} {name}\n", format_timestamp_s(timestamp_ns)));
+        Ok(())
+    }
+
+    fn finish(self) -> Result<()> {
+        let path = self.dir.join(format!("{}.txt", self.sub));
+        std::fs::write(&path, &self.list).map_err(|source| Error::Io { path, source })
+    }
+}
+
 fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|source| Error::Io { path: path.to_owned(), source })
 }
@@ -256,7 +322,8 @@ fn calibration_from_path(dir: &Path) -> Option<RgbdCalibration> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::test_util::{ScratchDir, TUM_FR1_RPY_DIR};
+    use crate::io::test_util::{SAMPLE_RECORDING, ScratchDir, sample_as_tum, shared_tum_fr1_rpy_dir};
+    use crate::recording::RecordingReader;
     use crate::{ColorImage, DepthImage, PinholeIntrinsics};
 
     #[test]
@@ -333,8 +400,9 @@ mod tests {
     }
 
     #[test]
+    #[ignore = "optional: needs ../shared/data (scripts/test.sh --extras)"]
     fn opens_the_real_fr1_rpy_excerpt() {
-        let dir = Path::new(TUM_FR1_RPY_DIR);
+        let dir = &shared_tum_fr1_rpy_dir();
         let mut dataset = TumDataset::open(dir, None).expect("opening the TUM excerpt");
         assert_eq!(dataset.name(), "tum_fr1_rpy_0-99", "name");
         assert_eq!(dataset.frame_count(), 100, "associated frames");
@@ -362,6 +430,26 @@ mod tests {
         let mean_m = frame.depth.units.iter().filter(|&&u| u != 0).map(|&u| f64::from(u) / 5000.0).sum::<f64>() / valid as f64;
         assert!((0.5..5.0).contains(&mean_m), "mean depth {mean_m} m is plausible for an office");
         assert!(matches!(dataset.read_frame(100), Err(Error::Dataset { .. })), "out of range");
+    }
+
+    #[test]
+    fn the_sample_round_trips_through_a_tum_directory() {
+        let (scratch, dir) = sample_as_tum(10..14);
+        let mut sample = RecordingReader::open(SAMPLE_RECORDING).expect("opening the sample");
+        let mut dataset = TumDataset::open(&dir, None).expect("opening what was written");
+        assert_eq!(dataset.name(), "rgbd_dataset_freiburg1_rpy", "name");
+        assert_eq!(dataset.calibration(), sample.calibration(), "fr1, found from the path");
+        assert_eq!(dataset.frame_count(), 4, "frames");
+        assert_eq!(dataset.ground_truth(), sample.ground_truth(), "ground truth, exactly");
+        for i in 0..4 {
+            let (mut want, got) = (sample.read_frame(10 + i).expect("sample frame"), dataset.read_frame(i).expect("written frame"));
+            want.index = i as u64;
+            assert_eq!(got, want, "frame {i}: images and timestamps");
+        }
+        let again = write_tum_dataset(&dir, &mut sample, 10..11).expect_err("writing over existing images");
+        assert!(matches!(&again, Error::InvalidConfig(m) if m.contains("exists already")), "{again:?}");
+        let beyond = write_tum_dataset(&scratch.path().join("other"), &mut sample, 99..101).expect_err("frames past the end");
+        assert!(matches!(&beyond, Error::InvalidConfig(m) if m.contains("99..101")), "{beyond:?}");
     }
 
     /// Writes a small TUM-like directory with 4x3 images.
@@ -417,9 +505,10 @@ mod tests {
     fn recognises_the_camera_from_a_symlink_name() {
         let scratch = ScratchDir::new("tum-symlink");
         let link = scratch.path().join("rgbd_dataset_freiburg2_desk");
-        std::os::unix::fs::symlink(TUM_FR1_RPY_DIR, &link).expect("creating a symlink");
+        let (_sample_scratch, fr1_dir) = sample_as_tum(0..1);
+        std::os::unix::fs::symlink(&fr1_dir, &link).expect("creating a symlink");
         let dataset = TumDataset::open(&link, None).expect("opening through the symlink");
-        assert_eq!(dataset.calibration().intrinsics, TUM_FREIBURG1, "the resolved name (tum_fr1_...) is nearer the data");
+        assert_eq!(dataset.calibration().intrinsics, TUM_FREIBURG1, "the resolved name (..._freiburg1_...) is nearer the data");
         assert_eq!(dataset.name(), "rgbd_dataset_freiburg2_desk", "name as given");
         let unnamed = scratch.path().join("sequence");
         std::fs::create_dir(&unnamed).expect("mkdir");

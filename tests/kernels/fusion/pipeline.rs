@@ -77,7 +77,7 @@ fn tracks_real_kinect_frames_against_motion_capture() {
     use webfusion_core::tsdf::VolumePlacement;
 
     let gpu = gpu();
-    let mut dataset = webfusion_core::io::tum::TumDataset::open(webfusion_tests::tum_dir(), None).expect("TUM data");
+    let mut dataset = webfusion_tests::sample();
     let ground_truth = dataset.ground_truth().expect("ground truth").to_vec();
     // A coarse volume keeps the test fast on lavapipe: 160³ voxels of 3 cm around the camera.
     let config = FusionConfig { tsdf: TsdfConfig { placement: VolumePlacement::Centred, ..TsdfConfig::cube(160, 0.03) }, ..FusionConfig::default() };

@@ -19,14 +19,13 @@ use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::cpu::{self};
 use webfusion_core::fusion::tracker::track_params;
 use webfusion_core::fusion::{DEFAULT_RGB_MAX_DEPTH_DIFF_M, DEFAULT_RGB_MAX_RESIDUAL, IcpConfig, NormalEquations, twist_exp};
-use webfusion_core::io::tum::TumDataset;
 use webfusion_core::kernels::keep_previous::KeepPreviousParams;
 use webfusion_core::kernels::track_reduce::{DEFAULT_WORKGROUPS as WORKGROUPS, SUM_FLOATS, TrackParams, TrackState, WORKGROUP_THREADS};
 use webfusion_core::kernels::{GpuIntrinsics, vertex_map::VertexMapParams};
 use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_core::source::FrameSource;
-use webfusion_core::{Gpu, PinholeIntrinsics, Se3};
-use webfusion_tests::{SENTINEL_F32, Tolerance, compare_f32, finish, gpu, tum_dir};
+use webfusion_core::{Gpu, PinholeIntrinsics, RgbdFrame, Se3};
+use webfusion_tests::{SENTINEL_F32, Tolerance, compare_f32, finish, gpu, sample};
 
 use crate::fusion::track_reduce::{ReduceInputs, reduce_cpu_with, reduce_gpu_with, state_at};
 use crate::preprocess::chain::real_cpu_chain;
@@ -262,23 +261,24 @@ fn run_and_compare(gpu: &Gpu, what: &str, p: &Params, f: &Frames) -> (Vec<f32>, 
     (g, c, budget, stats)
 }
 
-/// The ground-truth pose of `frame_ix` in the TUM sequence: the mocap pose nearest in time to
-/// its depth image (the ground truth runs at 100 Hz, so within 5 ms of motion).
-fn ground_truth_pose(dataset: &TumDataset, frame_ix: usize) -> Se3 {
-    let t = dataset.frames()[frame_ix].depth_timestamp_ns;
-    let gt = dataset.ground_truth().expect("the shared TUM sequence has ground truth");
+/// The ground-truth pose of `frame`: the mocap pose nearest in time to its depth image (the
+/// ground truth runs at 100 Hz, so within 5 ms of motion).
+fn ground_truth_pose(source: &dyn FrameSource, frame: &RgbdFrame) -> Se3 {
+    let t = frame.depth_timestamp_ns;
+    let gt = source.ground_truth().expect("the sample has ground truth");
     gt.iter().min_by_key(|p| (p.timestamp_ns - t).abs()).expect("ground truth is not empty").world_from_camera
 }
 
 /// Current = TUM frame 1, previous = frame 0, both at level 0 of the CPU chain, and frame 1's
 /// pose in frame 0's camera from the ground truth.
 fn real_frames() -> (Frames, Se3) {
-    let mut dataset = TumDataset::open(tum_dir(), None).expect("open shared TUM data");
+    let mut dataset = sample();
     let calib = dataset.calibration();
-    let frame1 = dataset.read_frame(1).expect("read TUM frame 1");
+    let frame0 = dataset.read_frame(0).expect("read sample frame 0");
+    let frame1 = dataset.read_frame(1).expect("read sample frame 1");
     let cur = preprocess(&calib, &PreprocessConfig::default(), &frame1);
     let prev = real_cpu_chain();
-    let camera0_from_camera1 = ground_truth_pose(&dataset, 0).inverse() * ground_truth_pose(&dataset, 1);
+    let camera0_from_camera1 = ground_truth_pose(&dataset, &frame0).inverse() * ground_truth_pose(&dataset, &frame1);
     let frames = Frames {
         k: cur.levels[0].intrinsics,
         vertex_in_camera: cur.levels[0].vertex_in_camera.clone(),

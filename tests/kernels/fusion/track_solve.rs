@@ -297,12 +297,12 @@ fn an_update_below_the_threshold_converges_the_level() {
     let s = g.0.levels[0];
     assert!(s.last_update_m < p.converged_update_m, "update {} m below {} m", s.last_update_m, p.converged_update_m);
     assert_eq!((g.0.done_levels & 1, g.1.reduce[0][0]), (1, 0), "converged: done, no more reductions");
-    // Ten times larger: not converged, the level goes on.
-    let partials = partials_of(&a, &(-(a * xi * 20.0)), 1e4);
+    // Fifty times larger (about twice the threshold): not converged, the level goes on.
+    let partials = partials_of(&a, &(-(a * xi * 50.0)), 1e4);
     let (g, _) = solve(&gpu, &p, &partials, &initial_state());
     finish(&gpu);
     assert_eq!((g.0.done_levels & 1, g.1.reduce[0][0]), (0, DEFAULT_WORKGROUPS), "a larger update keeps the level going ({} m)", g.0.levels[0].last_update_m);
     let t = Se3::from_cols_f32(&g.0.estimate).translation_m;
-    assert!((t - DVec3::new(2e-4, 0.0, -1e-4)).length() < 1e-7, "the update is applied: {t:?}");
+    assert!((t - DVec3::new(5e-4, 0.0, -2.5e-4)).length() < 1e-7, "the update is applied: {t:?}");
     let _ = cast::<u8>;
 }

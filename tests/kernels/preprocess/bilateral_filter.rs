@@ -4,7 +4,7 @@
 
 use webfusion_core::cpu;
 use webfusion_core::kernels::bilateral_filter::BilateralFilterParams;
-use webfusion_tests::{Tolerance, assert_negative_control, cast, compare_f32, finish, gpu, run_kernel, tum_frame};
+use webfusion_tests::{Tolerance, assert_negative_control, cast, compare_f32, finish, gpu, run_kernel, sample_frame};
 
 use crate::synthetic::{K_SMALL, UNITS_PER_M, step_scene};
 
@@ -58,7 +58,7 @@ fn synthetic_noise_is_reduced() {
 
 #[test]
 fn real_frame_matches_cpu() {
-    let (calib, frame) = tum_frame(0);
+    let (calib, frame) = sample_frame(0);
     let k = calib.intrinsics;
     let depth_m: Vec<f32> = frame.depth.units.iter().map(|&u| if u == 0 { f32::NAN } else { u as f32 * calib.metres_per_depth_unit() }).collect();
     let (g, c) = run(&params(k.width_px, k.height_px), &depth_m);

@@ -9,13 +9,13 @@ use std::sync::OnceLock;
 
 use webfusion_core::cpu::preprocess::chain::{CpuPreprocessed, preprocess};
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
-use webfusion_tests::{Tolerance, assert_negative_control_vec4, compare_f32, compare_vec4, finish, gpu, tum_frame};
+use webfusion_tests::{Tolerance, assert_negative_control_vec4, compare_f32, compare_vec4, finish, gpu, sample_frame};
 
 /// The CPU chain on frame 0 with the default configuration, computed once per test binary.
 pub(crate) fn real_cpu_chain() -> &'static CpuPreprocessed {
     static CHAIN: OnceLock<CpuPreprocessed> = OnceLock::new();
     CHAIN.get_or_init(|| {
-        let (calib, frame) = tum_frame(0);
+        let (calib, frame) = sample_frame(0);
         preprocess(&calib, &PreprocessConfig::default(), &frame)
     })
 }
@@ -32,7 +32,7 @@ const COLOR_TOL: Tolerance = Tolerance { absolute: 3e-7, relative: 0.0 };
 
 fn check_chain(config: PreprocessConfig) {
     let gpu = gpu();
-    let (calib, frame) = tum_frame(0);
+    let (calib, frame) = sample_frame(0);
     let pre = DepthPreprocessor::new(&gpu, calib, config).unwrap();
     for level in &pre.levels {
         gpu.fill_buffer(&level.depth_m, webfusion_tests::SENTINEL_F32);
@@ -76,7 +76,7 @@ fn unfiltered_unsmoothed_chain_matches_cpu_on_real_frame() {
 #[test]
 fn wrong_frame_size_is_a_typed_error() {
     let gpu = gpu();
-    let (calib, mut frame) = tum_frame(0);
+    let (calib, mut frame) = sample_frame(0);
     let pre = DepthPreprocessor::new(&gpu, calib, PreprocessConfig::default()).unwrap();
     frame.depth.width_px = 320;
     let err = pre.upload(&gpu, &frame).unwrap_err();

@@ -4,7 +4,7 @@
 use webfusion_core::cpu;
 use webfusion_core::cpu::shared::pack_bytes;
 use webfusion_core::kernels::color_to_float::ColorToFloatParams;
-use webfusion_tests::{Tolerance, assert_negative_control, assert_negative_control_vec4, cast, compare_f32, compare_vec4, finish, gpu, run_kernel, tum_frame};
+use webfusion_tests::{Tolerance, assert_negative_control, assert_negative_control_vec4, cast, compare_f32, compare_vec4, finish, gpu, run_kernel, sample_frame};
 
 /// Values in [0, 1]: 3e-7 absolute (a few ulp at 1.0).
 const TOL: Tolerance = Tolerance { absolute: 3e-7, relative: 0.0 };
@@ -39,7 +39,7 @@ fn every_byte_value_converts_exactly() {
 
 #[test]
 fn real_frame_matches_cpu() {
-    let (calib, frame) = tum_frame(0);
+    let (calib, frame) = sample_frame(0);
     let k = calib.intrinsics;
     let ((gc, gi), (cc, ci)) = run(k.width_px, k.height_px, &frame.color.rgb8);
     compare_vec4("color", &gc, &cc, TOL).unwrap();

@@ -3,7 +3,7 @@
 
 use webfusion_core::cpu;
 use webfusion_core::kernels::depth_pyramid_down::DepthPyramidDownParams;
-use webfusion_tests::{Tolerance, assert_negative_control, cast, compare_f32, finish, gpu, run_kernel, tum_frame};
+use webfusion_tests::{Tolerance, assert_negative_control, cast, compare_f32, finish, gpu, run_kernel, sample_frame};
 
 /// Sums of <= 4 values divided by the count; division may be 1 ulp apart on the GPU.
 const TOL: Tolerance = Tolerance { absolute: 0.0, relative: 3e-7 };
@@ -45,7 +45,7 @@ fn synthetic_blocks_have_exact_answers() {
 
 #[test]
 fn real_frame_matches_cpu() {
-    let (calib, frame) = tum_frame(0);
+    let (calib, frame) = sample_frame(0);
     let k = calib.intrinsics;
     let depth_m: Vec<f32> = frame.depth.units.iter().map(|&u| if u == 0 { f32::NAN } else { u as f32 * calib.metres_per_depth_unit() }).collect();
     let (g, c) = run(k.width_px, k.height_px, &depth_m);

@@ -4,7 +4,7 @@
 use webfusion_core::cpu;
 use webfusion_core::cpu::shared::pack_u16_pairs;
 use webfusion_core::kernels::depth_to_metres::DepthToMetresParams;
-use webfusion_tests::{Tolerance, assert_negative_control, cast, compare_f32, finish, gpu, run_kernel, tum_frame};
+use webfusion_tests::{Tolerance, assert_negative_control, cast, compare_f32, finish, gpu, run_kernel, sample_frame};
 
 use crate::synthetic::{K_SMALL, UNITS_PER_M, step_scene};
 
@@ -53,7 +53,7 @@ fn every_u16_value_and_odd_width() {
 
 #[test]
 fn real_frame_matches_cpu() {
-    let (calib, frame) = tum_frame(0);
+    let (calib, frame) = sample_frame(0);
     let k = calib.intrinsics;
     let (g, c) = run(k.width_px, k.height_px, &frame.depth.units, calib.metres_per_depth_unit());
     let cmp = compare_f32("depth_m", &g, &c, TOL).unwrap();

@@ -5,7 +5,7 @@ use webfusion_core::cpu;
 use webfusion_core::kernels::GpuIntrinsics;
 use webfusion_core::kernels::vertex_map::VertexMapParams;
 use webfusion_core::PinholeIntrinsics;
-use webfusion_tests::{Tolerance, assert_negative_control_vec4, cast, compare_vec4, finish, gpu, run_kernel, tum_frame};
+use webfusion_tests::{Tolerance, assert_negative_control_vec4, cast, compare_vec4, finish, gpu, run_kernel, sample_frame};
 
 use crate::synthetic::{K_SMALL, plane_depth_m};
 
@@ -43,7 +43,7 @@ fn fronto_parallel_plane_back_projects_exactly() {
 
 #[test]
 fn real_frame_matches_cpu() {
-    let (calib, frame) = tum_frame(3);
+    let (calib, frame) = sample_frame(3);
     let depth_m: Vec<f32> = frame.depth.units.iter().map(|&u| if u == 0 { f32::NAN } else { u as f32 * calib.metres_per_depth_unit() }).collect();
     let (g, c) = run(calib.intrinsics, &depth_m);
     compare_vec4("vertex_in_camera", &g, &c, TOL).unwrap();
