@@ -282,3 +282,52 @@ macro_rules! check_layout {
     }};
 }
 
+
+/// Compares RGBA8 images (red in the low byte) pixel by pixel: every channel within
+/// `max_channel_diff` and at least `min_exact_fraction` of the pixels identical. Pixels the
+/// CPU left at [`SENTINEL_F32`] (padding) must be the sentinel on the GPU too.
+pub fn compare_rgba8(what: &str, gpu: &[u32], cpu: &[u32], max_channel_diff: u8, min_exact_fraction: f64) -> Result<usize, String> {
+    if gpu.len() != cpu.len() {
+        return Err(format!("{what}: {} GPU pixels vs {} CPU", gpu.len(), cpu.len()));
+    }
+    let sentinel = SENTINEL_F32.to_bits();
+    let mut exact = 0;
+    for (i, (&g, &c)) in gpu.iter().zip(cpu).enumerate() {
+        if (g == sentinel) != (c == sentinel) {
+            return Err(format!("{what}[{i}]: written on one side only (GPU {g:#010x}, CPU {c:#010x})"));
+        }
+        let worst = g.to_le_bytes().iter().zip(c.to_le_bytes()).map(|(a, b)| a.abs_diff(b)).max().unwrap_or(0);
+        if worst > max_channel_diff {
+            return Err(format!("{what}[{i}]: GPU {g:#010x} vs CPU {c:#010x}, a channel {worst} apart (allowed {max_channel_diff})"));
+        }
+        exact += usize::from(g == c);
+    }
+    if (exact as f64) < min_exact_fraction * gpu.len() as f64 {
+        return Err(format!("{what}: only {exact} of {} pixels identical (need {min_exact_fraction})", gpu.len()));
+    }
+    Ok(exact)
+}
+
+/// Proves [`compare_rgba8`] can fail on `gpu`: a channel moved past the tolerance, a written
+/// pixel turned into the sentinel, a padding (sentinel) pixel written, and every pixel off by
+/// one when exact pixels are required must each be rejected.
+pub fn assert_negative_control_rgba8(what: &str, gpu: &[u32], cpu: &[u32], max_channel_diff: u8, min_exact_fraction: f64) {
+    let sentinel = SENTINEL_F32.to_bits();
+    let written = cpu.iter().position(|&c| c != sentinel).expect("a written pixel");
+    let mut moved = gpu.to_vec();
+    moved[written] ^= u32::from(max_channel_diff.max(1)) * 2 + 1;
+    let mut erased = gpu.to_vec();
+    erased[written] = sentinel;
+    let mut cases = vec![("a channel past tolerance", moved), ("a written pixel left at the sentinel", erased)];
+    if let Some(pad) = cpu.iter().position(|&c| c == sentinel) {
+        let mut padded = gpu.to_vec();
+        padded[pad] = 0xff00_0000;
+        cases.push(("a padding pixel written", padded));
+    }
+    if min_exact_fraction > 0.0 {
+        cases.push(("every pixel one off", gpu.iter().map(|&g| if g == sentinel { g } else { g ^ 1 }).collect()));
+    }
+    for (case, perturbed) in cases {
+        assert!(compare_rgba8(what, &perturbed, cpu, max_channel_diff, min_exact_fraction).is_err(), "{what}: the comparison accepted {case}");
+    }
+}

@@ -161,10 +161,25 @@ pub fn umeyama_se3(points_in_est: &[DVec3], points_in_gt: &[DVec3], with_scale: 
         variance_est_m2 += x.length_squared();
         covariance += Vector3::new(y.x, y.y, y.z) * Vector3::new(x.x, x.y, x.z).transpose();
     }
-    variance_est_m2 *= inv_n;
-    covariance *= inv_n;
+    let moments = Moments { n_points, mean_est, mean_gt, variance_est_m2: variance_est_m2 * inv_n, covariance: covariance * inv_n };
+    Ok(umeyama_from_moments(&moments, with_scale)?.0)
+}
 
-    let svd = nalgebra::linalg::SVD::try_new(covariance, true, true, f64::EPSILON, SVD_MAX_ITERATIONS)
+/// First and second moments of paired positions: what the Umeyama alignment needs.
+struct Moments {
+    n_points: usize,
+    mean_est: DVec3,
+    mean_gt: DVec3,
+    /// Mean squared distance of the estimated positions from their mean, m².
+    variance_est_m2: f64,
+    /// Cross-covariance `(1/n) Σ (p_gt − mean_gt)(p_est − mean_est)ᵀ`, m².
+    covariance: Matrix3<f64>,
+}
+
+/// The alignment the moments give, and `tr(D S)` (the sum of the signed singular values of
+/// the cross-covariance, which the residual needs).
+fn umeyama_from_moments(m: &Moments, with_scale: bool) -> Result<(Alignment, f64)> {
+    let svd = nalgebra::linalg::SVD::try_new(m.covariance, true, true, f64::EPSILON, SVD_MAX_ITERATIONS)
         .ok_or_else(|| Error::DegenerateAlignment { message: "the SVD of the cross-covariance did not converge".to_owned() })?;
     let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
         return Err(Error::DegenerateAlignment { message: "the SVD returned no singular vectors".to_owned() });
@@ -173,8 +188,8 @@ pub fn umeyama_se3(points_in_est: &[DVec3], points_in_gt: &[DVec3], with_scale: 
     if !(d[0] > 0.0) || !(d[1] > d[0] * ALIGNMENT_RANK_TOLERANCE) {
         return Err(Error::DegenerateAlignment {
             message: format!(
-                "the {n_points} positions are collinear or coincident (cross-covariance singular values {:.3e}, {:.3e}, {:.3e} m²)",
-                d[0], d[1], d[2]
+                "the {} positions are collinear or coincident (cross-covariance singular values {:.3e}, {:.3e}, {:.3e} m²)",
+                m.n_points, d[0], d[1], d[2]
             ),
         });
     }
@@ -183,11 +198,84 @@ pub fn umeyama_se3(points_in_est: &[DVec3], points_in_gt: &[DVec3], with_scale: 
         s[2] = -1.0;
     }
     let rotation_matrix = u * Matrix3::from_diagonal(&s) * v_t;
-    let scale = if with_scale { d.dot(&s) / variance_est_m2 } else { 1.0 };
+    let trace_ds = d.dot(&s);
+    let scale = if with_scale { trace_ds / m.variance_est_m2 } else { 1.0 };
 
     let rotation = DQuat::from_mat3(&DMat3::from_cols_slice(rotation_matrix.as_slice())).normalize();
-    let translation_m = mean_gt - scale * (rotation * mean_est);
-    Ok(Alignment { gt_from_est: Se3 { rotation, translation_m }, scale })
+    let translation_m = m.mean_gt - scale * (rotation * m.mean_est);
+    Ok((Alignment { gt_from_est: Se3 { rotation, translation_m }, scale }, trace_ds))
+}
+
+/// ATE (SE(3)-aligned position RMSE, as [`ate`] with its default alignment and no scale) of a
+/// trajectory that grows one pair at a time, in O(1) per pair and per query: it keeps the
+/// positions' moments instead of the positions, so a live view can show the error of every
+/// frame so far without redoing the alignment over all of them.
+///
+/// The residual of the best rigid fit follows from the moments (Umeyama 1991):
+/// `RMSE² = σ²_gt + σ²_est − 2 tr(D S)`. Sums are taken relative to the first pair, so
+/// trajectories far from the origin lose no precision.
+#[derive(Clone, Debug, Default)]
+pub struct RunningAte {
+    origin_est: DVec3,
+    origin_gt: DVec3,
+    n_points: usize,
+    sum_est: DVec3,
+    sum_gt: DVec3,
+    sum_sq_est: f64,
+    sum_sq_gt: f64,
+    sum_gt_est: Matrix3<f64>,
+}
+
+impl RunningAte {
+    /// Adds the estimated and ground-truth positions of one frame.
+    pub fn push(&mut self, position_in_est: DVec3, position_in_gt: DVec3) {
+        if self.n_points == 0 {
+            self.origin_est = position_in_est;
+            self.origin_gt = position_in_gt;
+        }
+        let x = position_in_est - self.origin_est;
+        let y = position_in_gt - self.origin_gt;
+        self.n_points += 1;
+        self.sum_est += x;
+        self.sum_gt += y;
+        self.sum_sq_est += x.length_squared();
+        self.sum_sq_gt += y.length_squared();
+        self.sum_gt_est += Vector3::new(y.x, y.y, y.z) * Vector3::new(x.x, x.y, x.z).transpose();
+    }
+
+    /// Pairs so far.
+    pub fn len(&self) -> usize {
+        self.n_points
+    }
+
+    /// Whether no pair was added.
+    pub fn is_empty(&self) -> bool {
+        self.n_points == 0
+    }
+
+    /// The best rigid alignment of the pairs so far and the RMSE of the positions after it,
+    /// metres. Errors as [`umeyama_se3`]'s (fewer than three pairs, collinear or non-finite
+    /// positions).
+    pub fn alignment_and_rmse_m(&self) -> Result<(Alignment, f64)> {
+        if self.n_points < MIN_PAIRS_FOR_ALIGNMENT {
+            return Err(Error::TooFewAssociations { what: "Umeyama alignment", pairs: self.n_points, required: MIN_PAIRS_FOR_ALIGNMENT });
+        }
+        let inv_n = 1.0 / self.n_points as f64;
+        let (mean_x, mean_y) = (self.sum_est * inv_n, self.sum_gt * inv_n);
+        if !(mean_x.is_finite() && mean_y.is_finite() && self.sum_sq_est.is_finite() && self.sum_sq_gt.is_finite()) {
+            return Err(Error::DegenerateAlignment { message: "a position is NaN or infinite".to_owned() });
+        }
+        let covariance = self.sum_gt_est * inv_n - Vector3::new(mean_y.x, mean_y.y, mean_y.z) * Vector3::new(mean_x.x, mean_x.y, mean_x.z).transpose();
+        let variance_est_m2 = (self.sum_sq_est * inv_n - mean_x.length_squared()).max(0.0);
+        let variance_gt_m2 = (self.sum_sq_gt * inv_n - mean_y.length_squared()).max(0.0);
+        let moments = Moments { n_points: self.n_points, mean_est: mean_x, mean_gt: mean_y, variance_est_m2, covariance };
+        let (relative, trace_ds) = umeyama_from_moments(&moments, false)?;
+        let rmse_m = (variance_gt_m2 + variance_est_m2 - 2.0 * trace_ds).max(0.0).sqrt();
+        // Undo the origins: p_gt = origin_gt + R (p_est − origin_est) + t.
+        let rotation = relative.gt_from_est.rotation;
+        let translation_m = self.origin_gt + relative.gt_from_est.translation_m - rotation * self.origin_est;
+        Ok((Alignment { gt_from_est: Se3 { rotation, translation_m }, scale: 1.0 }, rmse_m))
+    }
 }
 
 /// Summary statistics of a set of errors, as `evo` reports them. Units are those of the field
@@ -752,6 +840,43 @@ mod tests {
         let scaled = rpe(&gt, &est, &RpeOptions { correct_scale: true, ..RpeOptions::default() }).expect("RPE with scale");
         assert_close(scaled.scale, 1.0 / 1.1, 1e-12, "scale");
         assert!(scaled.translation_m.max < 1e-12, "{:?}", scaled.translation_m);
+    }
+
+    #[test]
+    fn the_running_ate_equals_the_batch_ate_at_every_length() {
+        let sample = crate::recording::RecordingReader::open(SAMPLE_RECORDING).expect("opening the sample");
+        let gt: Vec<TimedPose> = sample.ground_truth().expect("ground truth").iter().step_by(4).copied().collect();
+        // The ground truth in another world frame, 10 km away, with millimetre wobble.
+        let est_from_gt = Se3 { translation_m: DVec3::new(1e4, -2e4, 5e3), ..known_transform() };
+        let est: Vec<TimedPose> = gt
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let wobble_m = 0.003 * DVec3::new((i as f64 * 0.7).sin(), (i as f64 * 1.3).cos(), (i as f64 * 0.4).sin());
+                TimedPose { timestamp_ns: p.timestamp_ns, world_from_camera: Se3 { translation_m: est_from_gt.transform_point(p.world_from_camera.translation_m) + wobble_m, ..p.world_from_camera } }
+            })
+            .collect();
+        let mut running = RunningAte::default();
+        assert!(matches!(running.alignment_and_rmse_m(), Err(Error::TooFewAssociations { .. })), "no pairs");
+        for (n, (e, g)) in est.iter().zip(&gt).enumerate() {
+            running.push(e.world_from_camera.translation_m, g.world_from_camera.translation_m);
+            if n + 1 < 3 || (n + 1) % 10 != 0 {
+                continue;
+            }
+            let batch = ate(&gt, &est[..=n], &AteOptions::default()).expect("batch ATE");
+            let (alignment, rmse_m) = running.alignment_and_rmse_m().expect("running ATE");
+            assert!((rmse_m - batch.error_m.rmse).abs() < 1e-7, "{} pairs: running {rmse_m} m vs batch {} m", n + 1, batch.error_m.rmse);
+            assert_se3_close(&alignment.gt_from_est, &batch.alignment.gt_from_est, 1e-6, "alignment");
+        }
+        assert!(running.alignment_and_rmse_m().expect("ATE").1 > 1e-3, "the wobble shows");
+        let mut bad = running.clone();
+        bad.push(DVec3::new(f64::NAN, 0.0, 0.0), DVec3::ZERO);
+        assert!(matches!(bad.alignment_and_rmse_m(), Err(Error::DegenerateAlignment { .. })), "a NaN position is an error");
+        let mut line = RunningAte::default();
+        for i in 0..5 {
+            line.push(DVec3::X * f64::from(i), DVec3::Y * f64::from(i));
+        }
+        assert!(matches!(line.alignment_and_rmse_m(), Err(Error::DegenerateAlignment { .. })), "collinear positions");
     }
 
     #[test]

@@ -25,6 +25,7 @@ pub mod protocol;
 pub mod recording;
 pub mod source;
 pub mod tsdf;
+pub mod view;
 
 pub use camera::{PinholeIntrinsics, RgbdCalibration};
 pub use error::{Error, Result};

@@ -315,3 +315,30 @@ pub fn rotation_angle_rad(m: &Mat4) -> f32 {
 pub fn camera_pose(world_from_camera: &Mat4, enabled: u32) -> crate::kernels::gpu_data::CameraPose {
     crate::kernels::gpu_data::CameraPose { world_from_camera: *world_from_camera, camera_from_world: rigid_inverse(world_from_camera), enabled, ..Default::default() }
 }
+
+/// Twin of `pack_rgba8()` in `shared/colormap.wgsl`: channels clamped to [0, 1], truncated to
+/// 0..255, red in the low byte.
+pub fn pack_rgba8(c: [f32; 4]) -> u32 {
+    let q = c.map(|v| (v.clamp(0.0, 1.0) * 255.0) as u32);
+    q[0] | (q[1] << 8) | (q[2] << 16) | (q[3] << 24)
+}
+
+/// Twin of `depth_colour()` in `shared/colormap.wgsl`.
+pub fn depth_colour(depth_m: f32, max_m: f32) -> u32 {
+    if !(is_valid_f32(depth_m) && depth_m > 0.0) {
+        return pack_rgba8([0.0, 0.0, 0.0, 1.0]);
+    }
+    let t = (depth_m / max_m).clamp(0.0, 1.0);
+    let r = 0.27 + t * (-0.6 + t * 1.33);
+    let g = t * 0.9;
+    let b = 0.33 + t * (1.2 - t * 1.45);
+    pack_rgba8([r, g, b, 1.0])
+}
+
+/// Twin of `normal_colour()` in `shared/colormap.wgsl`.
+pub fn normal_colour(n: [f32; 4]) -> u32 {
+    if !is_valid_f32(n[0]) {
+        return pack_rgba8([0.0, 0.0, 0.0, 1.0]);
+    }
+    pack_rgba8([0.5 - 0.5 * n[0], 0.5 - 0.5 * n[1], 0.5 - 0.5 * n[2], 1.0])
+}
