@@ -49,6 +49,9 @@ pub struct Gpu {
     lost: Arc<Mutex<Option<String>>>,
     /// Mappable staging buffers kept for reuse by [`Gpu::read_buffers`].
     staging: Mutex<Vec<wgpu::Buffer>>,
+    /// The instance the adapter came from (none when built from a given adapter): what
+    /// surfaces (a browser canvas) are created on.
+    pub instance: Option<wgpu::Instance>,
 }
 
 /// How often the host touched the GPU: every submission, every wait for the GPU (a blocking
@@ -128,7 +131,9 @@ impl Gpu {
         desc.flags = wgpu::InstanceFlags::from_build_config().with_env();
         let instance = wgpu::Instance::new(desc);
         let adapter = select_adapter(&instance, backends, options).await?;
-        Self::from_adapter(&adapter).await
+        let mut gpu = Self::from_adapter(&adapter).await?;
+        gpu.instance = Some(instance);
+        Ok(gpu)
     }
 
     /// Creates the device on a given adapter.
@@ -175,6 +180,7 @@ impl Gpu {
             errors,
             lost,
             staging: Mutex::new(Vec::new()),
+            instance: None,
         })
     }
 

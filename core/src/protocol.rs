@@ -33,6 +33,21 @@ pub const MAX_CLIENT_MESSAGE_BYTES: usize = 1024;
 pub const MAX_SERVER_MESSAGE_BYTES: usize = 16 << 20;
 /// Longest source name or error message, in bytes.
 pub const MAX_TEXT_BYTES: usize = 4096;
+/// Fastest playback rate a client may ask for, times the source's own rate.
+pub const MAX_RATE: f32 = 1000.0;
+
+/// A playback rate the bridge accepts: a number in `0..=MAX_RATE` (0: as fast as possible).
+/// The one rule the decoder and the page's inputs share, so a page never sends a rate the
+/// bridge would close the session over.
+pub fn checked_rate(rate: f32) -> std::result::Result<f32, String> {
+    if (0.0..=MAX_RATE).contains(&rate) { Ok(rate) } else { Err(format!("rate {rate} is outside 0..={MAX_RATE} (0: as fast as possible)")) }
+}
+
+/// Parses a playback rate typed by a person or given in a URL ([`checked_rate`]).
+pub fn parse_rate(text: &str) -> std::result::Result<f32, String> {
+    let rate: f32 = text.trim().parse().map_err(|_| format!("rate {text:?} is not a number"))?;
+    checked_rate(rate)
+}
 
 const KIND_HELLO: u8 = 1;
 const KIND_FRAME: u8 = 2;
@@ -391,10 +406,7 @@ impl Message {
                     4 => Control::Seek(r.u64("seek index")?),
                     5 => {
                         let rate = r.f32("rate")?;
-                        if !(0.0..=1000.0).contains(&rate) {
-                            return Err(protocol_error(format!("control: rate {rate} outside 0..=1000")));
-                        }
-                        Control::Rate(rate)
+                        Control::Rate(checked_rate(rate).map_err(|e| protocol_error(format!("control: {e}")))?)
                     }
                     6 => Control::Loop(r.bool("loop flag")?),
                     7 => Control::Delivery(r.delivery()?),
@@ -650,5 +662,22 @@ mod tests {
         let mut short = message.clone();
         short.color_payload.pop();
         assert!(matches!(short.decode_images(&cal), Err(Error::Protocol { .. })), "short raw colour");
+    }
+
+    #[test]
+    fn rates_from_people_and_urls_are_checked_as_the_decoder_checks_them() {
+        assert_eq!(parse_rate(" 2.5 "), Ok(2.5), "spaces trimmed");
+        assert_eq!(parse_rate("0"), Ok(0.0), "0: as fast as possible");
+        assert_eq!(parse_rate("1000"), Ok(MAX_RATE), "the fastest");
+        for bad in ["NaN", "nan", "inf", "-inf", "-1", "1000.5", "abc", ""] {
+            assert!(parse_rate(bad).is_err(), "{bad:?} accepted");
+        }
+        // Whatever the page lets through, the bridge accepts.
+        for rate in [0.0f32, 0.25, 1.0, 999.0, MAX_RATE] {
+            let bytes = Message::Control(Control::Rate(rate)).encode();
+            assert_eq!(Message::decode(&bytes).expect("a checked rate decodes"), Message::Control(Control::Rate(rate)));
+        }
+        let nan = Message::Control(Control::Rate(f32::NAN)).encode();
+        assert!(Message::decode(&nan).is_err(), "NaN is refused on the wire too");
     }
 }

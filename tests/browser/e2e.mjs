@@ -7,7 +7,10 @@
 //   4. the browser's trajectory must match the native one (same world frame, so no alignment:
 //      RMSE and max position difference < 5 mm), and a screenshot of the free 3D view must
 //      show a model (decoded PNG pixels, not just a file);
-//   5. the mesh and trajectory exports arrive as downloads with the right contents.
+//   5. the mesh and trajectory exports arrive as downloads with the right contents;
+//   6. a second page opened with unparsable settings in its URL (?voxel_mm=abc&rate=NaN) falls
+//      back to the defaults with a visible message and fuses; its GPU device is then destroyed
+//      (as a driver reset would) and the page must rebuild the pipeline and carry on fusing.
 // Prints one line per check and a closing "e2e: N passed, M failed"; exits non-zero on failure.
 //
 // usage: node tests/browser/e2e.mjs [--webfusion target/release/webfusion] [--dist dist]
@@ -68,7 +71,7 @@ try {
   const tRun = Date.now();
   const done = await waitFor(page, 'every frame', (s) => s.frames_done >= total && s.state === 'ended', FRAME_TIMEOUT_MS * total);
   console.log(`browser: ${done.frames_done} frames, ${done.fps.toFixed(2)} fps over the last frames; stages (median ms) ${JSON.stringify(done.stages_ms)}; lost ${done.lost_frames}; ATE vs ground truth ${done.ate_rmse_m === null ? 'n/a' : (done.ate_rmse_m * 100).toFixed(2) + ' cm'}; ${((Date.now() - tRun) / 1000).toFixed(0)} s after the reconnect`);
-  const browserTum = await page.evaluate(() => window.webfusion.trajectory_tum);
+  const browserTum = await page.evaluate(() => window.webfusion.trajectory_tum());
   writeFileSync(join(out, 'browser_trajectory.txt'), browserTum);
   const browserTrajectory = parseTum(browserTum);
   const byTime = new Map(nativeTrajectory.map((p) => [p.t.toFixed(6), p.p]));
@@ -111,6 +114,29 @@ try {
     `mesh.ply ${vertices} vertices, ${faces} triangles, ${ply.length} bytes (expected ${plyBytes}); trajectory.txt ${tumText === browserTum ? 'equals' : 'DIFFERS from'} the hook's`);
   const final = await page.evaluate(() => window.webfusion.status);
   check('no page errors', consoleErrors.length === 0 && final.message === '', consoleErrors.length ? consoleErrors.join(' | ') : `status message "${final.message}"`);
+  console.log(`host per frame: ${JSON.stringify(final.host_per_frame)}; GPU timestamps: ${final.gpu_timestamps}; time to first frame ${final.time_to_first_frame_ms?.toFixed(0)} ms`);
+  check('one submission and one late readback per frame', final.host_per_frame.submits === 1 && final.host_per_frame.readbacks === 1 && final.host_per_frame.host_waits <= 1,
+    `the last frame's pipeline: ${JSON.stringify(final.host_per_frame)}`);
+
+  // 7. Bad settings in the URL, then a lost device.
+  const second = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+  const secondErrors = [];
+  second.on('pageerror', (e) => secondErrors.push(String(e)));
+  await second.goto(`http://${bridge.addr}/?volume=${volume}&voxel_mm=abc&rate=NaN&centred=1&autoplay=1`);
+  const fallback = await waitFor(second, 'frames with fallback settings', (s) => s.frames_done >= 3, FRAME_TIMEOUT_MS * 3);
+  check('bad URL settings fall back with a message', /voxel_mm=abc ignored/.test(fallback.message) && /rate ignored/.test(fallback.message) && fallback.reconnects === 0 && fallback.volume.voxel_size_m > 0,
+    `message "${fallback.message}"; voxel ${(fallback.volume.voxel_size_m * 1000).toFixed(1)} mm; reconnects ${fallback.reconnects}`);
+  await second.evaluate(() => window.webfusion.lose_device());
+  // The loss may show as an error for a moment before the rebuild: poll without failing on it.
+  let rebuilt = null;
+  for (const deadline = Date.now() + FRAME_TIMEOUT_MS * 4; Date.now() < deadline; await new Promise((r) => setTimeout(r, 250))) {
+    const s = await second.evaluate(() => window.webfusion.status);
+    if (s.device_rebuilds >= 1 && s.frames_done >= fallback.frames_done + 3) { rebuilt = s; break; }
+  }
+  if (!rebuilt) throw new Error(`no rebuild after the lost device: ${JSON.stringify(await second.evaluate(() => window.webfusion.status))}`);
+  check('a lost device is rebuilt and fusing resumes', rebuilt.state !== 'error' && secondErrors.length === 0 && rebuilt.last_index > fallback.last_index,
+    `${rebuilt.device_rebuilds} rebuild(s); frames ${fallback.frames_done} -> ${rebuilt.frames_done}, last index ${fallback.last_index} -> ${rebuilt.last_index}; state ${rebuilt.state}${secondErrors.length ? '; page errors: ' + secondErrors.join(' | ') : ''}`);
+  await second.close();
 } catch (error) {
   check('e2e run', false, error.stack ?? String(error));
 } finally {

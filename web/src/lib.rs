@@ -6,7 +6,10 @@
 #![cfg(target_arch = "wasm32")]
 
 mod app;
+mod canvas;
+mod fusion_mode;
 mod link;
+mod status;
 mod ui;
 mod view;
 

@@ -23,6 +23,8 @@ pub(crate) enum Event {
     Closed { generation: u64, code: u16, reason: String },
     /// Time to try connecting again (scheduled after a drop).
     Reconnect { generation: u64 },
+    /// Time to look for frame reports (scheduled while frames are in flight).
+    Poll,
     /// A button, input or view gesture.
     Ui(Ui),
 }
@@ -32,8 +34,13 @@ pub(crate) enum Event {
 pub(crate) enum Ui {
     Connect,
     Disconnect,
-    /// Play, pause, step, seek, rate or loop; the app decides what reaches the bridge.
+    /// Play, pause, step, seek or loop; the app decides what reaches the bridge.
     Playback(Control),
+    /// The rate input's text, checked by the app before anything reaches the bridge.
+    Rate(String),
+    /// Test hook (`window.webfusion.lose_device()`): destroys the GPU device, as a driver
+    /// reset or a GPU process crash would, to exercise the rebuild.
+    LoseDevice,
     EveryFrame(bool),
     ApplySettings,
     Reset,

@@ -124,7 +124,7 @@ pub(crate) fn bind_controls(inbox: &Rc<Inbox>) {
         on(inbox, id, "click", move || Some(ui.clone()));
     }
     on(inbox, "seek", "change", || value("seek").parse().ok().map(|i| Ui::Playback(Control::Seek(i))));
-    on(inbox, "rate", "change", || value("rate").parse().ok().map(|r| Ui::Playback(Control::Rate(r))));
+    on(inbox, "rate", "change", || Some(Ui::Rate(value("rate"))));
     on(inbox, "loop", "change", || Some(Ui::Playback(Control::Loop(!value("loop").is_empty()))));
     on(inbox, "every-frame", "change", || Some(Ui::EveryFrame(!value("every-frame").is_empty())));
     on(inbox, "free-colour", "change", || Some(Ui::ViewColour(!value("free-colour").is_empty())));

@@ -1,62 +1,28 @@
 // SPDX-License-Identifier: MIT
-//! Pixels for the views: colour-mapped depth, normals as colour, the free viewer's camera
-//! and the trajectory drawn over the raycast model.
+//! The 2D side of the views: the colour image, the free viewer's camera and the trajectory
+//! drawn over the raycast model (the colour-mapped views are drawn on the GPU, `canvas.rs`).
 
 use glam::{DMat3, DQuat, DVec3};
 use wasm_bindgen::prelude::*;
 use webfusion_core::{PinholeIntrinsics, Se3};
-
-/// Depth shown at the warm end of the colour map, metres.
-pub(crate) const DEPTH_VIEW_MAX_M: f32 = 4.5;
 
 /// Packed RGB8 as RGBA8.
 pub(crate) fn rgba_from_rgb(rgb8: &[u8]) -> Vec<u8> {
     rgb8.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect()
 }
 
-/// Depth in metres (0 or NaN: invalid, black) through a perceptual blue-to-yellow map.
-pub(crate) fn rgba_from_depth_m(depth_m: impl Iterator<Item = f32>) -> Vec<u8> {
-    depth_m
-        .flat_map(|d| {
-            if !(d > 0.0) {
-                return [0, 0, 0, 255];
-            }
-            let t = (d / DEPTH_VIEW_MAX_M).clamp(0.0, 1.0);
-            // A compact approximation of viridis: dark blue, teal, green, yellow.
-            let r = (255.0 * (0.27 + t * (-0.6 + t * 1.33)).clamp(0.0, 1.0)) as u8;
-            let g = (255.0 * (0.0 + t * 0.9).clamp(0.0, 1.0)) as u8;
-            let b = (255.0 * (0.33 + t * (1.2 - t * 1.45)).clamp(0.0, 1.0)) as u8;
-            [r, g, b, 255]
-        })
-        .collect()
-}
-
-/// Unit normals (x, y, z, _) in the camera frame as colour (NaN: black).
-pub(crate) fn rgba_from_normals(normals: &[[f32; 4]]) -> Vec<u8> {
-    normals
-        .iter()
-        .flat_map(|n| {
-            if n[0].is_nan() {
-                [0, 0, 0, 255]
-            } else {
-                [((0.5 - 0.5 * n[0]) * 255.0) as u8, ((0.5 - 0.5 * n[1]) * 255.0) as u8, ((0.5 - 0.5 * n[2]) * 255.0) as u8, 255]
-            }
-        })
-        .collect()
-}
-
-/// RGBA8 packed in u32 (little-endian, as the raycast kernel writes it).
-pub(crate) fn rgba_from_packed(packed: &[u32]) -> Vec<u8> {
-    packed.iter().flat_map(|p| p.to_le_bytes()).collect()
-}
-
-/// Puts RGBA8 pixels of `width`x`height` on a canvas, resizing it to fit.
-pub(crate) fn draw_rgba(canvas: &web_sys::HtmlCanvasElement, width: u32, height: u32, rgba: &[u8]) -> Result<web_sys::CanvasRenderingContext2d, JsValue> {
+/// The 2D context of a canvas sized `width`x`height` (resized to fit).
+pub(crate) fn context_2d(canvas: &web_sys::HtmlCanvasElement, width: u32, height: u32) -> Result<web_sys::CanvasRenderingContext2d, JsValue> {
     if canvas.width() != width || canvas.height() != height {
         canvas.set_width(width);
         canvas.set_height(height);
     }
-    let ctx: web_sys::CanvasRenderingContext2d = canvas.get_context("2d")?.ok_or("no 2d context")?.dyn_into()?;
+    canvas.get_context("2d")?.ok_or("no 2d context")?.dyn_into().map_err(JsValue::from)
+}
+
+/// Puts RGBA8 pixels of `width`x`height` on a canvas, resizing it to fit.
+pub(crate) fn draw_rgba(canvas: &web_sys::HtmlCanvasElement, width: u32, height: u32, rgba: &[u8]) -> Result<web_sys::CanvasRenderingContext2d, JsValue> {
+    let ctx = context_2d(canvas, width, height)?;
     let image = web_sys::ImageData::new_with_u8_clamped_array_and_sh(wasm_bindgen::Clamped(rgba), width, height)?;
     ctx.put_image_data(&image, 0.0, 0.0)?;
     Ok(ctx)
@@ -187,14 +153,11 @@ mod tests {
     }
 
     #[wasm_bindgen_test]
-    fn points_behind_the_viewer_are_not_drawn_and_invalid_depth_is_black() {
+    fn points_behind_the_viewer_are_not_drawn() {
         let orbit = Orbit::looking_at(DVec3::new(0.0, 0.0, 2.0), 2.0);
         let pose = orbit.world_from_viewer();
         let behind = pose.transform_point(DVec3::new(0.0, 0.0, -1.0));
         assert_eq!(project(&K, &pose, behind), None, "behind the viewer");
-        let rgba = rgba_from_depth_m([0.0, f32::NAN, 1.0, 10.0].into_iter());
-        assert_eq!(&rgba[..8], &[0, 0, 0, 255, 0, 0, 0, 255], "invalid depth is black");
-        assert_ne!(&rgba[8..12], &rgba[12..16], "near and far differ");
-        assert_eq!(rgba_from_normals(&[[f32::NAN; 4], [0.0, 0.0, -1.0, 0.0]]), vec![0, 0, 0, 255, 127, 127, 255, 255], "normals: NaN black, facing the camera blue");
+        assert_eq!(rgba_from_rgb(&[1, 2, 3, 4, 5, 6]), vec![1, 2, 3, 255, 4, 5, 6, 255], "RGB gains opaque alpha");
     }
 }

@@ -8,7 +8,7 @@
 pub mod trajectory;
 pub mod tum;
 
-pub use trajectory::{TimedPose, format_tum_trajectory, parse_tum_trajectory, read_tum_trajectory, write_tum_trajectory};
+pub use trajectory::{TUM_TRAJECTORY_HEADER, TimedPose, format_tum_trajectory, parse_tum_trajectory, push_tum_line, read_tum_trajectory, write_tum_trajectory};
 pub use tum::{DEFAULT_MAX_TIME_DIFFERENCE_NS, TumDataset, TumFrameFiles, TumOptions};
 
 /// Nanoseconds per second.

@@ -65,20 +65,29 @@ pub fn parse_tum_trajectory(text: &str, path: &Path) -> Result<Vec<TimedPose>> {
     Ok(poses)
 }
 
+/// Header line of [`format_tum_trajectory`] (newline included).
+pub const TUM_TRAJECTORY_HEADER: &str = "# timestamp tx ty tz qx qy qz qw\n";
+
 /// Renders poses in the TUM trajectory format, with a `#` header line.
 ///
 /// Timestamps keep their exact nanosecond value ([`super::format_timestamp_s`]); numbers use
 /// Rust's shortest representation that parses back to the same `f64`, so the text round-trips.
 pub fn format_tum_trajectory(poses: &[TimedPose]) -> String {
     let mut text = String::with_capacity(32 + poses.len() * 96);
-    text.push_str("# timestamp tx ty tz qx qy qz qw\n");
+    text.push_str(TUM_TRAJECTORY_HEADER);
     for pose in poses {
-        let t = pose.world_from_camera.translation_m;
-        let q = pose.world_from_camera.rotation;
-        // Writing to a String cannot fail.
-        writeln!(text, "{} {} {} {} {} {} {} {}", format_timestamp_s(pose.timestamp_ns), t.x, t.y, t.z, q.x, q.y, q.z, q.w).ok();
+        push_tum_line(&mut text, pose);
     }
     text
+}
+
+/// Appends one pose's line of [`format_tum_trajectory`] to `text` (for text that grows a
+/// pose at a time).
+pub fn push_tum_line(text: &mut String, pose: &TimedPose) {
+    let t = pose.world_from_camera.translation_m;
+    let q = pose.world_from_camera.rotation;
+    // Writing to a String cannot fail.
+    writeln!(text, "{} {} {} {} {} {} {} {}", format_timestamp_s(pose.timestamp_ns), t.x, t.y, t.z, q.x, q.y, q.z, q.w).ok();
 }
 
 /// Writes poses to a TUM trajectory file (see [`format_tum_trajectory`]).

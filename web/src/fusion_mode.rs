@@ -1,0 +1,416 @@
+// SPDX-License-Identifier: MIT
+//! The KinectFusion mode: the pipeline, its views and what it reports. The shell (`app.rs`)
+//! feeds it decoded frames and asks it for its status section; it never waits for the GPU.
+//!
+//! A frame is submitted as one command buffer ([`KinectFusion::submit_frame`]); its views
+//! (depth, normals, the model from the tracked camera) are coloured on the GPU and copied into
+//! their canvases in a second one. Reports (pose, tracking state, GPU stage times) come back
+//! a frame or two later through [`FusionMode::poll`]; the trajectory, the running ATE and the
+//! statistics are updated then, in O(1) per frame.
+
+use std::cell::RefCell;
+use std::collections::VecDeque;
+use std::rc::Rc;
+
+use glam::DVec3;
+use web_time::Instant;
+use webfusion_core::eval::{Alignment, RunningAte};
+use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, RaycastTarget, TrackingState};
+use webfusion_core::io::{TUM_TRAJECTORY_HEADER, push_tum_line};
+use webfusion_core::source::TimedPose;
+use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, NormalView};
+use webfusion_core::{Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
+
+use crate::canvas::GpuCanvas;
+use crate::status::{HostPerFrame, STATS_WINDOW, StageMedians, VolumeStatus, Window};
+use crate::ui;
+use crate::view::{self, Orbit};
+
+/// The free view's camera.
+pub(crate) const FREE_VIEW: PinholeIntrinsics = PinholeIntrinsics { fx_px: 420.0, fy_px: 420.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 };
+/// Depth range the free view searches, metres.
+const FREE_VIEW_RANGE_M: (f32, f32) = (0.05, 20.0);
+
+/// What the shell knows about a frame until its report comes back.
+#[derive(Clone, Debug)]
+struct InFlight {
+    index: u64,
+    timestamp_ns: i64,
+    ground_truth: Option<Se3>,
+    arrived: Instant,
+    decode_ms: f64,
+    views_ms: f64,
+}
+
+/// The per-frame views, coloured on the GPU from the pipeline's own buffers.
+struct FrameViews {
+    depth: DepthView,
+    normals: NormalView,
+    model: NormalView,
+    depth_canvas: GpuCanvas,
+    normals_canvas: GpuCanvas,
+    model_canvas: GpuCanvas,
+}
+
+/// The free view: the model raycast from the orbiting viewer.
+struct FreeView {
+    target: RaycastTarget,
+    shading: NormalView,
+    canvas: GpuCanvas,
+}
+
+/// The pipeline and everything built on its device.
+struct Pipeline {
+    fusion: KinectFusion,
+    views: FrameViews,
+    free: FreeView,
+}
+
+impl Pipeline {
+    fn new(gpu: &Gpu, calibration: RgbdCalibration, config: &FusionConfig) -> Result<Self, String> {
+        let fusion = KinectFusion::new(gpu, calibration, config.clone()).map_err(|e| format!("cannot build the pipeline: {e}"))?;
+        let k = calibration.intrinsics;
+        let size = [k.width_px, k.height_px];
+        let pre = fusion.preprocessor();
+        let views = FrameViews {
+            depth: DepthView::new(gpu, &pre.depth_raw, size, 1.0 / calibration.depth_units_per_metre, DEFAULT_DEPTH_VIEW_MAX_M),
+            normals: NormalView::new(gpu, "web.view.normals", &pre.levels[0].normal_in_camera, size),
+            model: NormalView::new(gpu, "web.view.model", &fusion.prediction().normal_in_world, size),
+            depth_canvas: GpuCanvas::new(gpu, "view-depth", size)?,
+            normals_canvas: GpuCanvas::new(gpu, "view-normals", size)?,
+            model_canvas: GpuCanvas::new(gpu, "view-model", size)?,
+        };
+        let target = RaycastTarget::new(gpu, fusion.volume(), FREE_VIEW, "web.free_view");
+        let shading = NormalView::new(gpu, "web.view.free", &target.normal_in_world, [FREE_VIEW.width_px, FREE_VIEW.height_px]);
+        let free = FreeView { target, shading, canvas: GpuCanvas::new(gpu, "view-free", [FREE_VIEW.width_px, FREE_VIEW.height_px])? };
+        Ok(Self { fusion, views, free })
+    }
+}
+
+/// KinectFusion on the frames the shell hands over.
+pub(crate) struct FusionMode {
+    config: FusionConfig,
+    pipeline: Option<Pipeline>,
+    in_flight: VecDeque<InFlight>,
+    /// Index of the last frame submitted.
+    last_submitted: Option<u64>,
+    /// Index of the last frame whose report came back.
+    last_reported: Option<u64>,
+    /// Poses of this run, in the run's world frame (after `run_origin`).
+    trajectory: Vec<TimedPose>,
+    /// The trajectory as TUM text, grown a line per report (shared with the page's
+    /// `window.webfusion.trajectory_tum()`).
+    trajectory_tum: Rc<RefCell<String>>,
+    /// Ground-truth positions paired with `trajectory` (for the running ATE and the path).
+    ground_truth: Vec<DVec3>,
+    ate: RunningAte,
+    alignment: Option<(Alignment, f64)>,
+    /// Where a pipeline rebuilt mid-run (after a lost device) starts: its world frame is the
+    /// camera of its first frame, placed at the last pose before the loss.
+    run_origin: Se3,
+    last_world_from_camera: Se3,
+    tracking: &'static str,
+    lost_frames: u64,
+    recovered_frames: u64,
+    stages: [Window; 6],
+    frame_instants: VecDeque<Instant>,
+    host: HostPerFrame,
+    latency_ms: Option<f64>,
+    orbit: Option<Orbit>,
+    free_dirty: bool,
+    free_colour: bool,
+}
+
+/// This mode's part of the page's status.
+#[derive(Clone, Debug, serde::Serialize)]
+pub(crate) struct FusionStatus {
+    pub(crate) frames_done: usize,
+    pub(crate) last_index: Option<u64>,
+    pub(crate) frames_in_flight: usize,
+    pub(crate) fps: f64,
+    pub(crate) stages_ms: StageMedians,
+    pub(crate) gpu_timestamps: bool,
+    pub(crate) host_per_frame: HostPerFrame,
+    pub(crate) tracking: &'static str,
+    pub(crate) lost_frames: u64,
+    pub(crate) recovered_frames: u64,
+    pub(crate) ate_rmse_m: Option<f64>,
+    pub(crate) ate_pairs: usize,
+    pub(crate) volume: VolumeStatus,
+    pub(crate) latency_ms: Option<f64>,
+}
+
+impl FusionMode {
+    pub(crate) fn new(config: FusionConfig) -> Self {
+        Self {
+            config,
+            pipeline: None,
+            in_flight: VecDeque::new(),
+            last_submitted: None,
+            last_reported: None,
+            trajectory: Vec::new(),
+            trajectory_tum: Rc::new(RefCell::new(TUM_TRAJECTORY_HEADER.to_owned())),
+            ground_truth: Vec::new(),
+            ate: RunningAte::default(),
+            alignment: None,
+            run_origin: Se3::IDENTITY,
+            last_world_from_camera: Se3::IDENTITY,
+            tracking: "idle",
+            lost_frames: 0,
+            recovered_frames: 0,
+            stages: Default::default(),
+            frame_instants: VecDeque::new(),
+            host: HostPerFrame::default(),
+            latency_ms: None,
+            orbit: None,
+            free_dirty: false,
+            free_colour: false,
+        }
+    }
+
+    /// Replaces the settings: the pipeline is rebuilt at the next frame.
+    pub(crate) fn set_config(&mut self, config: FusionConfig) {
+        self.config = config;
+        self.pipeline = None;
+    }
+
+    /// Drops everything built on the GPU (the device was lost, or the source changed); the
+    /// next frame rebuilds it. With `keep_trajectory` the run goes on: the new pipeline's
+    /// poses continue from the last one.
+    pub(crate) fn drop_pipeline(&mut self, keep_trajectory: bool) {
+        self.pipeline = None;
+        self.in_flight.clear();
+        if keep_trajectory {
+            self.run_origin = self.last_world_from_camera;
+        } else {
+            self.reset_run_state();
+        }
+    }
+
+    /// Forgets the model, the trajectory and the statistics: the next frame starts a new run.
+    pub(crate) fn reset(&mut self, gpu: &Gpu) {
+        if let Some(p) = &mut self.pipeline {
+            p.fusion.reset(gpu);
+        }
+        self.in_flight.clear();
+        self.reset_run_state();
+    }
+
+    fn reset_run_state(&mut self) {
+        self.last_submitted = None;
+        self.last_reported = None;
+        self.trajectory.clear();
+        TUM_TRAJECTORY_HEADER.clone_into(&mut self.trajectory_tum.borrow_mut());
+        self.ground_truth.clear();
+        self.ate = RunningAte::default();
+        self.alignment = None;
+        self.run_origin = Se3::IDENTITY;
+        self.last_world_from_camera = Se3::IDENTITY;
+        self.tracking = "idle";
+        self.lost_frames = 0;
+        self.recovered_frames = 0;
+        self.stages.iter_mut().for_each(Window::clear);
+        self.frame_instants.clear();
+        self.latency_ms = None;
+        self.orbit = None;
+        self.free_dirty = true;
+    }
+
+    /// Index of the last frame submitted (the shell requests the next one from it).
+    pub(crate) fn last_submitted(&self) -> Option<u64> {
+        self.last_submitted
+    }
+
+    /// Frames submitted whose reports are still to come.
+    pub(crate) fn frames_in_flight(&self) -> usize {
+        self.in_flight.len()
+    }
+
+    /// The trajectory so far, TUM text (kept current as reports arrive).
+    pub(crate) fn trajectory_tum(&self) -> Rc<RefCell<String>> {
+        Rc::clone(&self.trajectory_tum)
+    }
+
+    /// After the frames in flight were lost with the device: the next frame requested is the
+    /// one after `last` (the last one fused).
+    pub(crate) fn rewind_to(&mut self, last: Option<u64>) {
+        self.last_submitted = last;
+    }
+
+    /// Index of the last frame whose report came back.
+    pub(crate) fn last_reported(&self) -> Option<u64> {
+        self.last_reported
+    }
+
+    /// The pipeline's volume (for the mesh export), if built.
+    pub(crate) fn fusion(&self) -> Option<&KinectFusion> {
+        self.pipeline.as_ref().map(|p| &p.fusion)
+    }
+
+    /// Submits one decoded frame and draws its views, without waiting for the GPU (unless two
+    /// frames are in flight already: then for the oldest's report).
+    pub(crate) async fn submit(&mut self, gpu: &Gpu, calibration: RgbdCalibration, frame: &RgbdFrame, ground_truth: Option<Se3>, arrived: Instant, decode_ms: f64) -> Result<(), String> {
+        if self.pipeline.is_none() {
+            self.pipeline = Some(Pipeline::new(gpu, calibration, &self.config)?);
+        }
+        let Some(p) = self.pipeline.as_mut() else { return Ok(()) };
+        p.fusion.submit_frame(gpu, frame).await.map_err(|e| format!("frame {}: {e}", frame.index))?;
+        let t_views = Instant::now();
+        draw_frame_views(gpu, p, frame)?;
+        let views_ms = t_views.elapsed().as_secs_f64() * 1e3;
+        self.in_flight.push_back(InFlight { index: frame.index, timestamp_ns: frame.depth_timestamp_ns, ground_truth, arrived, decode_ms, views_ms });
+        self.last_submitted = Some(frame.index);
+        Ok(())
+    }
+
+    /// Takes the reports that came back (never waits); true if any did.
+    pub(crate) fn poll(&mut self, gpu: &Gpu) -> Result<bool, String> {
+        let Some(p) = self.pipeline.as_mut() else { return Ok(false) };
+        let reports = p.fusion.poll_reports(gpu).map_err(|e| e.to_string())?;
+        let any = !reports.is_empty();
+        for report in reports {
+            self.apply(report);
+        }
+        Ok(any)
+    }
+
+    fn apply(&mut self, report: FrameReport) {
+        while self.in_flight.front().is_some_and(|f| f.index != report.index) {
+            self.in_flight.pop_front();
+        }
+        let Some(meta) = self.in_flight.pop_front() else { return };
+        let world_from_camera = self.run_origin * report.world_from_camera;
+        self.last_world_from_camera = world_from_camera;
+        self.last_reported = Some(report.index);
+        let pose = TimedPose { timestamp_ns: meta.timestamp_ns, world_from_camera };
+        push_tum_line(&mut self.trajectory_tum.borrow_mut(), &pose);
+        self.trajectory.push(pose);
+        if let Some(gt) = meta.ground_truth {
+            self.ground_truth.push(gt.translation_m);
+            self.ate.push(world_from_camera.translation_m, gt.translation_m);
+            self.alignment = self.ate.alignment_and_rmse_m().ok();
+        }
+        self.tracking = report.state.name();
+        match report.state {
+            TrackingState::Lost(_) => self.lost_frames += 1,
+            TrackingState::Recovered => self.recovered_frames += 1,
+            _ => {}
+        }
+        if self.orbit.is_none() {
+            // Look at a point 1.5 m in front of the first camera.
+            self.orbit = Some(Orbit::looking_at(world_from_camera.transform_point(DVec3::new(0.0, 0.0, 1.5)), 3.0));
+        }
+        let t = report.gpu_ms.unwrap_or_default();
+        for (window, sample) in self.stages.iter_mut().zip([meta.decode_ms, t.preprocess, t.track, t.integrate, t.raycast, meta.views_ms]) {
+            window.push(sample);
+        }
+        self.host = HostPerFrame { submits: report.host.submits as f64, host_waits: report.host.host_waits as f64, readbacks: report.host.readbacks as f64 };
+        self.latency_ms = Some(meta.arrived.elapsed().as_secs_f64() * 1e3);
+        if self.frame_instants.len() == STATS_WINDOW {
+            self.frame_instants.pop_front();
+        }
+        self.frame_instants.push_back(Instant::now());
+        self.free_dirty = true;
+    }
+
+    /// The free view's camera moved or its shading changed.
+    pub(crate) fn orbit_mut(&mut self) -> Option<&mut Orbit> {
+        self.free_dirty = true;
+        self.orbit.as_mut()
+    }
+
+    pub(crate) fn set_free_colour(&mut self, on: bool) {
+        self.free_colour = on;
+        self.free_dirty = true;
+    }
+
+    /// Redraws the free view if its camera or the model changed since it was last drawn.
+    pub(crate) fn draw_free_view(&mut self, gpu: &Gpu) -> Result<(), String> {
+        let (Some(p), Some(orbit)) = (&self.pipeline, self.orbit) else { return Ok(()) };
+        if !self.free_dirty || self.trajectory.is_empty() {
+            return Ok(());
+        }
+        self.free_dirty = false;
+        let world_from_viewer = orbit.world_from_viewer();
+        // The pipeline's world frame is the run's after `run_origin`.
+        let pipeline_from_viewer = self.run_origin.inverse() * world_from_viewer;
+        let free = &p.free;
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.free_view") });
+        free.target.render(gpu, &mut encoder, p.fusion.volume(), &pipeline_from_viewer, FREE_VIEW_RANGE_M).map_err(|e| e.to_string())?;
+        let texture = if self.free_colour {
+            free.canvas.draw_packed(&mut encoder, &free.target.color_rgba8, FREE_VIEW.width_px)?
+        } else {
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("web.free_view.shading"), timestamp_writes: None });
+                free.shading.dispatch_in(gpu, &mut pass);
+            }
+            free.canvas.draw(&mut encoder, &free.shading.image)?
+        };
+        gpu.submit([encoder.finish()]);
+        GpuCanvas::present(gpu, [texture]);
+        self.draw_overlay(&world_from_viewer)
+    }
+
+    /// The trajectories and the current camera over the free view (a 2D canvas on top).
+    fn draw_overlay(&self, world_from_viewer: &Se3) -> Result<(), String> {
+        let canvas: web_sys::HtmlCanvasElement = ui::element("view-free-overlay")?;
+        let ctx = view::context_2d(&canvas, FREE_VIEW.width_px, FREE_VIEW.height_px).map_err(|e| crate::link::js_text(&e))?;
+        ctx.clear_rect(0.0, 0.0, f64::from(FREE_VIEW.width_px), f64::from(FREE_VIEW.height_px));
+        if let Some((alignment, _)) = &self.alignment {
+            // Ground truth, moved into this reconstruction's frame by the ATE alignment.
+            let est_from_gt = alignment.gt_from_est.inverse();
+            view::draw_path(&ctx, &FREE_VIEW, world_from_viewer, self.ground_truth.iter().map(|p| est_from_gt.transform_point(*p)), "#4caf50");
+        }
+        view::draw_path(&ctx, &FREE_VIEW, world_from_viewer, self.trajectory.iter().map(|p| p.world_from_camera.translation_m), "#ffb300");
+        if let Some(last) = self.trajectory.last() {
+            view::draw_camera(&ctx, &FREE_VIEW, world_from_viewer, &last.world_from_camera, "#ff5252");
+        }
+        Ok(())
+    }
+
+    /// This mode's status section.
+    pub(crate) fn status(&self) -> FusionStatus {
+        let fps = match (self.frame_instants.front(), self.frame_instants.back()) {
+            (Some(first), Some(last)) if self.frame_instants.len() >= 2 => (self.frame_instants.len() - 1) as f64 / (*last - *first).as_secs_f64().max(1e-9),
+            _ => 0.0,
+        };
+        let m = |i: usize| self.stages[i].median().unwrap_or(0.0);
+        let t = &self.config.tsdf;
+        FusionStatus {
+            frames_done: self.trajectory.len(),
+            last_index: self.last_reported,
+            frames_in_flight: self.in_flight.len(),
+            fps,
+            stages_ms: StageMedians { decode: m(0), preprocess: m(1), track: m(2), integrate: m(3), raycast: m(4), views: m(5) },
+            gpu_timestamps: self.pipeline.as_ref().is_some_and(|p| p.fusion.timer_available()),
+            host_per_frame: self.host,
+            tracking: self.tracking,
+            lost_frames: self.lost_frames,
+            recovered_frames: self.recovered_frames,
+            ate_rmse_m: self.alignment.as_ref().map(|(_, rmse)| *rmse),
+            ate_pairs: self.ate.len(),
+            volume: VolumeStatus { dims_voxels: t.dims_voxels, voxel_size_m: t.voxel_size_m, truncation_m: t.truncation_m, memory_bytes: t.memory_bytes() },
+            latency_ms: self.latency_ms,
+        }
+    }
+}
+
+/// Colours the frame's depth, normals and predicted model on the GPU and copies them into
+/// their canvases (one submission, no readback); the colour image, decoded on the CPU anyway,
+/// goes to its 2D canvas directly.
+fn draw_frame_views(gpu: &Gpu, p: &Pipeline, frame: &RgbdFrame) -> Result<(), String> {
+    let v = &p.views;
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.frame_views") });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("web.frame_views"), timestamp_writes: None });
+        v.depth.dispatch_in(gpu, &mut pass);
+        v.normals.dispatch_in(gpu, &mut pass);
+        v.model.dispatch_in(gpu, &mut pass);
+    }
+    let textures = [v.depth_canvas.draw(&mut encoder, &v.depth.image)?, v.normals_canvas.draw(&mut encoder, &v.normals.image)?, v.model_canvas.draw(&mut encoder, &v.model.image)?];
+    gpu.submit([encoder.finish()]);
+    GpuCanvas::present(gpu, textures);
+    let (w, h) = (frame.color.width_px, frame.color.height_px);
+    view::draw_rgba(&ui::element("view-colour")?, w, h, &view::rgba_from_rgb(&frame.color.rgb8)).map_err(|e| crate::link::js_text(&e))?;
+    Ok(())
+}

@@ -1,0 +1,111 @@
+// SPDX-License-Identifier: MIT
+//! The page's status: one typed struct, serialised once per update into `window.webfusion`,
+//! and the bounded statistics it is built from (O(1) work per frame).
+
+use std::collections::VecDeque;
+
+use serde::Serialize;
+
+/// Frames the stage medians and the fps figure look back over.
+pub(crate) const STATS_WINDOW: usize = 32;
+
+/// The last [`STATS_WINDOW`] samples of a quantity and their median.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Window {
+    samples: VecDeque<f64>,
+}
+
+impl Window {
+    pub(crate) fn push(&mut self, sample: f64) {
+        if self.samples.len() == STATS_WINDOW {
+            self.samples.pop_front();
+        }
+        self.samples.push_back(sample);
+    }
+
+    /// Median of the window (the upper one of an even count), `None` when empty.
+    pub(crate) fn median(&self) -> Option<f64> {
+        let mut sorted: Vec<f64> = self.samples.iter().copied().collect();
+        sorted.sort_by(f64::total_cmp);
+        sorted.get(sorted.len() / 2).copied()
+    }
+
+    pub(crate) fn clear(&mut self) {
+        self.samples.clear();
+    }
+}
+
+/// Median stage times over the last frames, milliseconds (GPU timestamps where the browser
+/// gives them, else 0 for the GPU stages).
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
+pub(crate) struct StageMedians {
+    pub(crate) decode: f64,
+    pub(crate) preprocess: f64,
+    pub(crate) track: f64,
+    pub(crate) integrate: f64,
+    pub(crate) raycast: f64,
+    /// Encoding the views' colour maps and copies (the GPU does the rest).
+    pub(crate) views: f64,
+}
+
+/// The volume the pipeline fuses into.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub(crate) struct VolumeStatus {
+    pub(crate) dims_voxels: [u32; 3],
+    pub(crate) voxel_size_m: f32,
+    pub(crate) truncation_m: f32,
+    pub(crate) memory_bytes: u64,
+}
+
+/// How often the page touched the GPU per fused frame (steady state).
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
+pub(crate) struct HostPerFrame {
+    pub(crate) submits: f64,
+    pub(crate) host_waits: f64,
+    pub(crate) readbacks: f64,
+}
+
+/// Everything the page reports, as `window.webfusion.status`: the shell's fields and the
+/// running mode's section, flattened into one object.
+#[derive(Clone, Debug, Serialize)]
+pub(crate) struct Status {
+    /// running, paused, ended, connecting, reconnecting, disconnected or error.
+    pub(crate) state: &'static str,
+    /// The link: disconnected, connecting, connected or retrying.
+    pub(crate) link: &'static str,
+    /// The last error, or why a setting was ignored ("" if none).
+    pub(crate) message: String,
+    pub(crate) source: Option<String>,
+    pub(crate) frames_total: Option<u64>,
+    pub(crate) adapter: String,
+    /// Frames dropped (real-time delivery) here and at the bridge.
+    pub(crate) frames_dropped: u64,
+    pub(crate) reconnects: u32,
+    /// Pipelines rebuilt after the GPU device was lost.
+    pub(crate) device_rebuilds: u32,
+    /// Connecting to the first fused frame, milliseconds.
+    pub(crate) time_to_first_frame_ms: Option<f64>,
+    #[serde(flatten)]
+    pub(crate) fusion: crate::fusion_mode::FusionStatus,
+}
+
+#[cfg(test)]
+mod tests {
+    use wasm_bindgen_test::wasm_bindgen_test;
+
+    use super::*;
+
+    #[wasm_bindgen_test]
+    fn the_window_keeps_the_last_samples_and_their_median() {
+        let mut w = Window::default();
+        assert_eq!(w.median(), None, "empty");
+        for i in 0..100 {
+            w.push(f64::from(i));
+        }
+        // The last 32 samples are 68..=99: the upper median is 84.
+        assert_eq!(w.median(), Some(84.0), "median of the window");
+        w.clear();
+        w.push(3.0);
+        assert_eq!(w.median(), Some(3.0), "after clear");
+    }
+}
