@@ -168,6 +168,14 @@ struct App {
     /// Connecting to the first fused frame.
     connected_at: Option<Instant>,
     first_frame_ms: Option<f64>,
+    /// When the page's loop started.
+    started_at: Instant,
+    /// Set once the warm-up submission completed (the pipelines are compiled).
+    gpu_ready: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    /// Milestones up to the first fused frame (GPU ready, connected, hello, frame received,
+    /// decoded, submitted, fused), milliseconds after the page started: where the time to the
+    /// first frame goes.
+    startup_ms: Vec<(&'static str, f64)>,
 }
 
 async fn run() -> Result<(), String> {
@@ -176,6 +184,7 @@ async fn run() -> Result<(), String> {
         return Err("this browser has no WebGPU (navigator.gpu is missing). Use Chrome or Edge 113+ (on Linux: chrome://flags/#enable-unsafe-webgpu, or start Chromium with --enable-unsafe-webgpu), Firefox 141+ on Windows, or Safari 26+. The native `webfusion reconstruct` runs the same pipeline without a browser.".into());
     }
     ui::set_text("status", "requesting a WebGPU adapter…");
+    let started_at = Instant::now();
     let gpu = new_gpu().await?;
     // Browsers keep the adapter's name to themselves; say what is known.
     let adapter = if gpu.adapter_info.name.is_empty() { format!("browser WebGPU, {:?} adapter", gpu.adapter_info.device_type) } else { gpu.adapter_summary() };
@@ -204,6 +213,12 @@ async fn run() -> Result<(), String> {
     ui::bind_gestures(&inbox, &overlay);
     let mode = FusionMode::new(settings.config.clone());
     install_hooks(&inbox, &mode);
+    // The browser compiles the pipelines after `Gpu::new` returns; an empty submission
+    // completes once they are ready (a milestone of the status).
+    gpu.submit([gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.warm_up") }).finish()]);
+    let gpu_ready = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let ready = std::sync::Arc::clone(&gpu_ready);
+    gpu.queue.on_submitted_work_done(move || ready.store(true, std::sync::atomic::Ordering::Relaxed));
     let mut app = App {
         inbox: Rc::clone(&inbox),
         gpu,
@@ -231,6 +246,9 @@ async fn run() -> Result<(), String> {
         device_rebuilds: 0,
         connected_at: None,
         first_frame_ms: None,
+        started_at,
+        gpu_ready,
+        startup_ms: Vec::new(),
     };
     // Connect at once to the page's own bridge (or the remembered one), unless told not to.
     if query.get("connect").is_none_or(|v| v != "0") {
@@ -247,6 +265,9 @@ async fn run() -> Result<(), String> {
             && let Err(message) = app.submit(frame, arrived).await
         {
             app.fail(&message);
+        }
+        if app.gpu_ready.load(std::sync::atomic::Ordering::Relaxed) {
+            app.milestone("gpu ready");
         }
         app.collect_reports();
         if let Err(message) = app.mode.draw_free_view(&app.gpu) {
@@ -308,10 +329,16 @@ impl App {
         match event {
             Event::Opened { generation } if generation == self.generation => {
                 self.link_state = LinkState::Connected;
-                self.connected_at = Some(Instant::now());
+                if self.connected_at.is_none() {
+                    self.connected_at = Some(Instant::now());
+                    self.milestone("connected");
+                }
             }
             Event::Received { generation, bytes } if generation == self.generation => match Message::decode(&bytes) {
-                Ok(Message::Hello(hello)) => self.on_hello(hello),
+                Ok(Message::Hello(hello)) => {
+                    self.milestone("hello");
+                    self.on_hello(hello);
+                }
                 Ok(Message::Status(status)) => {
                     if status.state == PlaybackState::Ended {
                         self.playing = false;
@@ -319,6 +346,7 @@ impl App {
                     self.server = Some(status);
                 }
                 Ok(Message::Frame(frame)) => {
+                    self.milestone("frame received");
                     if self.pending.replace((frame, Instant::now())).is_some() {
                         self.dropped_here += 1;
                     }
@@ -565,11 +593,20 @@ impl App {
             // The log looped (or was sought backwards): a new pass.
             self.reset_run();
         }
+        self.milestone("decoded");
         self.mode.submit(&self.gpu, source.calibration, &frame, message.ground_truth, arrived, decode_ms).await?;
+        self.milestone("submitted");
         if self.playing && self.every_frame && !self.is_live() {
             self.request_next();
         }
         Ok(())
+    }
+
+    /// Notes `what` happening now, until the first frame is fused.
+    fn milestone(&mut self, what: &'static str) {
+        if self.first_frame_ms.is_none() && !self.startup_ms.iter().any(|(w, _)| *w == what) {
+            self.startup_ms.push((what, self.started_at.elapsed().as_secs_f64() * 1e3));
+        }
     }
 
     /// Takes the reports that came back and notes the first fused frame.
@@ -579,6 +616,7 @@ impl App {
                 if self.first_frame_ms.is_none()
                     && let Some(at) = self.connected_at
                 {
+                    self.milestone("fused");
                     self.first_frame_ms = Some(at.elapsed().as_secs_f64() * 1e3);
                 }
             }
@@ -657,6 +695,7 @@ impl App {
             reconnects: self.reconnects,
             device_rebuilds: self.device_rebuilds,
             time_to_first_frame_ms: self.first_frame_ms,
+            startup_ms: self.startup_ms.iter().map(|(w, ms)| ((*w).to_owned(), *ms)).collect(),
             fusion,
         };
         match serde_json::to_string(&status) {

@@ -85,6 +85,9 @@ pub(crate) struct Status {
     pub(crate) device_rebuilds: u32,
     /// Connecting to the first fused frame, milliseconds.
     pub(crate) time_to_first_frame_ms: Option<f64>,
+    /// When the milestones up to the first fused frame happened, milliseconds after the page
+    /// started.
+    pub(crate) startup_ms: std::collections::BTreeMap<String, f64>,
     #[serde(flatten)]
     pub(crate) fusion: crate::fusion_mode::FusionStatus,
 }

@@ -19,7 +19,7 @@ use crate::cpu::shared::IDENTITY;
 use crate::fusion::IcpConfig;
 use crate::fusion::predictor::Predictor;
 use crate::kernels::keep_previous::{self, KeepPreviousParams};
-use crate::kernels::track_reduce::{self, DEFAULT_WORKGROUPS, SUM_FLOATS, WORKGROUP_THREADS};
+use crate::kernels::track_reduce::{self, MAX_WORKGROUPS, SUM_FLOATS, WORKGROUP_THREADS, min_pixels_per_thread, reduce_workgroups};
 use crate::kernels::track_solve::{TrackDispatch, TrackParams, TrackState};
 use crate::kernels::{GpuIntrinsics, track_begin, track_finish, track_solve};
 use crate::preprocess::DepthPreprocessor;
@@ -48,6 +48,8 @@ pub struct IcpTracker {
     state: wgpu::Buffer,
     dispatch: wgpu::Buffer,
     levels: Vec<TrackerLevel>,
+    /// Workgroups of each level's `track_reduce` (0 beyond the levels used).
+    level_workgroups: [u32; TRACK_MAX_LEVELS],
     partial_sums: wgpu::Buffer,
     begin: wgpu::BindGroup,
     finish: wgpu::BindGroup,
@@ -75,13 +77,18 @@ impl IcpTracker {
             mapped_at_creation: false,
         });
         gpu.write_buffer(&dispatch, &[TrackDispatch::default()]);
-        let partial_sums = gpu.storage_buffer::<f32>("core.track.partial_sums", DEFAULT_WORKGROUPS as usize * SUM_FLOATS);
+        let partial_sums = gpu.storage_buffer::<f32>("core.track.partial_sums", MAX_WORKGROUPS as usize * SUM_FLOATS);
+        let per_thread = min_pixels_per_thread(gpu.adapter_info.device_type);
+        let mut level_workgroups = [0u32; TRACK_MAX_LEVELS];
+        for (l, w) in level_workgroups.iter_mut().enumerate().take(n_levels) {
+            *w = reduce_workgroups(preprocessor.levels[l].intrinsics.pixel_count(), per_thread);
+        }
         let min_inliers = (config.min_inlier_fraction * preprocessor.levels[0].intrinsics.pixel_count() as f64).ceil() as u32;
         let mut levels = Vec::with_capacity(n_levels);
         for (l, &iterations) in config.iterations_per_level.iter().enumerate() {
             let pre = &preprocessor.levels[l];
             let k = pre.intrinsics;
-            let params = gpu.uniform_buffer(&format!("core.track.params[{l}]"), &track_params(config, l, k, min_inliers));
+            let params = gpu.uniform_buffer(&format!("core.track.params[{l}]"), &track_params(config, l, k, min_inliers, level_workgroups));
             let previous = gpu.storage_buffer::<[f32; 4]>(&format!("core.track.previous[{l}]"), k.pixel_count());
             let (predicted_vertex_in_world, predicted_normal_in_world) = predictor.level(l);
             let reduce = track_reduce::Bindings {
@@ -101,10 +108,10 @@ impl IcpTracker {
             let keep = keep_previous::Bindings { params: &keep_params, pose: &state, intensity: &pre.intensity, depth_m: &pre.depth_m, previous: &previous }.bind_group(gpu);
             levels.push(TrackerLevel { intrinsics: k, iterations, _params: params, reduce, solve, keep, _previous: previous });
         }
-        let level0 = gpu.uniform_buffer("core.track.params.frame", &track_params(config, 0, levels[0].intrinsics, min_inliers));
+        let level0 = gpu.uniform_buffer("core.track.params.frame", &track_params(config, 0, levels[0].intrinsics, min_inliers, level_workgroups));
         let begin = track_begin::Bindings { params: &level0, state: &state, dispatch: &dispatch }.bind_group(gpu);
         let finish = track_finish::Bindings { params: &level0, state: &state }.bind_group(gpu);
-        let tracker = Self { config: config.clone(), state, dispatch, levels, partial_sums, begin, finish };
+        let tracker = Self { config: config.clone(), state, dispatch, levels, level_workgroups, partial_sums, begin, finish };
         tracker.reset(gpu);
         Ok(tracker)
     }
@@ -161,13 +168,18 @@ impl IcpTracker {
         let l = &self.levels[level];
         pass.set_pipeline(&gpu.kernels.track_reduce.pipeline);
         pass.set_bind_group(0, &l.reduce, &[]);
-        pass.dispatch_workgroups(DEFAULT_WORKGROUPS, 1, 1);
+        pass.dispatch_workgroups(self.level_workgroups[level], 1, 1);
         gpu.kernels.track_solve.dispatch_in(pass, &l.solve, [32, 1, 1]);
     }
 
     /// Pyramid levels tracked.
     pub fn levels(&self) -> usize {
         self.levels.len()
+    }
+
+    /// Workgroups of each level's `track_reduce` dispatches (0 beyond the levels used).
+    pub fn level_workgroups(&self) -> [u32; TRACK_MAX_LEVELS] {
+        self.level_workgroups
     }
 
     /// Records `keep_previous` for every level (after the predictor; skipped on the GPU when
@@ -201,13 +213,15 @@ pub fn initial_state() -> TrackState {
     }
 }
 
-/// The kernels' parameters at `level` (intrinsics `k`).
-pub fn track_params(config: &IcpConfig, level: usize, k: PinholeIntrinsics, min_inliers: u32) -> TrackParams {
+/// The kernels' parameters at `level` (intrinsics `k`), every level's `track_reduce`
+/// dispatch having `level_workgroups`.
+pub fn track_params(config: &IcpConfig, level: usize, k: PinholeIntrinsics, min_inliers: u32, level_workgroups: [u32; TRACK_MAX_LEVELS]) -> TrackParams {
     TrackParams {
         intrinsics: GpuIntrinsics::from(k),
         level: level as u32,
-        thread_count: DEFAULT_WORKGROUPS * WORKGROUP_THREADS,
-        reduce_workgroups: DEFAULT_WORKGROUPS,
+        thread_count: level_workgroups[level] * WORKGROUP_THREADS,
+        reduce_workgroups: level_workgroups[level],
+        level_workgroups,
         n_levels: config.iterations_per_level.len() as u32,
         dist_thresh_m: config.dist_thresh_m,
         cos_angle_thresh: config.angle_thresh_rad.cos(),

@@ -2,7 +2,7 @@
 //! Starts tracking a frame (one invocation): the estimate becomes the host's or another
 //! tracker's guess if one was set, else motion · reference with the constant-velocity model,
 //! else the reference (the last fused pose); the per-level statistics are cleared; and every
-//! level's `track_reduce` dispatch gets `reduce_workgroups` workgroups, or none when the model
+//! level's `track_reduce` dispatch gets its `level_workgroups`, or none when the model
 //! is still empty (the first frame only initialises the world frame).
 #import camera
 #import track_state
@@ -32,7 +32,7 @@ fn main() {
     state.jump_rotation_rad = 0.0;
     for (var l = 0u; l < TRACK_MAX_LEVELS; l++) {
         state.levels[l] = TrackLevelStats(0u, 0u, 0u, 0.0, 0.0, 0.0, 0.0, 0u);
-        var workgroups = params.reduce_workgroups;
+        var workgroups = params.level_workgroups[l];
         if initialising || l >= params.n_levels {
             workgroups = 0u;
         }

@@ -83,9 +83,9 @@ struct TrackParams {
     intrinsics: Intrinsics,
     // Pyramid level these parameters are for.
     level: u32,
-    // Threads of a `track_reduce` dispatch (the pixel stride).
+    // Threads of this level's `track_reduce` dispatch (the pixel stride).
     thread_count: u32,
-    // Workgroups of a `track_reduce` dispatch.
+    // Workgroups of this level's `track_reduce` dispatch (partial sums `track_solve` adds).
     reduce_workgroups: u32,
     // Levels the tracker uses.
     n_levels: u32,
@@ -123,4 +123,7 @@ struct TrackParams {
     constant_velocity: u32,
     // Length that scales the rotation columns of JᵀJ for the condition number, metres.
     rotation_scale_m: f32,
+    // Workgroups of each level's `track_reduce` dispatches (x: level 0 .. w: level 3), which
+    // `track_begin` sets up for the frame.
+    level_workgroups: vec4<u32>,
 }

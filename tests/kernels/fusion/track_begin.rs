@@ -9,7 +9,7 @@ use webfusion_core::cpu;
 use webfusion_core::fusion::IcpConfig;
 use webfusion_core::fusion::tracker::{initial_state, track_params};
 use webfusion_core::kernels::track_begin::{TrackDispatch, TrackLevelStats, TrackParams, TrackState};
-use webfusion_core::kernels::track_reduce::DEFAULT_WORKGROUPS;
+use webfusion_core::kernels::track_reduce::{MAX_WORKGROUPS, MIN_PIXELS_PER_THREAD_CPU, MIN_PIXELS_PER_THREAD_GPU, reduce_workgroups};
 use webfusion_core::{Gpu, PinholeIntrinsics, Se3};
 use webfusion_tests::{Slot, finish, gpu, run_kernel_slots};
 
@@ -38,7 +38,9 @@ fn pose(angle: f64, t: DVec3) -> Se3 {
 fn begins_each_kind_of_frame_as_the_twin_does() {
     let gpu = gpu();
     let config = IcpConfig::default();
-    let p = track_params(&config, 0, K, 1000);
+    // Each level its own workgroup count (as the tracker sizes them), one unused level.
+    const LEVEL_WORKGROUPS: [u32; 4] = [MAX_WORKGROUPS, 17, 3, 9];
+    let p = track_params(&config, 0, K, 1000, LEVEL_WORKGROUPS);
     let stale = TrackLevelStats { iterations: 9, inliers: 9, rgb_pairs: 9, rms_residual_m: 9.0, condition: 9.0, last_update_m: 9.0, ..Default::default() };
     let reference = pose(0.3, DVec3::new(0.1, 0.2, 0.3));
     let motion = pose(0.02, DVec3::new(0.01, 0.0, -0.005));
@@ -67,12 +69,12 @@ fn begins_each_kind_of_frame_as_the_twin_does() {
     assert_eq!(g.0.levels, [TrackLevelStats::default(); 4], "statistics cleared");
     let used = config.iterations_per_level.len();
     for (l, d) in g.1.reduce.iter().enumerate() {
-        let want = if l < used { DEFAULT_WORKGROUPS } else { 0 };
+        let want = if l < used { LEVEL_WORKGROUPS[l] } else { 0 };
         assert_eq!(*d, [want, 1, 1, 0], "level {l} dispatch");
     }
 
     // Constant velocity: motion · reference.
-    let cv = track_params(&IcpConfig { constant_velocity: true, ..config.clone() }, 0, K, 1000);
+    let cv = track_params(&IcpConfig { constant_velocity: true, ..config.clone() }, 0, K, 1000, [MAX_WORKGROUPS; 4]);
     let (g, c) = begin(&gpu, &cv, &tracking);
     same(&g, &c).unwrap();
     let predicted = Se3::from_cols_f32(&g.0.estimate);
@@ -90,4 +92,15 @@ fn begins_each_kind_of_frame_as_the_twin_does() {
     let mut bad = g;
     bad.1.reduce[2][0] += 1;
     assert!(same(&bad, &c).is_err(), "a wrong dispatch size is caught");
+}
+
+#[test]
+fn each_level_gets_workgroups_for_its_pixels() {
+    // 640x480 and its pyramid on a GPU (16 px per thread of 128) and a CPU adapter (128 px).
+    let gpu_counts: Vec<u32> = [307_200, 76_800, 19_200].map(|n| reduce_workgroups(n, MIN_PIXELS_PER_THREAD_GPU)).to_vec();
+    assert_eq!(gpu_counts, vec![MAX_WORKGROUPS, 38, 10], "GPU: capped, then 16 px per thread");
+    let cpu_counts: Vec<u32> = [307_200, 76_800, 19_200].map(|n| reduce_workgroups(n, MIN_PIXELS_PER_THREAD_CPU)).to_vec();
+    assert_eq!(cpu_counts, vec![19, 5, 2], "CPU adapter: 128 px per thread");
+    assert_eq!(reduce_workgroups(1, MIN_PIXELS_PER_THREAD_GPU), 1, "at least one workgroup");
+    assert_eq!(reduce_workgroups(0, 0), 1, "degenerate input still dispatches one");
 }

@@ -8,6 +8,7 @@ use glam::{DQuat, DVec3};
 use webfusion_core::cpu::{self, fusion::track_finish::outcome};
 use webfusion_core::fusion::IcpConfig;
 use webfusion_core::fusion::tracker::{initial_state, track_params};
+use webfusion_core::kernels::track_reduce::MAX_WORKGROUPS;
 use webfusion_core::kernels::track_finish::{TrackLevelStats, TrackParams, TrackState};
 use webfusion_core::{Gpu, PinholeIntrinsics, Se3};
 use webfusion_tests::{Slot, finish, gpu, run_kernel_slots};
@@ -34,7 +35,7 @@ fn same(g: &TrackState, c: &TrackState) -> Result<(), String> {
 #[test]
 fn every_outcome_is_decided_as_the_twin_decides() {
     let gpu = gpu();
-    let p = track_params(&IcpConfig::default(), 0, K, MIN_INLIERS);
+    let p = track_params(&IcpConfig::default(), 0, K, MIN_INLIERS, [MAX_WORKGROUPS; 4]);
     let reference = Se3::new(DQuat::from_axis_angle(DVec3::Y, 0.3), DVec3::new(0.1, 0.0, 0.2));
     let small = Se3::new(DQuat::from_axis_angle(DVec3::X, 0.02), DVec3::new(0.01, 0.0, 0.0)) * reference;
     let good = TrackLevelStats { iterations: 3, inliers: 100_000, condition: 50.0, translation_condition: 8.0, ..Default::default() };

@@ -16,7 +16,7 @@ use webfusion_core::cpu;
 use webfusion_core::cpu::fusion::track_reduce::TrackInputs;
 use webfusion_core::fusion::tracker::{initial_state, track_params};
 use webfusion_core::fusion::{IcpConfig, NormalEquations, twist_exp};
-use webfusion_core::kernels::track_reduce::{DEFAULT_WORKGROUPS as WORKGROUPS, SUM_FLOATS, TrackParams, TrackState};
+use webfusion_core::kernels::track_reduce::{MAX_WORKGROUPS, MAX_WORKGROUPS as WORKGROUPS, SUM_FLOATS, TrackParams, TrackState};
 use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_core::{ColorImage, DepthImage, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
 use webfusion_core::Gpu;
@@ -59,7 +59,7 @@ fn maps(k: PinholeIntrinsics, vertex: &[[f32; 4]], normal: &[[f32; 4]], world_fr
 /// photometric rows), and the state holding `estimate` against the reference `reference`.
 fn params(maps: &Maps, estimate: &Se3, reference: &Se3, dist_thresh_m: f32, angle_deg: f32) -> (TrackParams, TrackState) {
     let config = IcpConfig { dist_thresh_m, angle_thresh_rad: angle_deg.to_radians(), huber_delta_m: 0.01, rgb_weight: 0.0, ..IcpConfig::default() };
-    (track_params(&config, 0, maps.k, 0), state_at(estimate, reference))
+    (track_params(&config, 0, maps.k, 0, [MAX_WORKGROUPS; 4]), state_at(estimate, reference))
 }
 
 /// A `TrackState` with `estimate` and `reference` set (the rest as after a reset).

@@ -20,7 +20,7 @@ use webfusion_core::cpu::{self};
 use webfusion_core::fusion::tracker::track_params;
 use webfusion_core::fusion::{DEFAULT_RGB_MAX_DEPTH_DIFF_M, DEFAULT_RGB_MAX_RESIDUAL, IcpConfig, NormalEquations, twist_exp};
 use webfusion_core::kernels::keep_previous::KeepPreviousParams;
-use webfusion_core::kernels::track_reduce::{DEFAULT_WORKGROUPS as WORKGROUPS, SUM_FLOATS, TrackParams, TrackState, WORKGROUP_THREADS};
+use webfusion_core::kernels::track_reduce::{MAX_WORKGROUPS, MAX_WORKGROUPS as WORKGROUPS, SUM_FLOATS, TrackParams, TrackState, WORKGROUP_THREADS};
 use webfusion_core::kernels::{GpuIntrinsics, vertex_map::VertexMapParams};
 use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_core::source::FrameSource;
@@ -63,7 +63,7 @@ type Params = (TrackParams, TrackState);
 
 fn params(f: &Frames, world_from_camera: &Se3, world_from_camera_prev: &Se3, max_depth_diff_m: f32, max_residual: f32) -> Params {
     let config = IcpConfig { rgb_weight: 1.0, rgb_max_depth_diff_m: max_depth_diff_m, rgb_max_residual: max_residual, ..IcpConfig::default() };
-    let p = track_params(&config, 0, f.k, 0);
+    let p = track_params(&config, 0, f.k, 0, [MAX_WORKGROUPS; 4]);
     assert_eq!(p.thread_count, THREADS, "the tracker's dispatch size");
     (p, state_at(world_from_camera, world_from_camera_prev))
 }

@@ -17,19 +17,19 @@ use webfusion_core::cpu::{self, fusion::track_solve::CONDITION_SINGULAR};
 use webfusion_core::fusion::tracker::{initial_state, track_params};
 use webfusion_core::fusion::{IcpConfig, NormalEquations, twist_exp};
 use webfusion_core::kernels::track_solve::{TrackDispatch, TrackParams, TrackState};
-use webfusion_core::kernels::track_reduce::{DEFAULT_WORKGROUPS, SUM_FLOATS};
+use webfusion_core::kernels::track_reduce::{MAX_WORKGROUPS, SUM_FLOATS};
 use webfusion_core::{Gpu, PinholeIntrinsics, Se3};
 use webfusion_tests::{Slot, cast, finish, gpu, run_kernel_slots};
 
 const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 517.3, fy_px: 516.5, cx_px: 318.6, cy_px: 255.3, width_px: 640, height_px: 480 };
 
 fn params(level: u32) -> TrackParams {
-    track_params(&IcpConfig::default(), level as usize, K.pyramid_level(level as usize), 1000)
+    track_params(&IcpConfig::default(), level as usize, K.pyramid_level(level as usize), 1000, [MAX_WORKGROUPS; 4])
 }
 
 /// Runs the kernel on the GPU and its twin on the CPU from the same state.
 fn solve(gpu: &Gpu, p: &TrackParams, partials: &[f32], state: &TrackState) -> ((TrackState, TrackDispatch), (TrackState, TrackDispatch)) {
-    let dispatch = TrackDispatch { reduce: [[DEFAULT_WORKGROUPS, 1, 1, 0]; 4] };
+    let dispatch = TrackDispatch { reduce: [[MAX_WORKGROUPS, 1, 1, 0]; 4] };
     let out = run_kernel_slots(
         gpu,
         &gpu.kernels.track_solve,
@@ -45,7 +45,7 @@ fn solve(gpu: &Gpu, p: &TrackParams, partials: &[f32], state: &TrackState) -> ((
 
 /// Partial sums (one workgroup holds the system, the others zero) of JᵀJ = `a`, Jᵀr = `b`.
 fn partials_of(a: &Matrix6<f64>, b: &Vector6<f64>, inliers: f32) -> Vec<f32> {
-    let mut p = vec![0.0f32; DEFAULT_WORKGROUPS as usize * SUM_FLOATS];
+    let mut p = vec![0.0f32; MAX_WORKGROUPS as usize * SUM_FLOATS];
     let mut k = 0;
     for i in 0..6 {
         for j in i..6 {
@@ -113,7 +113,7 @@ fn real_system() -> (Vec<f32>, TrackState) {
     let mut previous = vec![[0.0; 4]; l.intrinsics.pixel_count()];
     let kp = webfusion_core::kernels::keep_previous::KeepPreviousParams { width_px: l.intrinsics.width_px, height_px: l.intrinsics.height_px, ..Default::default() };
     cpu::keep_previous(&kp, &cpu::shared::camera_pose(&cpu::shared::IDENTITY, 1), &l.intensity, &l.depth_m, &mut previous);
-    let p = track_params(&IcpConfig::default(), 0, l.intrinsics, 0);
+    let p = track_params(&IcpConfig::default(), 0, l.intrinsics, 0, [MAX_WORKGROUPS; 4]);
     let state = state_at(&estimate, &truth);
     let i = ReduceInputs { vertex: &l.vertex_in_camera, normal: &l.normal_in_camera, predicted_vertex: &l.vertex_in_camera, predicted_normal: &l.normal_in_camera, intensity: &l.intensity, previous: &previous };
     (reduce_cpu_with(&p, &state, &i), state)
@@ -270,11 +270,11 @@ fn a_single_plane_is_singular_and_leaves_the_estimate() {
 #[test]
 fn a_zero_system_ends_the_level_and_a_done_level_is_left_alone() {
     let gpu = gpu();
-    let zeros = vec![0.0f32; DEFAULT_WORKGROUPS as usize * SUM_FLOATS];
+    let zeros = vec![0.0f32; MAX_WORKGROUPS as usize * SUM_FLOATS];
     let (g, c) = solve(&gpu, &params(1), &zeros, &initial_state());
     compare_states(&g, &c, 1).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((g.0.levels[1].condition, g.0.levels[1].translation_condition), (CONDITION_SINGULAR, CONDITION_SINGULAR), "no pairs: singular");
-    assert_eq!((g.0.done_levels, g.1.reduce[1][0], g.1.reduce[0][0]), (2, 0, DEFAULT_WORKGROUPS), "level 1 done, level 0 untouched");
+    assert_eq!((g.0.done_levels, g.1.reduce[1][0], g.1.reduce[0][0]), (2, 0, MAX_WORKGROUPS), "level 1 done, level 0 untouched");
     // Once done, another solve of the level changes nothing at all.
     let (partials, state) = real_system();
     let done = TrackState { done_levels: 1, ..state };
@@ -301,7 +301,7 @@ fn an_update_below_the_threshold_converges_the_level() {
     let partials = partials_of(&a, &(-(a * xi * 50.0)), 1e4);
     let (g, _) = solve(&gpu, &p, &partials, &initial_state());
     finish(&gpu);
-    assert_eq!((g.0.done_levels & 1, g.1.reduce[0][0]), (0, DEFAULT_WORKGROUPS), "a larger update keeps the level going ({} m)", g.0.levels[0].last_update_m);
+    assert_eq!((g.0.done_levels & 1, g.1.reduce[0][0]), (0, MAX_WORKGROUPS), "a larger update keeps the level going ({} m)", g.0.levels[0].last_update_m);
     let t = Se3::from_cols_f32(&g.0.estimate).translation_m;
     assert!((t - DVec3::new(5e-4, 0.0, -2.5e-4)).length() < 1e-7, "the update is applied: {t:?}");
     let _ = cast::<u8>;

@@ -23,7 +23,7 @@ pub fn track_begin(params: &TrackParams, state: &mut TrackState, dispatch: &mut 
     state.jump_rotation_rad = 0.0;
     for l in 0..TRACK_MAX_LEVELS {
         state.levels[l as usize] = TrackLevelStats::default();
-        let workgroups = if initialising || l >= params.n_levels { 0 } else { params.reduce_workgroups };
+        let workgroups = if initialising || l >= params.n_levels { 0 } else { params.level_workgroups[l as usize] };
         dispatch.reduce[l as usize] = [workgroups, 1, 1, 0];
     }
 }
