@@ -46,13 +46,17 @@ const row = (name, nat, web) => console.log(`${name.padEnd(28)}${nat.padStart(14
 console.log(`\n${frames} frames of ${sample}, ${volume}^3 voxels of ${voxelMm} mm`);
 console.log(`native: ${stats.adapter}\nbrowser: ${done.adapter}\n`);
 row('', 'native', 'browser');
-const med = (stage) => stats.stages_ms[stage]?.median;
+// stats.json names GPU-timed stages `gpu <stage>` (wall clock where the adapter has no timestamps).
+const med = (stage) => (stats.stages_ms[`gpu ${stage}`] ?? stats.stages_ms[stage])?.median;
 for (const [nativeStage, webStage] of [['preprocess', 'preprocess'], ['track', 'track'], ['integrate', 'integrate'], ['raycast', 'raycast']]) {
   row(`${webStage} (median)`, `${med(nativeStage)?.toFixed(1)} ms`, `${done.stages_ms[webStage].toFixed(1)} ms`);
 }
 row('frame (median)', `${med('frame')?.toFixed(1)} ms`, `${(done.stages_ms.preprocess + done.stages_ms.track + done.stages_ms.integrate + done.stages_ms.raycast).toFixed(1)} ms`);
 row('decode + views (browser)', '-', `${(done.stages_ms.decode + done.stages_ms.views).toFixed(1)} ms`);
-row('frames/s (whole run)', (frames / nativeWallS).toFixed(2), ((done.frames_done - 1) / browserWallS).toFixed(2));
+const [nativeFps, browserFps] = [frames / nativeWallS, (done.frames_done - 1) / browserWallS];
+row('frames/s (whole run)', nativeFps.toFixed(2), browserFps.toFixed(2));
+console.log(`browser / native frames/s: ${(browserFps / nativeFps).toFixed(2)}`);
 console.log(`\nwasm: ${(wasmBytes.length / 1024).toFixed(0)} KiB, ${(gzipSync(wasmBytes, { level: 9 }).length / 1024).toFixed(0)} KiB gzip (${wasm[0]})`);
-console.log(`time to first fused frame: ${firstMs} ms from page load (${done.time_to_first_frame_ms?.toFixed(0)} ms from connecting)`);
+console.log(`time to first fused frame: ${firstMs} ms from page load (${done.time_to_first_frame_ms?.toFixed(0)} ms from connecting); milestones (ms after start) ${JSON.stringify(done.startup_ms)}`);
+console.log(`host per frame (last frame's pipeline): ${JSON.stringify(done.host_per_frame)}`);
 console.log(`native wall time includes start-up and reading; browser frames/s counts from the first frame. ATE vs ground truth: native ${stats.ate ? (stats.ate.rmse_m * 100).toFixed(2) + ' cm' : 'n/a'}, browser ${done.ate_rmse_m === null ? 'n/a' : (done.ate_rmse_m * 100).toFixed(2) + ' cm'}`);
