@@ -50,6 +50,9 @@ enum Command {
     Reconstruct(reconstruct::ReconstructArgs),
     /// Convert any source (TUM directory, recording) into a `.wfr` recording.
     Record(record::RecordArgs),
+    /// Write a finished copy (index and footer) of a recording whose writer was killed or that
+    /// is damaged: every complete, CRC-checked frame, bytes unchanged, and the counts.
+    Repair(record::RepairArgs),
     /// Benchmark depth codecs (RVL, RVL+DEFLATE) against PNG and zstd on the same frames.
     BenchCodecs(bench_stream::BenchCodecsArgs),
     /// Benchmark sustained streaming to 1, 4 and 16 WebSocket clients on loopback.
@@ -120,6 +123,7 @@ fn main() -> anyhow::Result<()> {
         Command::Preprocess(args) => preprocess(&options, &args),
         Command::Bench(args) => bench(&options, &args),
         Command::Record(args) => record::run(&args),
+        Command::Repair(args) => record::repair(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Serve(args) => serve::run(args),
         #[cfg(feature = "openni2")]
@@ -156,6 +160,13 @@ pub(crate) fn open_with(source: &std::path::Path, calibration: Option<webfusion_
         return Ok(Box::new(openni::OniSource::open(source, calibration).with_context(|| format!("opening source {}", source.display()))?));
         #[cfg(not(feature = "openni2"))]
         anyhow::bail!("{}: this webfusion was built without OpenNI2 support; rebuild with `--features openni2` (needs libopenni2-dev)", source.display());
+    }
+    if source.is_file() && webfusion_core::source::is_recording(source).unwrap_or(false) {
+        let recording = webfusion_core::source::open_recording(source, calibration).with_context(|| format!("opening source {}", source.display()))?;
+        if let Some(report) = recording.recovery() {
+            eprintln!("warning: {}: {report}; `webfusion repair` writes a finished copy", source.display());
+        }
+        return Ok(Box::new(recording));
     }
     open_source(source, calibration).with_context(|| format!("opening source {}", source.display()))
 }

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, bail};
 use webfusion_core::camera::TUM_DEPTH_UNITS_PER_METRE;
 use webfusion_core::codec::{ColorCodec, DEFAULT_JPEG_QUALITY, DepthCodec};
-use webfusion_core::recording::{RecordingOptions, RecordingSummary, RecordingWriter};
+use webfusion_core::recording::{RecordingOptions, RecordingReader, RecordingSummary, RecordingWriter};
 use webfusion_core::source::{FrameSource, open_source};
 use webfusion_core::{PinholeIntrinsics, RgbdCalibration};
 
@@ -309,4 +309,61 @@ mod tests {
         assert_eq!(partial_path(Path::new("data/x.wfr")).expect("file"), Path::new("data/x.wfr.partial"), "suffix");
         assert!(partial_path(Path::new("/")).is_err(), "no file name");
     }
+}
+
+/// Arguments of `webfusion repair`.
+#[derive(Clone, Debug, clap::Args)]
+pub(crate) struct RepairArgs {
+    /// The recording to recover (an unfinished `.wfr.partial`, or a damaged `.wfr`).
+    #[arg(value_name = "IN")]
+    pub(crate) input: PathBuf,
+
+    /// The finished recording to write; written to FILE.partial first, then renamed.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) out: PathBuf,
+}
+
+/// `webfusion repair`: scans `IN` for every complete, CRC-checked record (and the ground truth,
+/// if its block survived) and writes them, bytes unchanged, into a finished recording.
+pub(crate) fn repair(args: &RepairArgs) -> anyhow::Result<()> {
+    let same = |a: &Path, b: &Path| a.canonicalize().ok().zip(b.canonicalize().ok()).is_some_and(|(a, b)| a == b);
+    if same(&args.input, &args.out) {
+        bail!("--out {} is the input: write the repaired copy somewhere else", args.out.display());
+    }
+    let mut reader = RecordingReader::open_recovering(&args.input).with_context(|| format!("opening {}", args.input.display()))?;
+    match reader.recovery() {
+        Some(report) => eprintln!("{}: {report}", args.input.display()),
+        None => eprintln!("{}: intact ({} frames); writing a copy", args.input.display(), reader.frame_count()),
+    }
+    let options = RecordingOptions { depth_codec: reader.depth_codec(), color_codec: reader.color_codec(), ..RecordingOptions::default() };
+    let partial = partial_path(&args.out)?;
+    let written = (|| -> anyhow::Result<RecordingSummary> {
+        let mut writer = RecordingWriter::create(&partial, reader.calibration(), options)?;
+        for i in 0..reader.frame_count() {
+            writer.write_encoded_frame(&reader.read_encoded_frame(i)?)?;
+        }
+        if let Some(poses) = reader.ground_truth() {
+            writer.set_ground_truth(poses);
+        }
+        Ok(writer.finish()?)
+    })();
+    let summary = match written {
+        Ok(summary) => summary,
+        Err(e) => {
+            std::fs::remove_file(&partial).ok();
+            return Err(e.context(format!("writing {}", partial.display())));
+        }
+    };
+    std::fs::rename(&partial, &args.out).with_context(|| format!("renaming {} to {}", partial.display(), args.out.display()))?;
+    let report = reader.recovery();
+    println!(
+        "wrote {}: {} frames, {} ground-truth poses, {} bytes ({} damaged records dropped, {} bytes of unfinished tail dropped)",
+        args.out.display(),
+        summary.frame_count,
+        summary.ground_truth_pose_count,
+        summary.total_bytes,
+        report.map_or(0, |r| r.records_dropped),
+        report.map_or(0, |r| r.tail_bytes_dropped),
+    );
+    Ok(())
 }

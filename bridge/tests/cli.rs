@@ -121,3 +121,46 @@ fn eval_into_a_closed_pipe_ends_quietly_and_still_writes_json() {
     assert!(o.status.success() && !stderr(&o).contains("panicked"), "{}", stderr(&o));
     assert!(json.is_file(), "the JSON report was lost");
 }
+
+/// A take whose recorder died mid-frame (the file cut inside frame 12, no index or footer):
+/// every command reads the complete frames with a warning, and `repair` writes a finished
+/// copy holding exactly them, bytes unchanged.
+#[test]
+fn an_unfinished_take_is_read_with_a_warning_and_repaired() {
+    use webfusion_core::recording::RecordingReader;
+    use webfusion_core::source::FrameSource as _;
+    let dir = scratch("repair");
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/sample/fr1_rpy.wfr");
+    let take = dir.join("take.wfr");
+    let o = webfusion(&["record", "--source", sample.to_str().expect("utf-8"), "--out", take.to_str().expect("utf-8"), "--frames", "..20"]);
+    assert!(o.status.success(), "record: {}", stderr(&o));
+    // Cut inside frame 12: the writer was killed there.
+    let mut finished = RecordingReader::open(&take).expect("the take is finished");
+    let originals: Vec<_> = (0..12).map(|i| finished.read_encoded_frame(i).expect("frame")).collect();
+    let bytes = std::fs::read(&take).expect("read the take");
+    let cut_at = {
+        let f12 = finished.read_encoded_frame(12).expect("frame 12");
+        let start = bytes.windows(f12.depth_payload.len().min(64)).position(|w| w == &f12.depth_payload[..w.len()]).expect("frame 12's payload");
+        start + 100
+    };
+    let partial = dir.join("take.wfr.partial");
+    std::fs::write(&partial, &bytes[..cut_at]).expect("write the cut take");
+    assert!(RecordingReader::open(&partial).is_err(), "the strict reader refuses it");
+
+    let o = webfusion(&["preprocess", "--source", partial.to_str().expect("utf-8"), "--frames", "..2"]);
+    assert!(o.status.success(), "preprocess reads the complete frames: {}", stderr(&o));
+    assert!(stderr(&o).contains("recovered 12 frames by scanning"), "a warning says what was kept: {}", stderr(&o));
+
+    let repaired = dir.join("repaired.wfr");
+    let o = webfusion(&["repair", partial.to_str().expect("utf-8"), "--out", repaired.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "repair: {}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("12 frames") && out.contains("0 damaged records dropped"), "repair's counts: {out}");
+    let mut reader = RecordingReader::open(&repaired).expect("the repaired copy opens strictly");
+    assert_eq!(reader.frame_count(), 12, "frames");
+    for (i, want) in originals.iter().enumerate() {
+        assert_eq!(&reader.read_encoded_frame(i).expect("frame"), want, "frame {i} bit-identical");
+    }
+    let o = webfusion(&["repair", repaired.to_str().expect("utf-8"), "--out", repaired.to_str().expect("utf-8")]);
+    assert_clean_failure(&o, "is the input");
+}

@@ -6,7 +6,10 @@
 //! colour as JPEG or PNG. A fixed
 //! header holds the calibration; an index at the end gives each frame's offset, and a fixed
 //! footer in the last 32 bytes points to the index, so a reader seeks straight to any frame.
-//! A recording whose writer did not finish has no footer and is rejected as truncated.
+//! A recording whose writer did not finish has no footer: [`RecordingReader::open`] (strict)
+//! rejects it; [`RecordingReader::open_recovering`] (what the commands use) scans it instead
+//! and keeps every complete record whose CRC matches, resynchronising on the record magic past
+//! a damaged one (`webfusion repair` writes a finished copy).
 //!
 //! # Byte layout, version 1
 //!
@@ -212,12 +215,23 @@ impl<W: Write + Seek> RecordingWriter<W> {
                 });
             }
         }
+        let depth_payload = self.options.depth_codec.encode(&frame.depth);
+        let color_payload = self.options.color_codec.encode(&frame.color, self.options.jpeg_quality)?;
+        self.write_record(frame.depth_timestamp_ns, frame.color_timestamp_ns, &depth_payload, &color_payload)
+    }
+
+    /// Appends a frame already encoded with this writer's codecs (from a recording with the
+    /// same codecs, e.g. when repairing one), bytes unchanged; its index becomes its position.
+    pub fn write_encoded_frame(&mut self, frame: &EncodedFrame) -> Result<()> {
+        self.check_not_failed()?;
+        self.write_record(frame.depth_timestamp_ns, frame.color_timestamp_ns, &frame.depth_payload, &frame.color_payload)
+    }
+
+    fn write_record(&mut self, depth_timestamp_ns: i64, color_timestamp_ns: i64, depth_payload: &[u8], color_payload: &[u8]) -> Result<()> {
         let frame_index = u32::try_from(self.record_offsets.len())
             .ok()
             .filter(|&ix| ix < u32::MAX)
             .ok_or_else(|| Error::InvalidConfig(format!("a recording holds at most {} frames", u32::MAX)))?;
-        let depth_payload = self.options.depth_codec.encode(&frame.depth);
-        let color_payload = self.options.color_codec.encode(&frame.color, self.options.jpeg_quality)?;
         let too_long =
             |what: &str, len: usize| Error::InvalidConfig(format!("{what} payload of {len} bytes exceeds the 4 GiB record limit"));
         let depth_len = u32::try_from(depth_payload.len()).map_err(|_| too_long("depth", depth_payload.len()))?;
@@ -226,20 +240,20 @@ impl<W: Write + Seek> RecordingWriter<W> {
         let mut header = [0_u8; RECORD_HEADER_LEN];
         header[0..4].copy_from_slice(&RECORD_MAGIC);
         header[4..8].copy_from_slice(&frame_index.to_le_bytes());
-        header[8..16].copy_from_slice(&frame.depth_timestamp_ns.to_le_bytes());
-        header[16..24].copy_from_slice(&frame.color_timestamp_ns.to_le_bytes());
+        header[8..16].copy_from_slice(&depth_timestamp_ns.to_le_bytes());
+        header[16..24].copy_from_slice(&color_timestamp_ns.to_le_bytes());
         header[24..28].copy_from_slice(&depth_len.to_le_bytes());
         header[28..32].copy_from_slice(&color_len.to_le_bytes());
         let mut crc = crc32fast::Hasher::new();
         crc.update(&header[..32]);
-        crc.update(&depth_payload);
-        crc.update(&color_payload);
+        crc.update(depth_payload);
+        crc.update(color_payload);
         header[32..36].copy_from_slice(&crc.finalize().to_le_bytes());
 
         let offset = self.position;
         self.write_all(&header)?;
-        self.write_all(&depth_payload)?;
-        self.write_all(&color_payload)?;
+        self.write_all(depth_payload)?;
+        self.write_all(color_payload)?;
         self.record_offsets.push(offset);
         self.depth_payload_bytes += u64::from(depth_len);
         self.color_payload_bytes += u64::from(color_len);
@@ -483,29 +497,92 @@ pub struct RecordingReader {
     calibration: RgbdCalibration,
     depth_codec: DepthCodec,
     color_codec: ColorCodec,
-    record_offsets: Vec<u64>,
-    /// Where the records end (start of the ground truth, or of the index).
-    records_end: u64,
+    records: Vec<RecordSpan>,
     ground_truth: Option<Vec<TimedPose>>,
+    recovery: Option<RecoveryReport>,
+}
+
+/// Where one frame record lies: its header at `offset`, its payload up to `end`, and the
+/// index it was written with (its position, unless records before it were lost).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct RecordSpan {
+    offset: u64,
+    end: u64,
+    stored_index: u32,
+}
+
+/// What [`RecordingReader::open_recovering`] kept of a recording that did not open strictly
+/// (no footer: the writer was killed; or a damaged index, footer or record).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RecoveryReport {
+    /// Why the strict open failed.
+    pub reason: String,
+    /// Complete records whose CRC matched, in file order: the recovered frames.
+    pub frames_kept: usize,
+    /// Damaged records skipped (a CRC mismatch or impossible lengths, then a resynchronisation
+    /// on the next record magic), counted from the gaps in the kept records' indices.
+    pub records_dropped: usize,
+    /// Bytes after the last complete record that hold no complete record (an unfinished tail).
+    pub tail_bytes_dropped: u64,
+    /// Whether a complete ground-truth block was found.
+    pub ground_truth_recovered: bool,
+}
+
+impl std::fmt::Display for RecoveryReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "recovered {} frames by scanning ({}); {} damaged records dropped, {} bytes of unfinished tail dropped, ground truth {}",
+            self.frames_kept,
+            self.reason,
+            self.records_dropped,
+            self.tail_bytes_dropped,
+            if self.ground_truth_recovered { "recovered" } else { "not found" }
+        )
+    }
 }
 
 impl RecordingReader {
-    /// Opens a recording file and checks its header, footer, index and ground truth. Frames are
-    /// read from the file on demand.
+    /// Opens a recording file and checks its header, footer, index and ground truth (the strict
+    /// path: any damage is an error). Frames are read from the file on demand.
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
+        Self::from_storage(Self::file_storage(path)?, path.to_owned(), false)
+    }
+
+    /// Opens a recording as [`Self::open`] does; if that fails past the header (the writer was
+    /// killed before its footer, or the footer, index, ground truth or a record is damaged),
+    /// recovers by scanning: every complete record whose CRC matches is kept, a damaged one is
+    /// skipped up to the next record magic, the unfinished tail is dropped. What was kept is in
+    /// [`Self::recovery`]. A bad header (wrong magic, version, calibration) is still an error.
+    pub fn open_recovering(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        Self::from_storage(Self::file_storage(path)?, path.to_owned(), true)
+    }
+
+    fn file_storage(path: &Path) -> Result<Storage> {
         let io_error = |source| Error::Io { path: path.to_owned(), source };
         let file = File::open(path).map_err(io_error)?;
         let len = file.metadata().map_err(io_error)?.len();
-        Self::from_storage(Storage::File { file, len }, path.to_owned())
+        Ok(Storage::File { file, len })
     }
 
-    /// Reads a recording held in memory (as fetched by the browser).
+    /// Reads a recording held in memory (as fetched by the browser), strictly.
     pub fn from_bytes(bytes: Vec<u8>) -> Result<Self> {
-        Self::from_storage(Storage::Memory(bytes), PathBuf::from(MEMORY_NAME))
+        Self::from_storage(Storage::Memory(bytes), PathBuf::from(MEMORY_NAME), false)
     }
 
-    fn from_storage(mut storage: Storage, path: PathBuf) -> Result<Self> {
+    /// Reads a recording held in memory, recovering as [`Self::open_recovering`] does.
+    pub fn from_bytes_recovering(bytes: Vec<u8>) -> Result<Self> {
+        Self::from_storage(Storage::Memory(bytes), PathBuf::from(MEMORY_NAME), true)
+    }
+
+    /// What scanning recovered, if the recording did not open strictly.
+    pub fn recovery(&self) -> Option<&RecoveryReport> {
+        self.recovery.as_ref()
+    }
+
+    fn from_storage(mut storage: Storage, path: PathBuf, recover: bool) -> Result<Self> {
         let error = |message: String| Error::Recording { path: path.clone(), message };
         let file_len = storage.len();
         let read = |storage: &mut Storage, offset: u64, len: usize| -> Result<Vec<u8>> {
@@ -517,9 +594,8 @@ impl RecordingReader {
         if magic[..] != RECORDING_MAGIC[..magic.len()] {
             return Err(error("not a webfusion recording (wrong magic bytes)".to_owned()));
         }
-        let min_len = (HEADER_LEN + BLOCK_HEAD_LEN + CRC_LEN + FOOTER_LEN) as u64;
-        if file_len < min_len {
-            return Err(error(format!("truncated: {file_len} bytes, but a recording has at least {min_len}")));
+        if file_len < HEADER_LEN as u64 {
+            return Err(error(format!("truncated: {file_len} bytes, shorter than the {HEADER_LEN}-byte header")));
         }
         let header = read(&mut storage, 0, HEADER_LEN)?;
         let version = u16_at(&header, 8);
@@ -548,66 +624,26 @@ impl RecordingReader {
         let depth_codec = DepthCodec::from_id(header[40]).ok_or_else(|| error(format!("unknown depth codec id {}", header[40])))?;
         let color_codec = ColorCodec::from_id(header[41]).ok_or_else(|| error(format!("unknown colour codec id {}", header[41])))?;
         let header_frame_count = u32_at(&header, 44);
-
-        // Footer.
-        let footer = read(&mut storage, file_len - FOOTER_LEN as u64, FOOTER_LEN)?;
-        if footer[28..32] != FOOTER_MAGIC {
-            return Err(error("truncated or unfinished: no footer at the end of the file".to_owned()));
-        }
-        check_crc(&footer, 24, "footer").map_err(&error)?;
-        if footer[20..24] != [0; 4] {
-            return Err(error("reserved footer bytes are not zero".to_owned()));
-        }
-        let index_offset = u64_at(&footer, 0);
-        let ground_truth_offset = u64_at(&footer, 8);
-        let frame_count = u32_at(&footer, 16);
-        if frame_count != header_frame_count {
-            return Err(error(format!("header says {header_frame_count} frames but footer says {frame_count}")));
-        }
-
-        // Index: exactly between its offset and the footer.
-        let index_len = BLOCK_HEAD_LEN as u64 + u64::from(frame_count) * INDEX_ENTRY_LEN as u64 + CRC_LEN as u64;
-        let index_end = index_offset.checked_add(index_len);
-        if index_offset < HEADER_LEN as u64 || index_end != Some(file_len - FOOTER_LEN as u64) {
-            return Err(error(format!(
-                "index of {frame_count} frames at offset {index_offset} does not end at the footer (file is {file_len} bytes)"
-            )));
-        }
-        let index = read(&mut storage, index_offset, to_usize(index_len).map_err(&error)?)?;
-        if index[0..4] != INDEX_MAGIC {
-            return Err(error(format!("no index at offset {index_offset}")));
-        }
-        check_crc(&index, index.len() - CRC_LEN, "index").map_err(&error)?;
-        if u32_at(&index, 4) != frame_count {
-            return Err(error(format!("index holds {} frames but footer says {frame_count}", u32_at(&index, 4))));
-        }
-
-        // Ground truth: exactly between its offset and the index.
-        let (records_end, ground_truth) = if ground_truth_offset == 0 {
-            (index_offset, None)
-        } else {
-            if ground_truth_offset < HEADER_LEN as u64 || ground_truth_offset > index_offset - (BLOCK_HEAD_LEN + CRC_LEN) as u64 {
-                return Err(error(format!("ground truth offset {ground_truth_offset} lies outside the records")));
+        let (records, ground_truth, recovery) = match read_indexed(&mut storage, &path, header_frame_count) {
+            Ok((records, ground_truth)) => (records, ground_truth, None),
+            Err(e) if recover => {
+                let reason = match &e {
+                    Error::Recording { message, .. } => message.clone(),
+                    other => other.to_string(),
+                };
+                let scan = scan_records(&mut storage).map_err(|source| Error::Io { path: path.clone(), source })?;
+                let report = RecoveryReport {
+                    reason,
+                    frames_kept: scan.records.len(),
+                    records_dropped: scan.records_dropped,
+                    tail_bytes_dropped: scan.tail_bytes_dropped,
+                    ground_truth_recovered: scan.ground_truth.is_some(),
+                };
+                (scan.records, scan.ground_truth, Some(report))
             }
-            let block_len = index_offset - ground_truth_offset;
-            let block = read(&mut storage, ground_truth_offset, to_usize(block_len).map_err(&error)?)?;
-            (ground_truth_offset, Some(decode_ground_truth(&block).map_err(&error)?))
+            Err(e) => return Err(e),
         };
-
-        let record_offsets: Vec<u64> = (0..frame_count as usize).map(|i| u64_at(&index, BLOCK_HEAD_LEN + i * INDEX_ENTRY_LEN)).collect();
-        let mut expected_min = HEADER_LEN as u64;
-        for (i, &offset) in record_offsets.iter().enumerate() {
-            let first_ok = i != 0 || offset == HEADER_LEN as u64;
-            if !first_ok || offset < expected_min || offset.saturating_add(RECORD_HEADER_LEN as u64) > records_end {
-                return Err(error(format!("index entry {i} (offset {offset}) is out of order or outside the records")));
-            }
-            expected_min = offset + RECORD_HEADER_LEN as u64;
-        }
-        if record_offsets.is_empty() && records_end != HEADER_LEN as u64 {
-            return Err(error(format!("no frames, but {} bytes between header and index", records_end - HEADER_LEN as u64)));
-        }
-
-        Ok(Self { storage, path, calibration, depth_codec, color_codec, record_offsets, records_end, ground_truth })
+        Ok(Self { storage, path, calibration, depth_codec, color_codec, records, ground_truth, recovery })
     }
 
     /// The file (or `<memory>`).
@@ -654,10 +690,9 @@ impl RecordingReader {
         let path = self.path.clone();
         let error = |message: String| Error::Recording { path: path.clone(), message };
         let io_error = |source| Error::Io { path: path.clone(), source };
-        let Some(&offset) = self.record_offsets.get(index) else {
-            return Err(error(format!("frame {index} does not exist ({} frames)", self.record_offsets.len())));
+        let Some(&RecordSpan { offset, end: record_end, stored_index: expected_index }) = self.records.get(index) else {
+            return Err(error(format!("frame {index} does not exist ({} frames)", self.records.len())));
         };
-        let record_end = self.record_offsets.get(index + 1).copied().unwrap_or(self.records_end);
         let header = self.storage.read_at(offset, RECORD_HEADER_LEN).map_err(io_error)?;
         if header[0..4] != RECORD_MAGIC {
             return Err(error(format!("frame {index}: no frame record at offset {offset}")));
@@ -679,7 +714,7 @@ impl RecordingReader {
             )));
         }
         let stored_index = u32_at(&header, 4);
-        if stored_index as usize != index {
+        if stored_index != expected_index {
             return Err(error(format!("frame {index}: record says it is frame {stored_index}")));
         }
         let mut depth_payload = payload;
@@ -709,6 +744,195 @@ impl RecordingReader {
     }
 }
 
+/// The strict path past the header: footer, index and ground truth, all checked; the records'
+/// spans from the index.
+fn read_indexed(storage: &mut Storage, path: &Path, header_frame_count: u32) -> Result<(Vec<RecordSpan>, Option<Vec<TimedPose>>)> {
+    let error = |message: String| Error::Recording { path: path.to_owned(), message };
+    let file_len = storage.len();
+    let read = |storage: &mut Storage, offset: u64, len: usize| -> Result<Vec<u8>> {
+    storage.read_at(offset, len).map_err(|source| Error::Io { path: path.to_owned(), source })
+    };
+    let min_len = (HEADER_LEN + BLOCK_HEAD_LEN + CRC_LEN + FOOTER_LEN) as u64;
+    if file_len < min_len {
+        return Err(error(format!("truncated: {file_len} bytes, but a finished recording has at least {min_len}")));
+    }
+
+    // Footer.
+    let footer = read(storage, file_len - FOOTER_LEN as u64, FOOTER_LEN)?;
+    if footer[28..32] != FOOTER_MAGIC {
+        return Err(error("truncated or unfinished: no footer at the end of the file".to_owned()));
+    }
+    check_crc(&footer, 24, "footer").map_err(&error)?;
+    if footer[20..24] != [0; 4] {
+        return Err(error("reserved footer bytes are not zero".to_owned()));
+    }
+    let index_offset = u64_at(&footer, 0);
+    let ground_truth_offset = u64_at(&footer, 8);
+    let frame_count = u32_at(&footer, 16);
+    if frame_count != header_frame_count {
+        return Err(error(format!("header says {header_frame_count} frames but footer says {frame_count}")));
+    }
+
+    // Index: exactly between its offset and the footer.
+    let index_len = BLOCK_HEAD_LEN as u64 + u64::from(frame_count) * INDEX_ENTRY_LEN as u64 + CRC_LEN as u64;
+    let index_end = index_offset.checked_add(index_len);
+    if index_offset < HEADER_LEN as u64 || index_end != Some(file_len - FOOTER_LEN as u64) {
+        return Err(error(format!(
+            "index of {frame_count} frames at offset {index_offset} does not end at the footer (file is {file_len} bytes)"
+        )));
+    }
+    let index = read(storage, index_offset, to_usize(index_len).map_err(&error)?)?;
+    if index[0..4] != INDEX_MAGIC {
+        return Err(error(format!("no index at offset {index_offset}")));
+    }
+    check_crc(&index, index.len() - CRC_LEN, "index").map_err(&error)?;
+    if u32_at(&index, 4) != frame_count {
+        return Err(error(format!("index holds {} frames but footer says {frame_count}", u32_at(&index, 4))));
+    }
+
+    // Ground truth: exactly between its offset and the index.
+    let (records_end, ground_truth) = if ground_truth_offset == 0 {
+        (index_offset, None)
+    } else {
+        if ground_truth_offset < HEADER_LEN as u64 || ground_truth_offset > index_offset - (BLOCK_HEAD_LEN + CRC_LEN) as u64 {
+            return Err(error(format!("ground truth offset {ground_truth_offset} lies outside the records")));
+        }
+        let block_len = index_offset - ground_truth_offset;
+        let block = read(storage, ground_truth_offset, to_usize(block_len).map_err(&error)?)?;
+        (ground_truth_offset, Some(decode_ground_truth(&block).map_err(&error)?))
+    };
+
+    let record_offsets: Vec<u64> = (0..frame_count as usize).map(|i| u64_at(&index, BLOCK_HEAD_LEN + i * INDEX_ENTRY_LEN)).collect();
+    let mut expected_min = HEADER_LEN as u64;
+    for (i, &offset) in record_offsets.iter().enumerate() {
+        let first_ok = i != 0 || offset == HEADER_LEN as u64;
+        if !first_ok || offset < expected_min || offset.saturating_add(RECORD_HEADER_LEN as u64) > records_end {
+            return Err(error(format!("index entry {i} (offset {offset}) is out of order or outside the records")));
+        }
+        expected_min = offset + RECORD_HEADER_LEN as u64;
+    }
+    if record_offsets.is_empty() && records_end != HEADER_LEN as u64 {
+        return Err(error(format!("no frames, but {} bytes between header and index", records_end - HEADER_LEN as u64)));
+    }
+
+    let records = record_offsets
+    .iter()
+    .enumerate()
+    .map(|(i, &offset)| RecordSpan { offset, end: record_offsets.get(i + 1).copied().unwrap_or(records_end), stored_index: i as u32 })
+    .collect();
+    Ok((records, ground_truth))
+}
+
+/// What scanning a recording's records found.
+struct Scan {
+    records: Vec<RecordSpan>,
+    ground_truth: Option<Vec<TimedPose>>,
+    records_dropped: usize,
+    tail_bytes_dropped: u64,
+}
+
+/// Scans the records from the end of the header: keeps every complete record whose CRC
+/// matches; past a damaged one (CRC mismatch, lengths beyond the file) it resynchronises on the
+/// next record magic; a complete, CRC-checked ground-truth block is taken; the index (or
+/// nothing complete) ends the scan.
+fn scan_records(storage: &mut Storage) -> std::io::Result<Scan> {
+    let len = storage.len();
+    let mut scan = Scan { records: Vec::new(), ground_truth: None, records_dropped: 0, tail_bytes_dropped: 0 };
+    let mut at = HEADER_LEN as u64;
+    // Where the bytes not yet accounted for began (a damaged record or garbage).
+    let mut damaged_since: Option<u64> = None;
+    while at + 4 <= len {
+        let magic = storage.read_at(at, 4)?;
+        let next = if magic == RECORD_MAGIC { complete_record(storage, at)? } else { None };
+        if let Some(span) = next {
+            damaged_since = None;
+            // Records are written with their position as index: a gap counts the lost ones.
+            let expected = scan.records.last().map_or(0, |r| r.stored_index.saturating_add(1));
+            scan.records_dropped += span.stored_index.saturating_sub(expected) as usize;
+            scan.records.push(span);
+            at = span.end;
+            continue;
+        }
+        if magic == GROUND_TRUTH_MAGIC
+            && let Some((poses, end)) = complete_ground_truth(storage, at)?
+        {
+            damaged_since = None;
+            scan.ground_truth = Some(poses);
+            at = end;
+            continue;
+        }
+        if magic == INDEX_MAGIC && damaged_since.is_none() {
+            // The index and footer follow the records: nothing more to recover.
+            return Ok(scan);
+        }
+        // Damage or an unfinished record: look for the next magic.
+        damaged_since.get_or_insert(at);
+        match find_magic(storage, at + 1)? {
+            Some(found) => at = found,
+            None => break,
+        }
+    }
+    if let Some(from) = damaged_since {
+        scan.tail_bytes_dropped = len - from;
+    } else if at < len {
+        scan.tail_bytes_dropped = len - at;
+    }
+    Ok(scan)
+}
+
+/// The record at `at` if it is complete and its CRC matches.
+fn complete_record(storage: &mut Storage, at: u64) -> std::io::Result<Option<RecordSpan>> {
+    let len = storage.len();
+    if at + RECORD_HEADER_LEN as u64 > len {
+        return Ok(None);
+    }
+    let header = storage.read_at(at, RECORD_HEADER_LEN)?;
+    let payload_len = u64::from(u32_at(&header, 24)) + u64::from(u32_at(&header, 28));
+    let end = at + RECORD_HEADER_LEN as u64 + payload_len;
+    if end > len {
+        return Ok(None);
+    }
+    let Ok(payload_len) = usize::try_from(payload_len) else { return Ok(None) };
+    let payload = storage.read_at(at + RECORD_HEADER_LEN as u64, payload_len)?;
+    let mut crc = crc32fast::Hasher::new();
+    crc.update(&header[..32]);
+    crc.update(&payload);
+    Ok((crc.finalize() == u32_at(&header, 32)).then_some(RecordSpan { offset: at, end, stored_index: u32_at(&header, 4) }))
+}
+
+/// The ground-truth block at `at` and its end, if it is complete and its CRC matches.
+fn complete_ground_truth(storage: &mut Storage, at: u64) -> std::io::Result<Option<(Vec<TimedPose>, u64)>> {
+    let len = storage.len();
+    if at + BLOCK_HEAD_LEN as u64 > len {
+        return Ok(None);
+    }
+    let head = storage.read_at(at, BLOCK_HEAD_LEN)?;
+    let block_len = (BLOCK_HEAD_LEN + CRC_LEN) as u64 + u64::from(u32_at(&head, 4)) * POSE_LEN as u64;
+    if at + block_len > len {
+        return Ok(None);
+    }
+    let Ok(block_len) = usize::try_from(block_len) else { return Ok(None) };
+    let block = storage.read_at(at, block_len)?;
+    Ok(decode_ground_truth(&block).ok().map(|poses| (poses, at + block_len as u64)))
+}
+
+/// Offset of the first record, ground-truth or index magic at or after `from`, read in 1 MiB
+/// chunks (so a multi-gigabyte take is never held in memory).
+fn find_magic(storage: &mut Storage, from: u64) -> std::io::Result<Option<u64>> {
+    const CHUNK: u64 = 1 << 20;
+    let len = storage.len();
+    let mut start = from;
+    while start + 4 <= len {
+        let n = (len - start).min(CHUNK + 3);
+        let bytes = storage.read_at(start, n as usize)?;
+        if let Some(i) = bytes.windows(4).position(|w| w == RECORD_MAGIC || w == GROUND_TRUTH_MAGIC || w == INDEX_MAGIC) {
+            return Ok(Some(start + i as u64));
+        }
+        start += CHUNK;
+    }
+    Ok(None)
+}
+
 impl FrameSource for RecordingReader {
     fn name(&self) -> String {
         self.path.file_name().map_or_else(|| self.path.display().to_string(), |n| n.to_string_lossy().into_owned())
@@ -719,7 +943,7 @@ impl FrameSource for RecordingReader {
     }
 
     fn frame_count(&self) -> usize {
-        self.record_offsets.len()
+        self.records.len()
     }
 
     fn read_frame(&mut self, index: usize) -> Result<RgbdFrame> {
@@ -968,7 +1192,7 @@ mod tests {
     fn corrupt_frames_are_named() {
         let bytes = small_recording();
         let reader = RecordingReader::from_bytes(bytes.clone()).expect("opening");
-        let frame1_offset = reader.record_offsets[1] as usize;
+        let frame1_offset = reader.records[1].offset as usize;
         let mut corrupt = bytes.clone();
         corrupt[frame1_offset + RECORD_HEADER_LEN + 5] ^= 0x10;
         let mut reader = RecordingReader::from_bytes(corrupt).expect("corrupt payloads are found when read");
@@ -1065,6 +1289,89 @@ mod tests {
         );
     }
 
+    /// Frames 0..n of the synthetic sequence, written; and where each record ends.
+    fn recording_with_record_ends(n: u64, ground_truth: bool) -> (Vec<u8>, Vec<usize>) {
+        let frames: Vec<RgbdFrame> = (0..n).map(synthetic_frame).collect();
+        let bytes = record_to_bytes(png_options(), &frames, ground_truth.then(sample_ground_truth).as_deref());
+        let reader = RecordingReader::from_bytes(bytes.clone()).expect("a finished recording opens");
+        let ends = reader.records.iter().map(|r| r.end as usize).collect();
+        (bytes, ends)
+    }
+
+    #[test]
+    fn a_cut_at_every_byte_recovers_the_complete_records_before_it() {
+        let (bytes, ends) = recording_with_record_ends(4, true);
+        let mut strict = RecordingReader::from_bytes(bytes.clone()).expect("strict");
+        let originals: Vec<EncodedFrame> = (0..4).map(|i| strict.read_encoded_frame(i).expect("frame")).collect();
+        for cut in HEADER_LEN..bytes.len() {
+            let mut reader = RecordingReader::from_bytes_recovering(bytes[..cut].to_vec()).unwrap_or_else(|e| panic!("cut at {cut}: {e}"));
+            let want = ends.iter().filter(|&&end| end <= cut).count();
+            let report = reader.recovery().cloned().unwrap_or_else(|| panic!("cut at {cut}: a cut file cannot open strictly"));
+            assert_eq!((reader.frame_count(), report.frames_kept, report.records_dropped), (want, want, 0), "cut at {cut}: {report}");
+            for (i, original) in originals.iter().enumerate().take(want) {
+                assert_eq!(&reader.read_encoded_frame(i).expect("a kept frame reads"), original, "cut at {cut}: frame {i} bit-identical");
+            }
+            // The ground-truth block follows the last record: whole, or not at all.
+            let gt_end = ends[3] + BLOCK_HEAD_LEN + sample_ground_truth().len() * POSE_LEN + CRC_LEN;
+            assert_eq!(report.ground_truth_recovered, cut >= gt_end, "cut at {cut}: ground truth");
+            if report.ground_truth_recovered {
+                assert_eq!(reader.ground_truth(), Some(&sample_ground_truth()[..]), "cut at {cut}: poses exact");
+            }
+        }
+        // Shorter than the header: nothing to recover, a clear error.
+        let short = RecordingReader::from_bytes_recovering(bytes[..HEADER_LEN - 1].to_vec());
+        assert!(matches!(&short, Err(Error::Recording { message, .. }) if message.contains("header")), "{:?}", short.err());
+        // An intact file opens strictly, with no recovery to report.
+        assert!(RecordingReader::from_bytes_recovering(bytes).expect("intact").recovery().is_none(), "intact file");
+    }
+
+    #[test]
+    fn scanning_skips_damaged_records_and_counts_them() {
+        let (bytes, ends) = recording_with_record_ends(6, false);
+        let mut strict = RecordingReader::from_bytes(bytes.clone()).expect("strict");
+        let originals: Vec<EncodedFrame> = (0..6).map(|i| strict.read_encoded_frame(i).expect("frame")).collect();
+        // An unfinished take (no index or footer) with frames 1 and 2 damaged: a flipped
+        // payload byte and a flipped length field.
+        let mut damaged = bytes[..ends[5]].to_vec();
+        damaged[ends[0] + RECORD_HEADER_LEN + 5] ^= 0x40;
+        damaged[ends[1] + 24] ^= 0x01;
+        let mut reader = RecordingReader::from_bytes_recovering(damaged).expect("recovers");
+        let report = reader.recovery().cloned().expect("scanned");
+        assert_eq!((report.frames_kept, report.records_dropped, report.tail_bytes_dropped), (4, 2, 0), "{report}");
+        assert!(report.reason.contains("no footer"), "why the strict open failed: {}", report.reason);
+        for (i, want) in [0, 3, 4, 5].iter().enumerate() {
+            let got = reader.read_encoded_frame(i).expect("kept frame");
+            assert_eq!((got.depth_payload.clone(), got.color_payload.clone()), (originals[*want].depth_payload.clone(), originals[*want].color_payload.clone()), "frame {i} is original {want}");
+            assert_eq!(got.index, i as u64, "renumbered in order");
+        }
+        // Garbage after the last record is an unfinished tail, not a dropped record.
+        let mut tail = bytes[..ends[5]].to_vec();
+        tail.extend_from_slice(&RECORD_MAGIC);
+        tail.extend_from_slice(&[7; 20]);
+        let report = RecordingReader::from_bytes_recovering(tail).expect("recovers").recovery().cloned().expect("scanned");
+        assert_eq!((report.frames_kept, report.records_dropped, report.tail_bytes_dropped), (6, 0, 24), "{report}");
+        // A damaged index in a finished file: scanning still finds every frame.
+        let mut bad_index = bytes.clone();
+        let index_at = bad_index.len() - FOOTER_LEN - 4;
+        bad_index[index_at] ^= 0xff;
+        assert!(RecordingReader::from_bytes(bad_index.clone()).is_err(), "strict rejects the index");
+        let report = RecordingReader::from_bytes_recovering(bad_index).expect("recovers").recovery().cloned().expect("scanned");
+        assert_eq!((report.frames_kept, report.records_dropped), (6, 0), "{report}");
+    }
+
+    #[test]
+    fn encoded_frames_pass_through_a_writer_unchanged() {
+        let (bytes, _) = recording_with_record_ends(3, true);
+        let mut reader = RecordingReader::from_bytes(bytes.clone()).expect("open");
+        let mut writer = RecordingWriter::new(Cursor::new(Vec::new()), reader.calibration(), png_options()).expect("writer");
+        for i in 0..3 {
+            writer.write_encoded_frame(&reader.read_encoded_frame(i).expect("frame")).expect("write");
+        }
+        writer.set_ground_truth(reader.ground_truth().expect("gt"));
+        let (cursor, _) = writer.finish_into_inner().expect("finish");
+        assert_eq!(cursor.into_inner(), bytes, "the same bytes as the original");
+    }
+
     #[test]
     fn garbage_never_panics() {
         let bytes = small_recording();
@@ -1081,7 +1388,14 @@ mod tests {
                 let ix = (next() % corrupt.len() as u64) as usize;
                 corrupt[ix] = next() as u8;
             }
-            read_everything(corrupt).ok();
+            read_everything(corrupt.clone()).ok();
+            // Recovery reads whatever it kept, and every kept frame reads.
+            let cut = (next() % corrupt.len() as u64) as usize;
+            if let Ok(mut reader) = RecordingReader::from_bytes_recovering(corrupt[..cut].to_vec()) {
+                for i in 0..reader.frame_count() {
+                    reader.read_encoded_frame(i).expect("a frame recovery kept reads");
+                }
+            }
         }
         for len in [0, 7, 8, 63, 64, 100, 1000] {
             let mut garbage: Vec<u8> = (0..len).map(|_| next() as u8).collect();

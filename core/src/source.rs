@@ -72,8 +72,11 @@ pub fn is_recording(path: &Path) -> Result<bool> {
 }
 
 /// Opens a `.wfr` recording, with `calibration_override` (same image size) replacing its own.
+/// A recording that does not open strictly (its writer was killed, its index is damaged) is
+/// recovered by scanning ([`RecordingReader::open_recovering`]); what was kept is in
+/// [`RecordingReader::recovery`], for the caller to report.
 pub fn open_recording(path: &Path, calibration_override: Option<RgbdCalibration>) -> Result<RecordingReader> {
-    let mut recording = RecordingReader::open(path)?;
+    let mut recording = RecordingReader::open_recovering(path)?;
     if let Some(calibration) = calibration_override {
         recording.override_calibration(calibration)?;
     }
