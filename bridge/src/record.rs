@@ -86,6 +86,11 @@ pub(crate) struct RecordArgs {
     /// --intrinsics: 5000; otherwise the source's].
     #[arg(long, value_name = "UNITS_PER_METRE")]
     pub(crate) depth_scale: Option<f32>,
+
+    /// Sync the file to disk (flush + sync_data) at least this often, milliseconds: a crash or
+    /// power loss costs at most the frames since the last sync. 0: after every frame.
+    #[arg(long, value_name = "MS", default_value_t = 1000)]
+    pub(crate) sync_interval_ms: u64,
 }
 
 /// Runs `webfusion record`: progress on stderr, a summary on stdout.
@@ -115,36 +120,96 @@ pub(crate) fn run(args: &RecordArgs) -> anyhow::Result<()> {
     };
     let options = RecordingOptions { depth_codec, color_codec, jpeg_quality: args.jpeg_quality };
     let partial = partial_path(&args.out)?;
+    let stop = stop_on_signals()?;
+    let sync_interval = std::time::Duration::from_millis(args.sync_interval_ms);
 
-    let summary = match write_recording(source.as_mut(), frames.clone(), options, &partial) {
-        Ok(summary) => summary,
-        Err(error) => {
-            std::fs::remove_file(&partial).ok();
-            return Err(error);
-        }
-    };
+    let Take { summary, ended } = write_recording(source.as_mut(), frames.clone(), options, &partial, sync_interval, &stop)?;
     std::fs::rename(&partial, &args.out).with_context(|| format!("renaming {} to {}", partial.display(), args.out.display()))?;
 
     let k = source.calibration().intrinsics;
     print_summary(&args.out, &source.name(), frames, &summary, k.pixel_count() as u64, options);
-    Ok(())
+    match ended {
+        Ended::AllFrames => Ok(()),
+        Ended::Signal => {
+            println!("stopped by a signal: {} is complete with the {} frames recorded", args.out.display(), summary.frame_count);
+            Ok(())
+        }
+        Ended::Failed(error) => Err(error.context(format!("the take ended early; {} is complete with the {} frames written before", args.out.display(), summary.frame_count))),
+    }
 }
 
+/// A flag set by SIGINT or SIGTERM (the take ends cleanly at the next frame). SIGXFSZ (a
+/// file-size limit) is caught too, so a write past the limit fails with an error instead of
+/// killing the process.
+fn stop_on_signals() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, std::sync::Arc::clone(&stop)).context("installing a signal handler")?;
+    }
+    signal_hook::flag::register(signal_hook::consts::SIGXFSZ, std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false))).context("installing a signal handler")?;
+    Ok(stop)
+}
+
+/// How a take ended.
+enum Ended {
+    AllFrames,
+    /// SIGINT or SIGTERM.
+    Signal,
+    /// Reading the source or writing the file failed; the file holds what came before.
+    Failed(anyhow::Error),
+}
+
+/// A finished recording and how its take ended.
+struct Take {
+    summary: RecordingSummary,
+    ended: Ended,
+}
+
+/// Records `frames` of `source` into `out`, syncing at least every `sync_interval`; a signal,
+/// a source error or a failed write (a full disk, a size limit) ends the take early with a
+/// finished file holding every frame written (or what fits). Errors only when not even that
+/// file can be written.
 fn write_recording(
     source: &mut dyn FrameSource,
     frames: Range<usize>,
     options: RecordingOptions,
     out: &Path,
-) -> anyhow::Result<RecordingSummary> {
+    sync_interval: std::time::Duration,
+    stop: &std::sync::atomic::AtomicBool,
+) -> anyhow::Result<Take> {
     let mut writer = RecordingWriter::create(out, source.calibration(), options)?;
     let total = frames.len();
     let mut stderr = std::io::stderr();
     // One updating line on a terminal; about ten lines in a log.
     let interactive = stderr.is_terminal();
     let log_every = total.div_ceil(10).max(1);
+    let mut last_sync = std::time::Instant::now();
+    let mut ended = Ended::AllFrames;
+    let mut write_failed = false;
     for (done, index) in (1_usize..).zip(frames) {
-        let frame = source.read_frame(index).with_context(|| format!("reading frame {index} of {}", source.name()))?;
-        writer.write_frame(&frame).with_context(|| format!("writing frame {index}"))?;
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            ended = Ended::Signal;
+            break;
+        }
+        let frame = match source.read_frame(index) {
+            Ok(frame) => frame,
+            Err(e) => {
+                ended = Ended::Failed(anyhow::Error::new(e).context(format!("reading frame {index} of {}", source.name())));
+                break;
+            }
+        };
+        let sync_due = last_sync.elapsed() >= sync_interval;
+        if let Err(e) = writer.write_frame(&frame).and_then(|()| if sync_due { writer.sync() } else { Ok(()) }) {
+            ended = Ended::Failed(anyhow::Error::new(e).context(format!("writing frame {index}")));
+            write_failed = true;
+            break;
+        }
+        if sync_due {
+            last_sync = std::time::Instant::now();
+            if !interactive {
+                writeln!(stderr, "synced {} frames ({:.1} MB)", writer.frame_count(), writer.bytes_written() as f64 * 1e-6).ok();
+            }
+        }
         let progress = format!("recording frame {done}/{total} ({:.1} MB)", writer.bytes_written() as f64 * 1e-6);
         if interactive {
             write!(stderr, "\r{progress}").ok();
@@ -159,7 +224,8 @@ fn write_recording(
     if let Some(poses) = source.ground_truth() {
         writer.set_ground_truth(poses);
     }
-    Ok(writer.finish()?)
+    let summary = if write_failed { writer.finish_keeping_what_fits()? } else { writer.finish()? };
+    Ok(Take { summary, ended })
 }
 
 fn print_summary(

@@ -155,6 +155,10 @@ pub struct RecordingWriter<W: Write + Seek = BufWriter<File>> {
     ground_truth: Option<Vec<TimedPose>>,
     depth_payload_bytes: u64,
     color_payload_bytes: u64,
+    /// Payload bytes (depth, colour) of each record, to give them back if a record is dropped.
+    record_payloads: Vec<(u64, u64)>,
+    /// End of the last complete record (or of the header), from the start of the recording.
+    committed: u64,
     failed: bool,
 }
 
@@ -166,6 +170,51 @@ impl RecordingWriter<BufWriter<File>> {
         validate_options(&options)?;
         let file = File::create(path).map_err(|source| Error::Io { path: path.to_owned(), source })?;
         Self::with_path(BufWriter::new(file), path.to_owned(), calibration, options)
+    }
+
+    /// Flushes everything written so far and syncs it to disk (`sync_data`): a crash or power
+    /// loss after this loses none of those frames (a reader recovers them by scanning).
+    pub fn sync(&mut self) -> Result<()> {
+        self.check_not_failed()?;
+        let result = self.sink.flush().and_then(|()| self.sink.get_ref().sync_data());
+        result.map_err(|source| {
+            self.failed = true;
+            Error::Io { path: self.path.clone(), source }
+        })
+    }
+
+    /// Finishes a recording whose last write failed (a full disk, a file-size limit): cuts the
+    /// file back to its last complete record and writes the trailer there; where even that
+    /// does not fit, drops the ground truth, then records from the end, until it does. Returns
+    /// what the finished file holds.
+    pub fn finish_keeping_what_fits(mut self) -> Result<RecordingSummary> {
+        let io_error = |path: &Path, source| Error::Io { path: path.to_owned(), source };
+        loop {
+            // A fresh buffer over the same file (the old one's pending bytes are dropped with
+            // it), cut back to the last complete record.
+            let file = self.sink.get_ref().try_clone().map_err(|e| io_error(&self.path, e))?;
+            drop(std::mem::replace(&mut self.sink, BufWriter::new(file)));
+            let end = self.base + self.committed;
+            self.sink.get_ref().set_len(end).map_err(|e| io_error(&self.path, e))?;
+            self.sink.seek(SeekFrom::Start(end)).map_err(|e| io_error(&self.path, e))?;
+            self.position = self.committed;
+            self.failed = false;
+            let error = match self.write_trailer().and_then(|summary| self.sync().map(|()| summary)) {
+                Ok(summary) => return Ok(summary),
+                Err(e) => e,
+            };
+            if self.ground_truth.take().is_some() {
+                continue;
+            }
+            match (self.record_offsets.pop(), self.record_payloads.pop()) {
+                (Some(offset), Some((depth, color))) => {
+                    self.committed = offset;
+                    self.depth_payload_bytes -= depth;
+                    self.color_payload_bytes -= color;
+                }
+                _ => return Err(error),
+            }
+        }
     }
 }
 
@@ -190,10 +239,13 @@ impl<W: Write + Seek> RecordingWriter<W> {
             ground_truth: None,
             depth_payload_bytes: 0,
             color_payload_bytes: 0,
+            record_payloads: Vec::new(),
+            committed: 0,
             failed: false,
         };
         let header = encode_header(&calibration, options.depth_codec, options.color_codec, 0);
         writer.write_all(&header)?;
+        writer.committed = writer.position;
         Ok(writer)
     }
 
@@ -255,8 +307,10 @@ impl<W: Write + Seek> RecordingWriter<W> {
         self.write_all(depth_payload)?;
         self.write_all(color_payload)?;
         self.record_offsets.push(offset);
+        self.record_payloads.push((u64::from(depth_len), u64::from(color_len)));
         self.depth_payload_bytes += u64::from(depth_len);
         self.color_payload_bytes += u64::from(color_len);
+        self.committed = self.position;
         Ok(())
     }
 
@@ -283,10 +337,17 @@ impl<W: Write + Seek> RecordingWriter<W> {
     /// Like [`RecordingWriter::finish`], and gives back the sink (e.g. the bytes of a `Cursor`).
     pub fn finish_into_inner(mut self) -> Result<(W, RecordingSummary)> {
         self.check_not_failed()?;
+        let summary = self.write_trailer()?;
+        Ok((self.sink, summary))
+    }
+
+    /// Writes ground truth, index and footer after the records, completes the header and
+    /// flushes.
+    fn write_trailer(&mut self) -> Result<RecordingSummary> {
         // `write_frame` keeps the count below `u32::MAX`.
         let frame_count = u32::try_from(self.record_offsets.len()).unwrap_or(u32::MAX);
 
-        let ground_truth = self.ground_truth.take();
+        let ground_truth = self.ground_truth.clone();
         let ground_truth_offset = match &ground_truth {
             Some(poses) => {
                 let pose_count = u32::try_from(poses.len())
@@ -346,7 +407,7 @@ impl<W: Write + Seek> RecordingWriter<W> {
             depth_payload_bytes: self.depth_payload_bytes,
             color_payload_bytes: self.color_payload_bytes,
         };
-        Ok((self.sink, summary))
+        Ok(summary)
     }
 
     fn write_all(&mut self, bytes: &[u8]) -> Result<()> {

@@ -1,0 +1,110 @@
+// SPDX-License-Identifier: MIT
+//! `webfusion record` loses nothing it reported as synced: killed with SIGKILL after a reported
+//! sync, every synced frame is recovered bit-identical; SIGTERM ends the take with a finished
+//! file; a file-size limit (`ulimit -f`) ends it with a finished file of what fit and an error.
+//! Event-driven: the kills follow the recorder's own "synced N frames" lines, no timing.
+
+use std::io::{BufRead as _, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use webfusion_core::recording::{EncodedFrame, RecordingReader};
+use webfusion_core::source::FrameSource as _;
+
+const SAMPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/sample/fr1_rpy.wfr");
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("webfusion-record-crash-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+fn record(out: &Path, extra: &[&str]) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_webfusion"))
+        .args(["record", "--source", SAMPLE, "--out", out.to_str().expect("utf-8")])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start webfusion record")
+}
+
+/// Reads the recorder's stderr until its `nth` "synced N frames" line; returns N.
+fn wait_for_sync(child: &mut Child, nth: usize) -> usize {
+    let stderr = child.stderr.take().expect("piped stderr");
+    let mut lines = BufReader::new(stderr).lines();
+    let mut seen = 0;
+    for line in lines.by_ref() {
+        let line = line.expect("stderr line");
+        if let Some(rest) = line.strip_prefix("synced ") {
+            seen += 1;
+            if seen == nth {
+                // Keep draining stderr so the recorder never blocks on a full pipe.
+                std::thread::spawn(move || lines.for_each(drop));
+                return rest.split_whitespace().next().and_then(|n| n.parse().ok()).expect("a frame count");
+            }
+        }
+    }
+    panic!("the recorder ended after {seen} syncs, before sync {nth}");
+}
+
+/// The frames a finished recording of the same source holds (the encoders are deterministic).
+fn reference(dir: &Path) -> Vec<EncodedFrame> {
+    let out = dir.join("reference.wfr");
+    let status = record(&out, &[]).wait_with_output().expect("reference run");
+    assert!(status.status.success(), "reference recording: {}", String::from_utf8_lossy(&status.stderr));
+    let mut reader = RecordingReader::open(&out).expect("the reference is finished");
+    (0..reader.frame_count()).map(|i| reader.read_encoded_frame(i).expect("frame")).collect()
+}
+
+#[test]
+fn a_killed_recorder_loses_no_synced_frame() {
+    let dir = scratch("kill");
+    let want = reference(&dir);
+    for (trial, nth_sync) in [1usize, 9, 37].into_iter().enumerate() {
+        let out = dir.join(format!("take{trial}.wfr"));
+        let mut child = record(&out, &["--sync-interval-ms", "0"]);
+        let synced = wait_for_sync(&mut child, nth_sync);
+        child.kill().expect("SIGKILL");
+        child.wait().expect("reap");
+        let partial = dir.join(format!("take{trial}.wfr.partial"));
+        let mut reader = RecordingReader::open_recovering(&partial).expect("the killed take opens");
+        let kept = reader.frame_count();
+        assert!(kept >= synced, "trial {trial}: {synced} frames reported synced, {kept} recovered ({:?})", reader.recovery());
+        for (i, want) in want.iter().enumerate().take(kept) {
+            assert_eq!(&reader.read_encoded_frame(i).expect("recovered frame"), want, "trial {trial}: frame {i} bit-identical");
+        }
+    }
+}
+
+#[test]
+fn sigterm_ends_the_take_with_a_finished_file() {
+    let dir = scratch("term");
+    let out = dir.join("take.wfr");
+    let mut child = record(&out, &["--sync-interval-ms", "0"]);
+    let synced = wait_for_sync(&mut child, 5);
+    let pid = child.id().to_string();
+    assert!(Command::new("kill").args(["-TERM", &pid]).status().expect("kill -TERM").success(), "SIGTERM sent");
+    let output = child.wait_with_output().expect("the recorder exits");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success() && stdout.contains("stopped by a signal"), "a signalled take ends cleanly: {stdout}");
+    let reader = RecordingReader::open(&out).expect("a finished file");
+    // 95 frames, each synced to disk, remained when the signal came.
+    assert!(reader.frame_count() >= synced && reader.frame_count() < 100, "{} frames, {synced} synced", reader.frame_count());
+}
+
+#[test]
+fn a_file_size_limit_ends_the_take_with_what_fit() {
+    let dir = scratch("ulimit");
+    let out = dir.join("take.wfr");
+    // 3000 KiB of the sample's ~12 MB: the limit hits a third of the way in.
+    let script = format!("ulimit -f 3000; exec {} record --source {SAMPLE} --out {}", env!("CARGO_BIN_EXE_webfusion"), out.display());
+    let output = Command::new("bash").args(["-c", &script]).output().expect("bash");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "the take could not finish: it must say so");
+    assert!(stderr.contains("the take ended early") && !stderr.contains("panicked"), "{stderr}");
+    let reader = RecordingReader::open(&out).expect("what fit is a finished file");
+    let len = std::fs::metadata(&out).expect("size").len();
+    assert!(reader.frame_count() > 5 && len <= 3000 * 1024, "{} frames in {len} bytes", reader.frame_count());
+}
