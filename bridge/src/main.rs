@@ -83,6 +83,9 @@ struct PreprocessArgs {
     /// Write per-stage statistics as JSON here.
     #[arg(long)]
     stats_json: Option<PathBuf>,
+    /// Skip damaged frames of a recording (counted) instead of stopping at the first.
+    #[arg(long)]
+    skip_corrupt: bool,
 }
 
 #[cfg(feature = "openni2")]
@@ -151,6 +154,31 @@ fn main() -> anyhow::Result<()> {
 
 fn open(source: &std::path::Path, calibration: &CalibrationArgs) -> anyhow::Result<Box<dyn FrameSource>> {
     open_with(source, calibration.resolve()?)
+}
+
+/// `"; N damaged frames skipped (i, j, …)"`, or nothing.
+pub(crate) fn skipped_note(skipped: &[usize]) -> String {
+    if skipped.is_empty() {
+        return String::new();
+    }
+    let list: Vec<String> = skipped.iter().take(10).map(usize::to_string).collect();
+    format!("; {} damaged frames skipped ({}{})", skipped.len(), list.join(", "), if skipped.len() > 10 { ", …" } else { "" })
+}
+
+/// Reads frame `index` of `source`. A damaged record (`Error::CorruptFrame`) is an error naming
+/// the frame, unless `skip_corrupt`: then it is reported on stderr, added to `skipped` and
+/// `None` comes back, so the command goes on with the next frame.
+pub(crate) fn read_or_skip(source: &mut dyn FrameSource, index: usize, skip_corrupt: bool, skipped: &mut Vec<usize>) -> anyhow::Result<Option<webfusion_core::RgbdFrame>> {
+    match source.read_frame(index) {
+        Ok(frame) => Ok(Some(frame)),
+        Err(e @ webfusion_core::Error::CorruptFrame { .. }) if skip_corrupt => {
+            eprintln!("\nskipping a damaged frame: {e}");
+            skipped.push(index);
+            Ok(None)
+        }
+        Err(e @ webfusion_core::Error::CorruptFrame { .. }) => Err(anyhow::Error::new(e).context(format!("reading frame {index} of {} (--skip-corrupt skips damaged frames)", source.name()))),
+        Err(e) => Err(anyhow::Error::new(e).context(format!("reading frame {index} of {}", source.name()))),
+    }
 }
 
 /// Opens a source with an already resolved calibration override.
@@ -268,9 +296,10 @@ fn preprocess(options: &GpuOptions, args: &PreprocessArgs) -> anyhow::Result<()>
     let pre = DepthPreprocessor::new(&gpu, source.calibration(), PreprocessConfig::default())?;
     let mut times = StageTimes::default();
     let n_frames = range.len();
+    let mut skipped = Vec::new();
     for (done, index) in range.enumerate() {
         let sw = Stopwatch::start();
-        let frame = source.read_frame(index).with_context(|| format!("reading frame {index} of {}", source.name()))?;
+        let Some(frame) = read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         times.record("read+decode", sw.ms());
         let sw = Stopwatch::start();
         pre.upload(&gpu, &frame)?;
@@ -285,7 +314,7 @@ fn preprocess(options: &GpuOptions, args: &PreprocessArgs) -> anyhow::Result<()>
     eprintln!();
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
-    println!("{} frames of {} on {}", n_frames, source.name(), gpu.adapter_summary());
+    println!("{} frames of {} on {}{}", n_frames - skipped.len(), source.name(), gpu.adapter_summary(), skipped_note(&skipped));
     times.print();
     if let Some(path) = &args.stats_json {
         let json = serde_json::json!({ "frames": n_frames, "adapter": gpu.adapter_summary(), "stages_ms": times.to_json() });

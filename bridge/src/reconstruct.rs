@@ -68,6 +68,10 @@ pub(crate) struct ReconstructArgs {
     /// Skip mesh extraction.
     #[arg(long)]
     no_mesh: bool,
+    /// Skip damaged frames of a recording (listed in stats.json) instead of stopping at the
+    /// first.
+    #[arg(long)]
+    skip_corrupt: bool,
     #[command(flatten)]
     calibration: CalibrationArgs,
 }
@@ -145,9 +149,10 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         let inliers = report.icp.last().map_or(0, |s| s.inliers);
         eprint!("\rframe {}/{} [{}], ICP inliers {inliers}   ", trajectory.len(), n_frames, report.state.name());
     };
+    let mut skipped = Vec::new();
     for index in range {
         let sw = crate::timing::Stopwatch::start();
-        let frame = source.read_frame(index).with_context(|| format!("reading frame {index} of {}", source.name()))?;
+        let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         times.record("read", sw.ms());
         timestamps.insert(frame.index, frame.depth_timestamp_ns);
         pollster::block_on(fusion.submit_frame(&gpu, &frame)).with_context(|| format!("processing frame {index}"))?;
@@ -168,7 +173,15 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     if !args.no_mesh {
         write_mesh(&gpu, &fusion, &args.out.join("mesh.ply"), &mut times)?;
     }
-    println!("{n_frames} frames of {} on {}; {} lost; {:.2} frames/s over {:.1} s", source.name(), gpu.adapter_summary(), lost.len(), n_frames as f64 / wall_s, wall_s);
+    println!(
+        "{n_frames} frames of {} on {}; {} lost; {:.2} frames/s over {:.1} s{}",
+        source.name(),
+        gpu.adapter_summary(),
+        lost.len(),
+        n_frames as f64 / wall_s,
+        wall_s,
+        crate::skipped_note(&skipped)
+    );
     if fusion.timer_available() {
         println!("stage times: \"gpu …\" from GPU timestamps; \"frame\" is the wall-clock interval between consecutive frames (reading and decoding overlapped)");
     } else {
@@ -202,6 +215,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         "ate": ate,
         "frames": n_frames,
         "lost_frames": lost,
+        "skipped_corrupt_frames": skipped,
         "adapter": gpu.adapter_summary(),
         "gpu_timestamps": fusion.timer_available(),
         "wall_s": wall_s,

@@ -87,6 +87,10 @@ pub(crate) struct RecordArgs {
     #[arg(long, value_name = "UNITS_PER_METRE")]
     pub(crate) depth_scale: Option<f32>,
 
+    /// Skip damaged frames of a recording source (counted) instead of stopping at the first.
+    #[arg(long)]
+    pub(crate) skip_corrupt: bool,
+
     /// Sync the file to disk (flush + sync_data) at least this often, milliseconds: a crash or
     /// power loss costs at most the frames since the last sync. 0: after every frame.
     #[arg(long, value_name = "MS", default_value_t = 1000)]
@@ -123,11 +127,15 @@ pub(crate) fn run(args: &RecordArgs) -> anyhow::Result<()> {
     let stop = stop_on_signals()?;
     let sync_interval = std::time::Duration::from_millis(args.sync_interval_ms);
 
-    let Take { summary, ended } = write_recording(source.as_mut(), frames.clone(), options, &partial, sync_interval, &stop)?;
+    let mut skipped = Vec::new();
+    let Take { summary, ended } = write_recording(source.as_mut(), frames.clone(), options, &partial, sync_interval, &stop, (args.skip_corrupt, &mut skipped))?;
     std::fs::rename(&partial, &args.out).with_context(|| format!("renaming {} to {}", partial.display(), args.out.display()))?;
 
     let k = source.calibration().intrinsics;
     print_summary(&args.out, &source.name(), frames, &summary, k.pixel_count() as u64, options);
+    if !skipped.is_empty() {
+        println!("  {}", crate::skipped_note(&skipped).trim_start_matches("; "));
+    }
     match ended {
         Ended::AllFrames => Ok(()),
         Ended::Signal => {
@@ -176,6 +184,7 @@ fn write_recording(
     out: &Path,
     sync_interval: std::time::Duration,
     stop: &std::sync::atomic::AtomicBool,
+    (skip_corrupt, skipped): (bool, &mut Vec<usize>),
 ) -> anyhow::Result<Take> {
     let mut writer = RecordingWriter::create(out, source.calibration(), options)?;
     let total = frames.len();
@@ -191,10 +200,11 @@ fn write_recording(
             ended = Ended::Signal;
             break;
         }
-        let frame = match source.read_frame(index) {
-            Ok(frame) => frame,
+        let frame = match crate::read_or_skip(source, index, skip_corrupt, skipped) {
+            Ok(Some(frame)) => frame,
+            Ok(None) => continue,
             Err(e) => {
-                ended = Ended::Failed(anyhow::Error::new(e).context(format!("reading frame {index} of {}", source.name())));
+                ended = Ended::Failed(e);
                 break;
             }
         };

@@ -164,3 +164,44 @@ fn an_unfinished_take_is_read_with_a_warning_and_repaired() {
     let o = webfusion(&["repair", repaired.to_str().expect("utf-8"), "--out", repaired.to_str().expect("utf-8")]);
     assert_clean_failure(&o, "is the input");
 }
+
+/// Two damaged frames in the middle of a recording: every reading command stops at the first
+/// with the frame named; `--skip-corrupt` skips both, counts them exactly and goes on.
+#[test]
+fn damaged_frames_stop_a_command_or_are_skipped_and_counted() {
+    use webfusion_core::recording::RecordingReader;
+    use webfusion_core::source::FrameSource as _;
+    let dir = scratch("corrupt");
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/sample/fr1_rpy.wfr");
+    let take = dir.join("take.wfr");
+    let o = webfusion(&["record", "--source", sample.to_str().expect("utf-8"), "--out", take.to_str().expect("utf-8"), "--frames", "..12"]);
+    assert!(o.status.success(), "record: {}", stderr(&o));
+    let mut bytes = std::fs::read(&take).expect("read the take");
+    let mut reader = RecordingReader::open(&take).expect("finished");
+    for damaged in [4usize, 9] {
+        let payload = reader.read_encoded_frame(damaged).expect("frame").depth_payload;
+        let at = bytes.windows(64).position(|w| w == &payload[..64]).expect("the frame's payload");
+        bytes[at + 10] ^= 0x5a;
+    }
+    let bad = dir.join("bad.wfr");
+    std::fs::write(&bad, &bytes).expect("write the damaged copy");
+    let bad_s = bad.to_str().expect("utf-8");
+
+    let o = webfusion(&["preprocess", "--source", bad_s]);
+    assert_clean_failure(&o, "frame 4: CRC mismatch");
+    assert!(stderr(&o).contains("--skip-corrupt"), "the error says how to go on: {}", stderr(&o));
+    let o = webfusion(&["preprocess", "--source", bad_s, "--skip-corrupt"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("2 damaged frames skipped (4, 9)"), "{}", String::from_utf8_lossy(&o.stdout));
+
+    let fixed = dir.join("fixed.wfr");
+    let o = webfusion(&["record", "--source", bad_s, "--out", fixed.to_str().expect("utf-8"), "--skip-corrupt"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(RecordingReader::open(&fixed).expect("finished").frame_count(), 10, "the ten intact frames");
+
+    let out = dir.join("reconstruct");
+    let o = webfusion(&["reconstruct", bad_s, "--out", out.to_str().expect("utf-8"), "--volume", "64", "--voxel-size", "0.08", "--centred", "--no-mesh", "--skip-corrupt"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).expect("stats.json")).expect("JSON");
+    assert_eq!(stats["skipped_corrupt_frames"], serde_json::json!([4, 9]), "stats list the skipped frames");
+}

@@ -105,6 +105,17 @@ pub enum Error {
         /// The source that lacks calibration.
         source_name: String,
     },
+    /// One frame record of a recording is damaged (a CRC mismatch, impossible lengths, a
+    /// payload that does not decode); the other frames may be fine (`--skip-corrupt`).
+    #[error("recording {}: frame {index}: {message}", path.display())]
+    CorruptFrame {
+        /// The recording file (or `<memory>`).
+        path: PathBuf,
+        /// The frame's position in the recording.
+        index: usize,
+        /// What is wrong.
+        message: String,
+    },
     /// A recording file is corrupt, truncated or of an unsupported version.
     #[error("recording {}: {message}", path.display())]
     Recording {

@@ -750,19 +750,20 @@ impl RecordingReader {
     pub fn read_encoded_frame(&mut self, index: usize) -> Result<EncodedFrame> {
         let path = self.path.clone();
         let error = |message: String| Error::Recording { path: path.clone(), message };
+        let corrupt = |message: String| Error::CorruptFrame { path: path.clone(), index, message };
         let io_error = |source| Error::Io { path: path.clone(), source };
         let Some(&RecordSpan { offset, end: record_end, stored_index: expected_index }) = self.records.get(index) else {
             return Err(error(format!("frame {index} does not exist ({} frames)", self.records.len())));
         };
         let header = self.storage.read_at(offset, RECORD_HEADER_LEN).map_err(io_error)?;
         if header[0..4] != RECORD_MAGIC {
-            return Err(error(format!("frame {index}: no frame record at offset {offset}")));
+            return Err(corrupt(format!("no frame record at offset {offset}")));
         }
         let (depth_len, color_len) = (u64::from(u32_at(&header, 24)), u64::from(u32_at(&header, 28)));
         let payload_len = depth_len + color_len;
         let room = record_end - offset - RECORD_HEADER_LEN as u64;
         if payload_len != room {
-            return Err(error(format!("frame {index}: record claims {payload_len} payload bytes but has room for {room}")));
+            return Err(corrupt(format!("record claims {payload_len} payload bytes but has room for {room}")));
         }
         let payload = self.storage.read_at(offset + RECORD_HEADER_LEN as u64, to_usize(payload_len).map_err(&error)?).map_err(io_error)?;
         let mut crc = crc32fast::Hasher::new();
@@ -770,13 +771,11 @@ impl RecordingReader {
         crc.update(&payload);
         let (stored, computed) = (u32_at(&header, 32), crc.finalize());
         if stored != computed {
-            return Err(error(format!(
-                "frame {index}: CRC mismatch (stored {stored:08x}, computed {computed:08x}); the record is corrupt"
-            )));
+            return Err(corrupt(format!("CRC mismatch (stored {stored:08x}, computed {computed:08x}); the record is corrupt")));
         }
         let stored_index = u32_at(&header, 4);
         if stored_index != expected_index {
-            return Err(error(format!("frame {index}: record says it is frame {stored_index}")));
+            return Err(corrupt(format!("record says it is frame {stored_index}")));
         }
         let mut depth_payload = payload;
         let color_payload = depth_payload.split_off(depth_len as usize);
@@ -792,7 +791,7 @@ impl RecordingReader {
     /// Decodes the images of an encoded frame of this recording.
     pub fn decode_frame(&self, encoded: &EncodedFrame) -> Result<RgbdFrame> {
         let (width_px, height_px) = (self.calibration.intrinsics.width_px, self.calibration.intrinsics.height_px);
-        let in_frame = |e: Error| Error::Recording { path: self.path.clone(), message: format!("frame {}: {e}", encoded.index) };
+        let in_frame = |e: Error| Error::CorruptFrame { path: self.path.clone(), index: encoded.index as usize, message: e.to_string() };
         let depth: DepthImage = self.depth_codec.decode(&encoded.depth_payload, width_px, height_px).map_err(in_frame)?;
         let color: ColorImage = self.color_codec.decode(&encoded.color_payload, width_px, height_px).map_err(in_frame)?;
         Ok(RgbdFrame {
@@ -1125,6 +1124,7 @@ mod tests {
     fn recording_error<T: std::fmt::Debug>(result: Result<T>) -> String {
         match result {
             Err(Error::Recording { message, .. }) => message,
+            Err(Error::CorruptFrame { index, message, .. }) => format!("frame {index}: {message}"),
             other => panic!("expected a recording error, got {other:?}"),
         }
     }
