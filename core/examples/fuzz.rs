@@ -88,7 +88,7 @@ fn frame(i: u64) -> RgbdFrame {
         index: i,
         depth_timestamp_ns: 1_000_000_000 + i as i64 * 33_000_000,
         color_timestamp_ns: 1_000_000_100 + i as i64 * 33_000_000,
-        depth: DepthImage::new(k.width_px, k.height_px, (0..n).map(|p| if p % 9 == 0 { 0 } else { 700 + (p as u16 * 7) ^ i as u16 }).collect()).expect("size"),
+        depth: DepthImage::new(k.width_px, k.height_px, (0..n).map(|p| if p % 9 == 0 { 0 } else { (700 + p as u16 * 7) ^ i as u16 }).collect()).expect("size"),
         color: ColorImage::new(k.width_px, k.height_px, (0..3 * n).map(|b| (b * 5 + i as usize) as u8).collect()).expect("size"),
     }
 }
