@@ -507,18 +507,27 @@ impl Playback {
 }
 
 async fn session(socket: WebSocket, shared: Arc<Shared>) {
+    static SESSIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let id = SESSIONS.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
     let (mut sink, mut stream) = socket.split();
     let queue = Arc::new(OutQueue::new(shared.live_queue));
     let writer_queue = Arc::clone(&queue);
+    // Sends what the session queues; a failed send ends it and is reported below.
     let writer = tokio::spawn(async move {
+        let mut sent = Ok(());
         while let Some(message) = writer_queue.next().await {
             let is_close = matches!(message, WsMessage::Close(_));
-            if sink.send(message).await.is_err() || is_close {
+            if let Err(e) = sink.send(message).await {
+                sent = Err(e.to_string());
+                break;
+            }
+            if is_close {
                 break;
             }
         }
         writer_queue.close();
         sink.close().await.ok();
+        sent
     });
 
     let outcome = match &shared.live {
@@ -535,7 +544,12 @@ async fn session(socket: WebSocket, shared: Arc<Shared>) {
         queue.reply(WsMessage::Close(None));
     }
     // Let the writer drain what is queued, but never wait forever on a stuck client.
-    let _ = tokio::time::timeout(Duration::from_secs(5), writer).await;
+    match tokio::time::timeout(Duration::from_secs(5), writer).await {
+        Ok(Ok(Ok(()))) => {}
+        Ok(Ok(Err(e))) => eprintln!("serve: client #{id}: sending failed, session ended: {e}"),
+        Ok(Err(e)) => eprintln!("serve: client #{id}: the sending task failed: {e}"),
+        Err(_) => eprintln!("serve: client #{id}: took none of its last messages within 5 s; closed"),
+    }
     queue.close();
 }
 

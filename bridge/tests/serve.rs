@@ -23,10 +23,11 @@ const RECV_TIMEOUT: Duration = Duration::from_secs(60);
 
 type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
-/// A running `webfusion serve`, killed on drop.
+/// A running `webfusion serve`, killed on drop. Its stderr is echoed and kept in `log`.
 struct Server {
     child: Child,
     addr: String,
+    log: std::sync::Arc<std::sync::Mutex<String>>,
 }
 
 impl Server {
@@ -36,14 +37,37 @@ impl Server {
             .args(["--bind", "127.0.0.1:0"])
             .args(args)
             .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
+            .stderr(Stdio::piped())
             .spawn()
             .expect("starting webfusion serve");
+        let log = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        let stderr = child.stderr.take().expect("stderr");
+        let sink = std::sync::Arc::clone(&log);
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stderr).lines().map_while(Result::ok) {
+                eprintln!("{line}");
+                if let Ok(mut log) = sink.lock() {
+                    log.push_str(&line);
+                    log.push('\n');
+                }
+            }
+        });
         let stdout = child.stdout.take().expect("stdout");
         let mut line = String::new();
         std::io::BufReader::new(stdout).read_line(&mut line).expect("reading the URL line");
         let addr = line.split("http://").nth(1).and_then(|rest| rest.split('/').next()).unwrap_or_else(|| panic!("no URL in {line:?}")).to_owned();
-        Server { child, addr }
+        Server { child, addr, log }
+    }
+
+    /// Waits (up to 30 s) until the server's stderr contains `needle`.
+    async fn log_contains(&self, needle: &str) -> bool {
+        for _ in 0..300 {
+            if self.log.lock().is_ok_and(|log| log.contains(needle)) {
+                return true;
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        false
     }
 
     async fn connect(&self) -> Socket {
@@ -430,6 +454,8 @@ async fn a_client_vanishing_mid_stream_does_not_disturb_the_others() {
     let (frames, _) = frames_until(&mut steady, PlaybackState::Ended).await;
     assert_eq!(frames.first().map(|f| f.index), Some(3), "continues after the three steps");
     assert_eq!(frames.len(), 97, "every remaining frame");
+    // The vanished clients' failed sends are reported in the server's log, not dropped.
+    assert!(server.log_contains("sending failed, session ended").await, "log: {}", server.log.lock().map(|l| l.clone()).unwrap_or_default());
 }
 
 /// `serve`'s calibration flags for OpenNI2's Dummy device (it reports no field of view).
