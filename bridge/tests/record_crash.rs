@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 //! `webfusion record` loses nothing it reported as synced: killed with SIGKILL after a reported
-//! sync, every synced frame is recovered bit-identical; SIGTERM ends the take with a finished
+//! sync (from a recording, a TUM directory and an OpenNI2 `.oni` of the Dummy device), every
+//! synced frame is recovered bit-identical; SIGTERM ends the take with a finished
 //! file; a file-size limit (`ulimit -f`) ends it with a finished file of what fit and an error.
 //! Event-driven: the kills follow the recorder's own "synced N frames" lines, no timing.
 
@@ -21,8 +22,12 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn record(out: &Path, extra: &[&str]) -> Child {
+    record_from(SAMPLE, out, extra)
+}
+
+fn record_from(source: &str, out: &Path, extra: &[&str]) -> Child {
     Command::new(env!("CARGO_BIN_EXE_webfusion"))
-        .args(["record", "--source", SAMPLE, "--out", out.to_str().expect("utf-8")])
+        .args(["record", "--source", source, "--out", out.to_str().expect("utf-8")])
         .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -51,20 +56,25 @@ fn wait_for_sync(child: &mut Child, nth: usize) -> usize {
 
 /// The frames a finished recording of the same source holds (the encoders are deterministic).
 fn reference(dir: &Path) -> Vec<EncodedFrame> {
+    reference_from(SAMPLE, dir, &[])
+}
+
+fn reference_from(source: &str, dir: &Path, extra: &[&str]) -> Vec<EncodedFrame> {
     let out = dir.join("reference.wfr");
-    let status = record(&out, &[]).wait_with_output().expect("reference run");
+    let status = record_from(source, &out, extra).wait_with_output().expect("reference run");
     assert!(status.status.success(), "reference recording: {}", String::from_utf8_lossy(&status.stderr));
     let mut reader = RecordingReader::open(&out).expect("the reference is finished");
     (0..reader.frame_count()).map(|i| reader.read_encoded_frame(i).expect("frame")).collect()
 }
 
-#[test]
-fn a_killed_recorder_loses_no_synced_frame() {
-    let dir = scratch("kill");
-    let want = reference(&dir);
-    for (trial, nth_sync) in [1usize, 9, 37].into_iter().enumerate() {
+/// Kills the recorder of `source` after its `nth_sync`-th reported sync, in each trial, and
+/// checks that every synced frame is recovered bit-identical to `want`.
+fn kill_trials(dir: &Path, source: &str, extra: &[&str], want: &[EncodedFrame], syncs: &[usize]) {
+    for (trial, &nth_sync) in syncs.iter().enumerate() {
         let out = dir.join(format!("take{trial}.wfr"));
-        let mut child = record(&out, &["--sync-interval-ms", "0"]);
+        let mut args = vec!["--sync-interval-ms", "0"];
+        args.extend_from_slice(extra);
+        let mut child = record_from(source, &out, &args);
         let synced = wait_for_sync(&mut child, nth_sync);
         child.kill().expect("SIGKILL");
         child.wait().expect("reap");
@@ -76,6 +86,35 @@ fn a_killed_recorder_loses_no_synced_frame() {
             assert_eq!(&reader.read_encoded_frame(i).expect("recovered frame"), want, "trial {trial}: frame {i} bit-identical");
         }
     }
+}
+
+#[test]
+fn a_killed_recorder_loses_no_synced_frame() {
+    let dir = scratch("kill");
+    kill_trials(&dir, SAMPLE, &[], &reference(&dir), &[1, 9, 37]);
+}
+
+#[test]
+fn a_killed_recorder_of_a_tum_directory_loses_no_synced_frame() {
+    let dir = scratch("kill-tum");
+    let tum = dir.join("rgbd_dataset_freiburg1_rpy");
+    let mut sample = RecordingReader::open(SAMPLE).expect("the sample");
+    webfusion_core::io::tum::write_tum_dataset(&tum, &mut sample, 0..30).expect("the sample as a TUM directory");
+    let tum = tum.to_str().expect("utf-8").to_owned();
+    kill_trials(&dir, &tum, &[], &reference_from(&tum, &dir, &[]), &[2, 13]);
+}
+
+/// OpenNI2's Dummy device (no hardware), recorded to `.oni` and re-recorded to `.wfr`.
+#[cfg(feature = "openni2")]
+#[test]
+fn a_killed_recorder_of_an_openni2_recording_loses_no_synced_frame() {
+    const CALIBRATION: [&str; 4] = ["--intrinsics", "285,285,159.5,119.5,320,240", "--depth-scale", "1000"];
+    let dir = scratch("kill-oni");
+    let oni = dir.join("dummy.oni");
+    let o = Command::new(env!("CARGO_BIN_EXE_webfusion")).args(["oni-dummy", "--out", oni.to_str().expect("utf-8"), "--frames", "40"]).output().expect("oni-dummy");
+    assert!(o.status.success(), "oni-dummy: {}", String::from_utf8_lossy(&o.stderr));
+    let oni = oni.to_str().expect("utf-8").to_owned();
+    kill_trials(&dir, &oni, &CALIBRATION, &reference_from(&oni, &dir, &CALIBRATION), &[3, 21]);
 }
 
 #[test]
