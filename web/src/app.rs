@@ -625,12 +625,19 @@ impl App {
         }
     }
 
-    /// While reports are due, wakes the loop again shortly to collect them.
+    /// While reports are due, wakes the loop again shortly to collect them; while the free
+    /// view waits to follow the model, wakes it when that is due.
     fn schedule_poll(&mut self) {
-        if self.mode.frames_in_flight() > 0 && !self.poll_scheduled {
-            self.poll_scheduled = true;
-            push_later(&self.inbox, POLL_MS, Event::Poll);
+        if self.poll_scheduled {
+            return;
         }
+        let delay_ms = match (self.mode.frames_in_flight() > 0, self.mode.free_view_due_in_ms()) {
+            (true, _) => POLL_MS,
+            (false, Some(ms)) => (ms.ceil() as i32).max(1),
+            (false, None) => return,
+        };
+        self.poll_scheduled = true;
+        push_later(&self.inbox, delay_ms, Event::Poll);
     }
 
     /// The device is gone (driver reset, GPU process crash): a new device, the pipeline

@@ -30,6 +30,10 @@ use crate::view::{self, Orbit};
 pub(crate) const FREE_VIEW: PinholeIntrinsics = PinholeIntrinsics { fx_px: 420.0, fy_px: 420.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 };
 /// Depth range the free view searches, metres.
 const FREE_VIEW_RANGE_M: (f32, f32) = (0.05, 20.0);
+/// While frames stream, the free view follows the model at most this often, milliseconds (it
+/// costs a full raycast; the per-frame views show every frame). A move of its camera, or the
+/// stream stopping, redraws it at once.
+pub(crate) const FREE_VIEW_MODEL_REFRESH_MS: f64 = 500.0;
 
 /// What the shell knows about a frame until its report comes back.
 #[derive(Clone, Debug)]
@@ -117,7 +121,11 @@ pub(crate) struct FusionMode {
     host: HostPerFrame,
     latency_ms: Option<f64>,
     orbit: Option<Orbit>,
+    /// The free view's camera or shading changed: redraw at once.
     free_dirty: bool,
+    /// The model changed since the free view was drawn: redraw when due.
+    free_model_dirty: bool,
+    free_drawn_at: Option<Instant>,
     free_colour: bool,
 }
 
@@ -164,6 +172,8 @@ impl FusionMode {
             latency_ms: None,
             orbit: None,
             free_dirty: false,
+            free_model_dirty: false,
+            free_drawn_at: None,
             free_colour: false,
         }
     }
@@ -214,6 +224,7 @@ impl FusionMode {
         self.latency_ms = None;
         self.orbit = None;
         self.free_dirty = true;
+        self.free_model_dirty = false;
     }
 
     /// Index of the last frame submitted (the shell requests the next one from it).
@@ -310,7 +321,22 @@ impl FusionMode {
             self.frame_instants.pop_front();
         }
         self.frame_instants.push_back(Instant::now());
-        self.free_dirty = true;
+        self.free_model_dirty = true;
+    }
+
+    /// Milliseconds until the free view is due to follow the model, if it has to.
+    pub(crate) fn free_view_due_in_ms(&self) -> Option<f64> {
+        if self.free_dirty {
+            return Some(0.0);
+        }
+        if !self.free_model_dirty {
+            return None;
+        }
+        if self.in_flight.is_empty() {
+            // The stream paused or ended: show the model as it is now.
+            return Some(0.0);
+        }
+        Some(self.free_drawn_at.map_or(0.0, |t| (FREE_VIEW_MODEL_REFRESH_MS - t.elapsed().as_secs_f64() * 1e3).max(0.0)))
     }
 
     /// The free view's camera moved or its shading changed.
@@ -324,13 +350,19 @@ impl FusionMode {
         self.free_dirty = true;
     }
 
-    /// Redraws the free view if its camera or the model changed since it was last drawn.
+    /// Redraws the free view if its camera moved, or if the model changed and a redraw is due
+    /// ([`FREE_VIEW_MODEL_REFRESH_MS`] while frames stream).
     pub(crate) fn draw_free_view(&mut self, gpu: &Gpu) -> Result<(), String> {
+        if self.free_view_due_in_ms() != Some(0.0) {
+            return Ok(());
+        }
         let (Some(p), Some(orbit)) = (&self.pipeline, self.orbit) else { return Ok(()) };
-        if !self.free_dirty || self.trajectory.is_empty() {
+        if self.trajectory.is_empty() {
             return Ok(());
         }
         self.free_dirty = false;
+        self.free_model_dirty = false;
+        self.free_drawn_at = Some(Instant::now());
         let world_from_viewer = orbit.world_from_viewer();
         // The pipeline's world frame is the run's after `run_origin`.
         let pipeline_from_viewer = self.run_origin.inverse() * world_from_viewer;
