@@ -34,6 +34,18 @@ fn the_registry_compiles_one_pipeline_per_kernel_with_its_reflected_bindings() {
 }
 
 #[test]
+fn only_the_deferred_capabilities_are_deferred_and_natively_nothing_waits() {
+    use webfusion_core::kernels::{DEFERRED_CAPABILITIES, Kernels};
+    let want: Vec<&str> = shaders::ALL.iter().filter(|k| DEFERRED_CAPABILITIES.contains(&k.capability)).map(|k| k.name).collect();
+    assert_eq!(Kernels::DEFERRED, &want[..], "the generator defers exactly DEFERRED_CAPABILITIES' kernels");
+    assert!(!want.is_empty() && !want.contains(&"raycast"), "mesh kernels wait, frame kernels never");
+    let gpu = webfusion_tests::gpu();
+    assert!(gpu.kernels.deferred_compiled(), "natively every pipeline is compiled at start-up");
+    gpu.kernels.compile_deferred();
+    webfusion_tests::finish(&gpu);
+}
+
+#[test]
 fn coverage_names_a_missing_twin() {
     assert_eq!(coverage("depth_to_metres"), CpuKernel::Present);
     assert!(matches!(coverage("no_such_kernel"), CpuKernel::Missing { .. }), "an unknown kernel is not covered");

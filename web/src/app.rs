@@ -619,6 +619,11 @@ impl App {
                     self.milestone("fused");
                     self.first_frame_ms = Some(at.elapsed().as_secs_f64() * 1e3);
                 }
+                // The pipelines no frame needs (mesh export) are compiled once a frame is
+                // fused: before, their compilation would hold up the first frame's report.
+                if !self.gpu.kernels.deferred_compiled() {
+                    self.gpu.kernels.compile_deferred();
+                }
             }
             Ok(false) => {}
             Err(message) => self.fail(&message),

@@ -29,22 +29,67 @@ impl From<PinholeIntrinsics> for GpuIntrinsics {
 /// A kernel's reflection and its layout entries, as `Kernels::new` compiles it.
 type KernelSpec = (&'static webfusion_shaders::Kernel, fn() -> Vec<wgpu::BindGroupLayoutEntry>);
 
-/// Compiles every kernel of `specs`, in order. Natively the work is spread over the available
-/// cores (pipeline creation is thread-safe and dominates start-up on software adapters); the
-/// browser compiles in its GPU process, so there it is one loop.
-fn compile_all(device: &wgpu::Device, specs: &[KernelSpec]) -> Vec<KernelPipeline> {
+/// Capabilities whose kernels a frame does not need (mesh extraction): in the browser their
+/// pipelines are created on first use or by [`Kernels::compile_deferred`] (the app calls it
+/// once the first frame is fused), so the GPU process does not compile them before the first
+/// frame's work.
+pub const DEFERRED_CAPABILITIES: &[&str] = &["mesh"];
+
+/// Compiles the kernels of `specs`, in order: natively all of them, spread over the available
+/// cores (pipeline creation is thread-safe and dominates start-up on software adapters); in
+/// the browser (one loop: it compiles in its GPU process) all but the `deferred` ones, which
+/// come back as `None`.
+fn compile_eager(device: &wgpu::Device, specs: &[KernelSpec], deferred: &[bool]) -> Vec<Option<KernelPipeline>> {
     #[cfg(not(target_arch = "wasm32"))]
     {
+        let _ = deferred;
         let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get).min(specs.len()).max(1);
         let chunk = specs.len().div_ceil(threads).max(1);
         std::thread::scope(|scope| {
-            let handles: Vec<_> = specs.chunks(chunk).map(|part| scope.spawn(move || part.iter().map(|(k, entries)| KernelPipeline::new(device, k, &entries())).collect::<Vec<_>>())).collect();
+            let handles: Vec<_> = specs.chunks(chunk).map(|part| scope.spawn(move || part.iter().map(|(k, entries)| Some(KernelPipeline::new(device, k, &entries()))).collect::<Vec<_>>())).collect();
             handles.into_iter().flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
         })
     }
     #[cfg(target_arch = "wasm32")]
     {
-        specs.iter().map(|(k, entries)| KernelPipeline::new(device, k, &entries())).collect()
+        specs.iter().zip(deferred).map(|((k, entries), &later)| (!later).then(|| KernelPipeline::new(device, k, &entries()))).collect()
+    }
+}
+
+/// A kernel pipeline that may be compiled later ([`DEFERRED_CAPABILITIES`]): it derefs to its
+/// [`KernelPipeline`], compiling it on first use if that has not happened yet.
+pub struct DeferredPipeline {
+    cell: std::sync::OnceLock<KernelPipeline>,
+    device: wgpu::Device,
+    spec: KernelSpec,
+}
+
+impl DeferredPipeline {
+    /// `compiled` if it was, else compiled on first use.
+    fn new(device: &wgpu::Device, spec: KernelSpec, compiled: Option<KernelPipeline>) -> Self {
+        let cell = std::sync::OnceLock::new();
+        if let Some(pipeline) = compiled {
+            let _ = cell.set(pipeline);
+        }
+        Self { cell, device: device.clone(), spec }
+    }
+
+    /// Whether the pipeline exists yet.
+    pub fn is_compiled(&self) -> bool {
+        self.cell.get().is_some()
+    }
+}
+
+impl std::ops::Deref for DeferredPipeline {
+    type Target = KernelPipeline;
+    fn deref(&self) -> &KernelPipeline {
+        self.cell.get_or_init(|| KernelPipeline::new(&self.device, self.spec.0, &(self.spec.1)()))
+    }
+}
+
+impl std::fmt::Debug for DeferredPipeline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DeferredPipeline").field("kernel", &self.spec.0.name).field("compiled", &self.is_compiled()).finish()
     }
 }
 
