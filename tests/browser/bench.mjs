@@ -6,6 +6,10 @@
 //
 // usage: node tests/browser/bench.mjs [--webfusion target/release/webfusion] [--dist dist]
 //          [--sample data/sample/fr1_rpy.wfr] [--volume 256] [--voxel-mm 20] [--out out/bench-web]
+//          [--repeat N]
+// With --repeat N the native and browser runs alternate N times and the frames/s ratio and the
+// time to the first frame are reported per run and as medians: on a shared machine one run's
+// speed can differ from the next by half, and only runs side by side compare.
 import { spawnSync } from 'node:child_process';
 import { readFileSync, readdirSync } from 'node:fs';
 import { join } from 'node:path';
@@ -13,34 +17,50 @@ import { gzipSync } from 'node:zlib';
 import { launchChromium, options, startBridge, waitFor } from './lib.mjs';
 
 const { webfusion, dist, sample, out, volume, voxelMm } = options({ out: 'out/bench-web', volume: 256, 'voxel-mm': 20 });
+const repeatArg = process.argv.indexOf('--repeat');
+const repeat = repeatArg > 0 ? Number(process.argv[repeatArg + 1]) : 1;
+if (!(Number.isInteger(repeat) && repeat >= 1)) throw new Error(`--repeat needs a whole number >= 1, got ${process.argv[repeatArg + 1]}`);
 
 const wasm = readdirSync(dist).filter((f) => f.endsWith('.wasm')).map((f) => join(dist, f));
 if (wasm.length !== 1) throw new Error(`expected one .wasm in ${dist}, found ${wasm.length}`);
 const wasmBytes = readFileSync(wasm[0]);
 
-const t0 = Date.now();
-const native = spawnSync(webfusion, ['reconstruct', sample, '--out', join(out, 'native'), '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh'], { encoding: 'utf8' });
-if (native.status !== 0) throw new Error(`webfusion reconstruct failed: ${native.stderr}`);
-const nativeWallS = (Date.now() - t0) / 1000;
-const stats = JSON.parse(readFileSync(join(out, 'native', 'stats.json'), 'utf8'));
+/** One native run, then one browser run, on the same frames and settings. */
+async function runOnce() {
+  const t0 = Date.now();
+  const native = spawnSync(webfusion, ['reconstruct', sample, '--out', join(out, 'native'), '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh'], { encoding: 'utf8' });
+  if (native.status !== 0) throw new Error(`webfusion reconstruct failed: ${native.stderr}`);
+  const nativeWallS = (Date.now() - t0) / 1000;
+  const stats = JSON.parse(readFileSync(join(out, 'native', 'stats.json'), 'utf8'));
 
-const bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0');
-const browser = await launchChromium();
-let done, firstMs, browserWallS;
-try {
-  const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
-  const tLoad = Date.now();
-  await page.goto(`http://${bridge.addr}/?volume=${volume}&voxel_mm=${voxelMm}&centred=1&autoplay=1`);
-  const first = await waitFor(page, 'the first frame', (s) => s.frames_done >= 1, 300_000);
-  firstMs = Date.now() - tLoad;
-  const tFirst = Date.now();
-  done = await waitFor(page, 'every frame', (s) => s.frames_done >= first.frames_total && s.state === 'ended', 3_600_000);
-  browserWallS = (Date.now() - tFirst) / 1000;
-} finally {
-  await browser.close();
-  bridge.child.kill('SIGKILL');
+  const bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0');
+  const browser = await launchChromium();
+  let done, firstMs, browserWallS;
+  try {
+    const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+    const tLoad = Date.now();
+    await page.goto(`http://${bridge.addr}/?volume=${volume}&voxel_mm=${voxelMm}&centred=1&autoplay=1`);
+    const first = await waitFor(page, 'the first frame', (s) => s.frames_done >= 1, 300_000);
+    firstMs = Date.now() - tLoad;
+    const tFirst = Date.now();
+    done = await waitFor(page, 'every frame', (s) => s.frames_done >= first.frames_total && s.state === 'ended', 3_600_000);
+    browserWallS = (Date.now() - tFirst) / 1000;
+  } finally {
+    await browser.close();
+    bridge.child.kill('SIGKILL');
+  }
+  return { stats, nativeWallS, done, firstMs, browserWallS };
 }
 
+const runs = [];
+for (let i = 0; i < repeat; i++) {
+  const run = await runOnce();
+  run.ratio = ((run.done.frames_done - 1) / run.browserWallS) / (run.stats.frames / run.nativeWallS);
+  runs.push(run);
+  if (repeat > 1) console.log(`run ${i + 1}/${repeat}: browser/native frames/s ${run.ratio.toFixed(3)}; first fused frame ${run.firstMs} ms after load, ${run.done.time_to_first_frame_ms?.toFixed(0)} ms after connecting`);
+}
+const median = (values) => [...values].sort((x, y) => x - y)[Math.floor(values.length / 2)];
+const { stats, nativeWallS, done, firstMs, browserWallS } = runs[runs.length - 1];
 const frames = stats.frames;
 const row = (name, nat, web) => console.log(`${name.padEnd(28)}${nat.padStart(14)}${web.padStart(16)}${(typeof nat === 'string' && nat.endsWith('ms') && web.endsWith('ms') ? `${(parseFloat(web) / parseFloat(nat)).toFixed(2)}x`.padStart(10) : '')}`);
 console.log(`\n${frames} frames of ${sample}, ${volume}^3 voxels of ${voxelMm} mm`);
@@ -55,7 +75,7 @@ row('frame (median)', `${med('frame')?.toFixed(1)} ms`, `${(done.stages_ms.prepr
 row('decode + views (browser)', '-', `${(done.stages_ms.decode + done.stages_ms.views).toFixed(1)} ms`);
 const [nativeFps, browserFps] = [frames / nativeWallS, (done.frames_done - 1) / browserWallS];
 row('frames/s (whole run)', nativeFps.toFixed(2), browserFps.toFixed(2));
-console.log(`browser / native frames/s: ${(browserFps / nativeFps).toFixed(2)}`);
+console.log(`browser / native frames/s: ${(browserFps / nativeFps).toFixed(2)}${repeat > 1 ? ` (this run); median of ${repeat} runs ${median(runs.map((r) => r.ratio)).toFixed(2)}, first frame median ${median(runs.map((r) => r.done.time_to_first_frame_ms ?? NaN)).toFixed(0)} ms after connecting` : ''}`);
 console.log(`\nwasm: ${(wasmBytes.length / 1024).toFixed(0)} KiB, ${(gzipSync(wasmBytes, { level: 9 }).length / 1024).toFixed(0)} KiB gzip (${wasm[0]})`);
 console.log(`time to first fused frame: ${firstMs} ms from page load (${done.time_to_first_frame_ms?.toFixed(0)} ms from connecting); milestones (ms after start) ${JSON.stringify(done.startup_ms)}`);
 console.log(`host per frame (last frame's pipeline): ${JSON.stringify(done.host_per_frame)}`);
