@@ -122,6 +122,21 @@ fn eval_into_a_closed_pipe_ends_quietly_and_still_writes_json() {
     assert!(json.is_file(), "the JSON report was lost");
 }
 
+/// The first `frames` frames of the sample recorded into `dir/take.wfr` by `webfusion record`.
+fn record_sample_take(dir: &Path, frames: usize) -> PathBuf {
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/sample/fr1_rpy.wfr");
+    let take = dir.join("take.wfr");
+    let o = webfusion(&["record", "--source", sample.to_str().expect("utf-8"), "--out", take.to_str().expect("utf-8"), "--frames", &format!("..{frames}")]);
+    assert!(o.status.success(), "record: {}", stderr(&o));
+    take
+}
+
+/// Where a record's payload starts in a recording's bytes (found by its first 64 bytes).
+fn payload_offset(bytes: &[u8], payload: &[u8]) -> usize {
+    let probe = &payload[..payload.len().min(64)];
+    bytes.windows(probe.len()).position(|w| w == probe).expect("the record's payload is in the file")
+}
+
 /// A take whose recorder died mid-frame (the file cut inside frame 12, no index or footer):
 /// every command reads the complete frames with a warning, and `repair` writes a finished
 /// copy holding exactly them, bytes unchanged.
@@ -130,18 +145,14 @@ fn an_unfinished_take_is_read_with_a_warning_and_repaired() {
     use webfusion_core::recording::RecordingReader;
     use webfusion_core::source::FrameSource as _;
     let dir = scratch("repair");
-    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/sample/fr1_rpy.wfr");
-    let take = dir.join("take.wfr");
-    let o = webfusion(&["record", "--source", sample.to_str().expect("utf-8"), "--out", take.to_str().expect("utf-8"), "--frames", "..20"]);
-    assert!(o.status.success(), "record: {}", stderr(&o));
+    let take = record_sample_take(&dir, 20);
     // Cut inside frame 12: the writer was killed there.
     let mut finished = RecordingReader::open(&take).expect("the take is finished");
     let originals: Vec<_> = (0..12).map(|i| finished.read_encoded_frame(i).expect("frame")).collect();
     let bytes = std::fs::read(&take).expect("read the take");
     let cut_at = {
         let f12 = finished.read_encoded_frame(12).expect("frame 12");
-        let start = bytes.windows(f12.depth_payload.len().min(64)).position(|w| w == &f12.depth_payload[..w.len()]).expect("frame 12's payload");
-        start + 100
+        payload_offset(&bytes, &f12.depth_payload) + 100
     };
     let partial = dir.join("take.wfr.partial");
     std::fs::write(&partial, &bytes[..cut_at]).expect("write the cut take");
@@ -172,15 +183,12 @@ fn damaged_frames_stop_a_command_or_are_skipped_and_counted() {
     use webfusion_core::recording::RecordingReader;
     use webfusion_core::source::FrameSource as _;
     let dir = scratch("corrupt");
-    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/sample/fr1_rpy.wfr");
-    let take = dir.join("take.wfr");
-    let o = webfusion(&["record", "--source", sample.to_str().expect("utf-8"), "--out", take.to_str().expect("utf-8"), "--frames", "..12"]);
-    assert!(o.status.success(), "record: {}", stderr(&o));
+    let take = record_sample_take(&dir, 12);
     let mut bytes = std::fs::read(&take).expect("read the take");
     let mut reader = RecordingReader::open(&take).expect("finished");
     for damaged in [4usize, 9] {
         let payload = reader.read_encoded_frame(damaged).expect("frame").depth_payload;
-        let at = bytes.windows(64).position(|w| w == &payload[..64]).expect("the frame's payload");
+        let at = payload_offset(&bytes, &payload);
         bytes[at + 10] ^= 0x5a;
     }
     let bad = dir.join("bad.wfr");

@@ -296,11 +296,8 @@ impl<W: Write + Seek> RecordingWriter<W> {
         header[16..24].copy_from_slice(&color_timestamp_ns.to_le_bytes());
         header[24..28].copy_from_slice(&depth_len.to_le_bytes());
         header[28..32].copy_from_slice(&color_len.to_le_bytes());
-        let mut crc = crc32fast::Hasher::new();
-        crc.update(&header[..32]);
-        crc.update(depth_payload);
-        crc.update(color_payload);
-        header[32..36].copy_from_slice(&crc.finalize().to_le_bytes());
+        let crc = record_crc(&header, &[depth_payload, color_payload]);
+        header[32..36].copy_from_slice(&crc.to_le_bytes());
 
         let offset = self.position;
         self.write_all(&header)?;
@@ -766,10 +763,7 @@ impl RecordingReader {
             return Err(corrupt(format!("record claims {payload_len} payload bytes but has room for {room}")));
         }
         let payload = self.storage.read_at(offset + RECORD_HEADER_LEN as u64, to_usize(payload_len).map_err(&error)?).map_err(io_error)?;
-        let mut crc = crc32fast::Hasher::new();
-        crc.update(&header[..32]);
-        crc.update(&payload);
-        let (stored, computed) = (u32_at(&header, 32), crc.finalize());
+        let (stored, computed) = (u32_at(&header, 32), record_crc(&header, &[&payload]));
         if stored != computed {
             return Err(corrupt(format!("CRC mismatch (stored {stored:08x}, computed {computed:08x}); the record is corrupt")));
         }
@@ -954,10 +948,7 @@ fn complete_record(storage: &mut Storage, at: u64) -> std::io::Result<Option<Rec
     }
     let Ok(payload_len) = usize::try_from(payload_len) else { return Ok(None) };
     let payload = storage.read_at(at + RECORD_HEADER_LEN as u64, payload_len)?;
-    let mut crc = crc32fast::Hasher::new();
-    crc.update(&header[..32]);
-    crc.update(&payload);
-    Ok((crc.finalize() == u32_at(&header, 32)).then_some(RecordSpan { offset: at, end, stored_index: u32_at(&header, 4) }))
+    Ok((record_crc(&header, &[&payload]) == u32_at(&header, 32)).then_some(RecordSpan { offset: at, end, stored_index: u32_at(&header, 4) }))
 }
 
 /// The ground-truth block at `at` and its end, if it is complete and its CRC matches.
@@ -1014,6 +1005,16 @@ impl FrameSource for RecordingReader {
     fn ground_truth(&self) -> Option<&[TimedPose]> {
         self.ground_truth.as_deref()
     }
+}
+
+/// The CRC of a frame record: over its header's first 32 bytes, then the payload bytes.
+fn record_crc(header: &[u8], payloads: &[&[u8]]) -> u32 {
+    let mut crc = crc32fast::Hasher::new();
+    crc.update(&header[..32]);
+    for payload in payloads {
+        crc.update(payload);
+    }
+    crc.finalize()
 }
 
 /// Checks the little-endian CRC stored at `crc_offset` against the CRC of the bytes before it.
