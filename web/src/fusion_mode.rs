@@ -112,7 +112,6 @@ pub(crate) struct FusionMode {
     /// Where a pipeline rebuilt mid-run (after a lost device) starts: its world frame is the
     /// camera of its first frame, placed at the last pose before the loss.
     run_origin: Se3,
-    last_world_from_camera: Se3,
     tracking: &'static str,
     lost_frames: u64,
     recovered_frames: u64,
@@ -162,7 +161,6 @@ impl FusionMode {
             ate: RunningAte::default(),
             alignment: None,
             run_origin: Se3::IDENTITY,
-            last_world_from_camera: Se3::IDENTITY,
             tracking: "idle",
             lost_frames: 0,
             recovered_frames: 0,
@@ -191,7 +189,7 @@ impl FusionMode {
         self.pipeline = None;
         self.in_flight.clear();
         if keep_trajectory {
-            self.run_origin = self.last_world_from_camera;
+            self.run_origin = self.trajectory.last().map_or(Se3::IDENTITY, |p| p.world_from_camera);
         } else {
             self.reset_run_state();
         }
@@ -215,7 +213,6 @@ impl FusionMode {
         self.ate = RunningAte::default();
         self.alignment = None;
         self.run_origin = Se3::IDENTITY;
-        self.last_world_from_camera = Se3::IDENTITY;
         self.tracking = "idle";
         self.lost_frames = 0;
         self.recovered_frames = 0;
@@ -291,7 +288,6 @@ impl FusionMode {
         }
         let Some(meta) = self.in_flight.pop_front() else { return };
         let world_from_camera = self.run_origin * report.world_from_camera;
-        self.last_world_from_camera = world_from_camera;
         self.last_reported = Some(report.index);
         let pose = TimedPose { timestamp_ns: meta.timestamp_ns, world_from_camera };
         push_tum_line(&mut self.trajectory_tum.borrow_mut(), &pose);
