@@ -18,6 +18,7 @@ pub mod fusion;
 pub mod gpu;
 pub mod io;
 pub mod kernels;
+pub mod map;
 pub mod mesh;
 pub mod pose;
 pub mod preprocess;

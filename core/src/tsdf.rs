@@ -10,7 +10,11 @@
 //! sparse voxel-block-hashing store can replace [`DenseTsdfVolume`] later without touching
 //! tracking or export.
 
+use crate::cpu::shared::{MAP_DENSE, MAP_SPARSE};
+use crate::map::{DEFAULT_POOL_BLOCKS, MAX_POOL_BLOCKS, SPARSE_DIMS_VOXELS};
 use crate::{Error, Gpu, Result, Se3};
+
+pub use crate::map::MapKind;
 
 /// Default voxels per axis.
 pub const DEFAULT_VOLUME_DIM_VOXELS: u32 = 256;
@@ -46,8 +50,14 @@ pub struct TsdfConfig {
     pub max_weight: u32,
     /// Also fuse colour (a second u32 per voxel, RGB8).
     pub color: bool,
-    /// Placement relative to the first camera.
+    /// Placement relative to the first camera (the dense box; a sparse map's box is centred
+    /// on it).
     pub placement: VolumePlacement,
+    /// Dense box or sparse voxel blocks.
+    pub kind: MapKind,
+    /// Blocks of 8³ voxels in a sparse map's pool (see [`crate::map::pool_blocks_for_budget`]);
+    /// unused by a dense map.
+    pub pool_blocks: u32,
 }
 
 impl Default for TsdfConfig {
@@ -57,32 +67,59 @@ impl Default for TsdfConfig {
 }
 
 impl TsdfConfig {
-    /// A cube of `dim` voxels of `voxel_size_m`, with the default truncation (in voxels),
+    /// A dense cube of `dim` voxels of `voxel_size_m`, with the default truncation (in voxels),
     /// weight cap and colour on.
     pub fn cube(dim: u32, voxel_size_m: f32) -> Self {
-        Self { dims_voxels: [dim; 3], voxel_size_m, truncation_m: DEFAULT_TRUNCATION_VOXELS * voxel_size_m, max_weight: DEFAULT_MAX_WEIGHT, color: true, placement: VolumePlacement::InFront }
+        Self { dims_voxels: [dim; 3], voxel_size_m, truncation_m: DEFAULT_TRUNCATION_VOXELS * voxel_size_m, max_weight: DEFAULT_MAX_WEIGHT, color: true, placement: VolumePlacement::InFront, kind: MapKind::Dense, pool_blocks: DEFAULT_POOL_BLOCKS }
     }
 
-    /// Number of voxels.
+    /// A sparse map of `pool_blocks` blocks of 8³ voxels of `voxel_size_m`, with the default
+    /// truncation (in voxels), weight cap and colour on.
+    pub fn sparse(voxel_size_m: f32, pool_blocks: u32) -> Self {
+        Self { kind: MapKind::Sparse, pool_blocks, ..Self::cube(DEFAULT_VOLUME_DIM_VOXELS, voxel_size_m) }
+    }
+
+    /// Voxels along x, y, z of the map's box: the dense box, or a sparse map's addressable range.
+    pub fn box_dims_voxels(&self) -> [u32; 3] {
+        match self.kind {
+            MapKind::Dense => self.dims_voxels,
+            MapKind::Sparse => SPARSE_DIMS_VOXELS,
+        }
+    }
+
+    /// Voxels stored: the dense box's, or a sparse pool's.
     pub fn voxel_count(&self) -> u64 {
-        self.dims_voxels.iter().map(|&d| u64::from(d)).product()
+        match self.kind {
+            MapKind::Dense => self.dims_voxels.iter().map(|&d| u64::from(d)).product(),
+            MapKind::Sparse => u64::from(self.pool_blocks) * u64::from(crate::cpu::shared::BLOCK_VOXELS),
+        }
     }
 
-    /// Edge lengths, metres.
+    /// Edge lengths of the map's box, metres.
     pub fn extent_m(&self) -> [f32; 3] {
-        self.dims_voxels.map(|d| d as f32 * self.voxel_size_m)
+        self.box_dims_voxels().map(|d| d as f32 * self.voxel_size_m)
     }
 
-    /// Bytes of GPU memory the dense store takes (TSDF words, colour words, surface bricks).
+    /// Bytes of GPU memory the store takes (TSDF words, colour words, surface bricks; for a
+    /// sparse map also its hash table, block keys and visible list).
     pub fn memory_bytes(&self) -> u64 {
-        let bricks: u64 = self.dims_voxels.iter().map(|&d| u64::from(d.div_ceil(8))).product();
-        self.voxel_count() * 4 * if self.color { 2 } else { 1 } + bricks * 4
+        let words = self.voxel_count() * 4 * if self.color { 2 } else { 1 };
+        match self.kind {
+            MapKind::Dense => words + self.dims_voxels.iter().map(|&d| u64::from(d.div_ceil(8))).product::<u64>() * 4,
+            MapKind::Sparse => words + u64::from(self.pool_blocks) * 12 + u64::from(crate::map::hash_slots_for_pool(self.pool_blocks)) * 8 + 32,
+        }
     }
 
     /// Rejects settings the kernels cannot honour.
     pub fn validate(&self, max_binding_bytes: u64) -> Result<()> {
         let bad = |why: String| Err(Error::InvalidConfig(format!("TSDF volume: {why}")));
-        if self.dims_voxels.iter().any(|&d| !(2..=2048).contains(&d)) {
+        if self.kind == MapKind::Sparse && !(1..=MAX_POOL_BLOCKS).contains(&self.pool_blocks) {
+            return bad(format!("a sparse map's pool of {} blocks must hold 1..={MAX_POOL_BLOCKS}", self.pool_blocks));
+        }
+        if self.kind == MapKind::Sparse && self.truncation_m > 8.0 * self.voxel_size_m {
+            return bad(format!("truncation {} m: a sparse map allows at most a block (8 voxels, {} m)", self.truncation_m, 8.0 * self.voxel_size_m));
+        }
+        if self.kind == MapKind::Dense && self.dims_voxels.iter().any(|&d| !(2..=2048).contains(&d)) {
             return bad(format!("dimensions {:?} must be 2..=2048 voxels per axis", self.dims_voxels));
         }
         if !(self.voxel_size_m > 0.0 && self.voxel_size_m.is_finite()) {
@@ -100,13 +137,21 @@ impl TsdfConfig {
         Ok(())
     }
 
-    /// The description the kernels get, for a volume whose voxel (0, 0, 0) corner is at
-    /// `origin_in_world`.
+    /// The description the kernels get, for a map with its origin (a dense box's voxel
+    /// (0, 0, 0) corner, a sparse map's anchor voxel's corner) at `origin_in_world`.
     pub fn desc(&self, origin_in_world: [f32; 3]) -> VolumeDesc {
+        let [dim_x, dim_y, dim_z] = self.box_dims_voxels();
+        let (kind, hash_slots, pool_blocks) = match self.kind {
+            MapKind::Dense => (MAP_DENSE, 0, 0),
+            MapKind::Sparse => (MAP_SPARSE, crate::map::hash_slots_for_pool(self.pool_blocks), self.pool_blocks),
+        };
         VolumeDesc {
-            dim_x: self.dims_voxels[0],
-            dim_y: self.dims_voxels[1],
-            dim_z: self.dims_voxels[2],
+            dim_x,
+            dim_y,
+            dim_z,
+            kind,
+            hash_slots,
+            pool_blocks,
             max_weight: self.max_weight,
             origin_x_m: origin_in_world[0],
             origin_y_m: origin_in_world[1],
@@ -117,11 +162,21 @@ impl TsdfConfig {
         }
     }
 
-    /// The corner of voxel (0, 0, 0) for the first camera at `world_from_camera`, following
-    /// [`Self::placement`]. The volume stays axis-aligned in world; with an identity first
-    /// pose (the usual case) [`VolumePlacement::InFront`] spans x, y in [-e/2, e/2] and z in
-    /// [0, e] of the first camera's frame.
+    /// The map's origin for the first camera at `world_from_camera`: the corner of voxel
+    /// (0, 0, 0) of a dense box, following [`Self::placement`]. The volume stays axis-aligned in
+    /// world; with an identity first pose (the usual case) [`VolumePlacement::InFront`] spans
+    /// x, y in [-e/2, e/2] and z in [0, e] of the first camera's frame. A sparse map's box is
+    /// centred on the first camera: its origin is the corner of its anchor voxel
+    /// (`voxel_anchor`, the middle of the box), the first camera's position snapped to the voxel
+    /// lattice through the world origin (so a dense box placed at the identity and a sparse map
+    /// share their voxel centres).
     pub fn origin_for_first_camera(&self, world_from_camera: &Se3) -> [f32; 3] {
+        if self.kind == MapKind::Sparse {
+            let c = world_from_camera.translation_m;
+            let v = f64::from(self.voxel_size_m);
+            let snap = |c: f64| ((c / v).round() * v) as f32;
+            return [snap(c.x), snap(c.y), snap(c.z)];
+        }
         let [ex, ey, ez] = self.extent_m();
         let ahead_m = match self.placement {
             VolumePlacement::InFront => f64::from(ez) / 2.0,
@@ -136,19 +191,26 @@ impl TsdfConfig {
 pub use crate::kernels::gpu_data::VolumeDesc;
 
 impl VolumeDesc {
-    /// Number of voxels.
+    /// Voxel words stored: the dense box's, or a sparse pool's.
     pub fn voxel_count(&self) -> usize {
+        if self.kind == MAP_SPARSE {
+            return self.pool_blocks as usize * crate::cpu::shared::BLOCK_VOXELS as usize;
+        }
         self.dim_x as usize * self.dim_y as usize * self.dim_z as usize
     }
 
-    /// Bricks of 8³ voxels (`cpu::shared::brick_dims`) covering the volume.
+    /// Surface-brick words: bricks of 8³ voxels (`cpu::shared::brick_dims`) covering a dense
+    /// box, or a sparse map's pool blocks.
     pub fn brick_count(&self) -> usize {
+        if self.kind == MAP_SPARSE {
+            return self.pool_blocks as usize;
+        }
         crate::cpu::shared::brick_dims(self).iter().map(|&b| b as usize).product()
     }
 
-    /// World-space corners (min, max) of the volume, metres.
+    /// World-space corners (min, max) of the map's box, metres.
     pub fn bounds_in_world(&self) -> ([f32; 3], [f32; 3]) {
-        let lo = [self.origin_x_m, self.origin_y_m, self.origin_z_m];
+        let lo = crate::cpu::shared::box_corner_in_world(self);
         let dims = [self.dim_x, self.dim_y, self.dim_z];
         (lo, std::array::from_fn(|i| lo[i] + dims[i] as f32 * self.voxel_size_m))
     }
@@ -162,9 +224,13 @@ pub trait TsdfStore {
     fn voxels(&self) -> &wgpu::Buffer;
     /// Colour words (RGB8), or a one-word placeholder when colour is off.
     fn colors(&self) -> &wgpu::Buffer;
-    /// One word per brick of 8³ voxels, non-zero once a voxel in it has held a TSDF below
-    /// `FAR_TSDF` (integration marks them; the raycast skips the others).
+    /// One word per brick of 8³ voxels (a sparse map: per pool block), non-zero once a voxel in
+    /// it has held a TSDF below `FAR_TSDF` (integration marks them; the raycast skips the others).
     fn surface_bricks(&self) -> &wgpu::Buffer;
+    /// A sparse map's hash table ((key, pool index) per slot); a placeholder word for a dense map.
+    fn block_table(&self) -> &wgpu::Buffer;
+    /// A sparse map's key per pool block; a placeholder word for a dense map.
+    fn block_coords(&self) -> &wgpu::Buffer;
     /// Whether colour is fused.
     fn has_color(&self) -> bool;
     /// Forgets everything fused so far.
@@ -181,18 +247,22 @@ pub struct DenseTsdfVolume {
     voxels: wgpu::Buffer,
     colors: wgpu::Buffer,
     surface_bricks: wgpu::Buffer,
+    /// The placeholder word bound where kernels take a sparse map's table and keys.
+    no_blocks: wgpu::Buffer,
 }
 
 impl DenseTsdfVolume {
     /// Allocates an empty (never observed) volume with its corner at `origin_in_world`.
     pub fn new(gpu: &Gpu, config: TsdfConfig, origin_in_world: [f32; 3]) -> Result<Self> {
+        let config = TsdfConfig { kind: MapKind::Dense, ..config };
         config.validate(gpu.limits.max_storage_buffer_binding_size)?;
         let n = config.voxel_count() as usize;
         let voxels = gpu.storage_buffer::<u32>("core.tsdf.voxels", n);
         let colors = gpu.storage_buffer::<u32>("core.tsdf.colors", if config.color { n } else { 1 });
         let desc = config.desc(origin_in_world);
         let surface_bricks = gpu.storage_buffer::<u32>("core.tsdf.surface_bricks", desc.brick_count());
-        let volume = Self { config, desc, voxels, colors, surface_bricks };
+        let no_blocks = gpu.storage_buffer::<u32>("core.tsdf.no_blocks", 1);
+        let volume = Self { config, desc, voxels, colors, surface_bricks, no_blocks };
         volume.reset(gpu);
         Ok(volume)
     }
@@ -215,6 +285,12 @@ impl TsdfStore for DenseTsdfVolume {
     }
     fn surface_bricks(&self) -> &wgpu::Buffer {
         &self.surface_bricks
+    }
+    fn block_table(&self) -> &wgpu::Buffer {
+        &self.no_blocks
+    }
+    fn block_coords(&self) -> &wgpu::Buffer {
+        &self.no_blocks
     }
     fn has_color(&self) -> bool {
         self.config.color

@@ -95,13 +95,32 @@ pub fn voxel_index(d: &VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
     x + d.dim_x * (y + d.dim_y * z)
 }
 
+/// Twin of `MAP_DENSE` (shared/tsdf.wgsl).
+pub const MAP_DENSE: u32 = 0;
+/// Twin of `MAP_SPARSE`.
+pub const MAP_SPARSE: u32 = 1;
+
+/// Twin of `voxel_anchor()`: the voxel whose outer corner the origin gives.
+pub fn voxel_anchor(d: &VolumeDesc) -> [u32; 3] {
+    if d.kind == MAP_SPARSE {
+        return [d.dim_x, d.dim_y, d.dim_z].map(|v| (v >> (BRICK_SHIFT + 1)) << BRICK_SHIFT);
+    }
+    [0; 3]
+}
+
 /// Twin of `voxel_centre_in_world()`.
 pub fn voxel_centre_in_world(d: &VolumeDesc, x: u32, y: u32, z: u32) -> [f32; 3] {
-    [
-        d.origin_x_m + (x as f32 + 0.5) * d.voxel_size_m,
-        d.origin_y_m + (y as f32 + 0.5) * d.voxel_size_m,
-        d.origin_z_m + (z as f32 + 0.5) * d.voxel_size_m,
-    ]
+    let a = voxel_anchor(d);
+    let origin = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
+    let g = [x, y, z];
+    std::array::from_fn(|i| origin[i] + ((g[i] as i32 - a[i] as i32) as f32 + 0.5) * d.voxel_size_m)
+}
+
+/// Twin of `box_corner_in_world()`.
+pub fn box_corner_in_world(d: &VolumeDesc) -> [f32; 3] {
+    let a = voxel_anchor(d);
+    let origin = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
+    std::array::from_fn(|i| origin[i] - a[i] as f32 * d.voxel_size_m)
 }
 
 /// Twin of `pack_voxel()`: rounds to nearest, ties to even, as WGSL `round`.
@@ -145,20 +164,32 @@ pub fn mix(a: f32, b: f32, t: f32) -> f32 {
     a * (1.0 - t) + b * t
 }
 
-/// Twin of `sample_tsdf()`, reading `tsdf_volume`.
-pub fn sample_tsdf(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> TsdfSample {
+/// Twin of `sample_tsdf()` (shared/tsdf_sample.wgsl), reading a map of either kind.
+pub fn sample_tsdf(map: MapRef<'_>, d: &VolumeDesc, p_world: [f32; 3]) -> TsdfSample {
     let origin = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
     let g: [f32; 3] = std::array::from_fn(|i| (p_world[i] - origin[i]) / d.voxel_size_m - 0.5);
-    let base_f = g.map(f32::floor);
+    let base_rel = g.map(f32::floor);
+    let anchor = voxel_anchor(d);
+    let base_f: [f32; 3] = std::array::from_fn(|i| base_rel[i] + anchor[i] as f32);
     let invalid = TsdfSample { tsdf: 0.0, valid: false };
     let dims = [d.dim_x, d.dim_y, d.dim_z];
     if (0..3).any(|i| !(base_f[i] >= 0.0) || base_f[i] >= (dims[i] - 1) as f32) {
         return invalid;
     }
     let b = base_f.map(|v| v as u32);
-    let f: [f32; 3] = std::array::from_fn(|i| g[i] - base_f[i]);
-    let at = |dx: u32, dy: u32, dz: u32| tsdf_volume[voxel_index(d, b[0] + dx, b[1] + dy, b[2] + dz) as usize];
-    let w = [at(0, 0, 0), at(1, 0, 0), at(0, 1, 0), at(1, 1, 0), at(0, 0, 1), at(1, 0, 1), at(0, 1, 1), at(1, 1, 1)];
+    let f: [f32; 3] = std::array::from_fn(|i| g[i] - base_rel[i]);
+    let w = if d.kind == MAP_SPARSE && b.iter().all(|&v| v & 7 < 7) {
+        // The 8 voxels share one block: one lookup.
+        let block = find_block(map.block_table, d, b.map(|v| v >> BRICK_SHIFT));
+        if block == NO_BLOCK {
+            return invalid;
+        }
+        let s = (block * BLOCK_VOXELS + voxel_in_block(b[0], b[1], b[2])) as usize;
+        [0, 1, 8, 9, 64, 65, 72, 73].map(|o| map.tsdf_volume[s + o])
+    } else {
+        let at = |dx: u32, dy: u32, dz: u32| map_word(map, d, b[0] + dx, b[1] + dy, b[2] + dz);
+        [at(0, 0, 0), at(1, 0, 0), at(0, 1, 0), at(1, 1, 0), at(0, 0, 1), at(1, 0, 1), at(0, 1, 1), at(1, 1, 1)]
+    };
     let observed = w.iter().copied().min().unwrap_or(0) >= 0x1_0000;
     let t = w.map(voxel_tsdf);
     let x00 = mix(t[0], t[1], f[0]);
@@ -166,6 +197,111 @@ pub fn sample_tsdf(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> Ts
     let x01 = mix(t[4], t[5], f[0]);
     let x11 = mix(t[6], t[7], f[0]);
     TsdfSample { tsdf: mix(mix(x00, x10, f[1]), mix(x01, x11, f[1]), f[2]), valid: observed }
+}
+
+/// Twin of `BLOCK_VOXELS` (shared/map.wgsl): voxels per block of 8³.
+pub const BLOCK_VOXELS: u32 = 512;
+/// Twin of `EMPTY_KEY`: the key of a free hash slot.
+pub const EMPTY_KEY: u32 = u32::MAX;
+/// Twin of `NO_BLOCK`: the pool index of a key without a block.
+pub const NO_BLOCK: u32 = u32::MAX;
+/// Twin of `NO_SLOT`: the voxel slot of a voxel without a block.
+pub const NO_SLOT: u32 = u32::MAX;
+/// Twin of `MAP_MAX_PROBES`.
+pub const MAP_MAX_PROBES: u32 = 64;
+/// Twin of `MAP_COUNTER_BLOCKS_USED`.
+pub const MAP_COUNTER_BLOCKS_USED: usize = 0;
+/// Twin of `MAP_COUNTER_VISIBLE`.
+pub const MAP_COUNTER_VISIBLE: usize = 1;
+/// Twin of `MAP_COUNTER_HASH_FULL`.
+pub const MAP_COUNTER_HASH_FULL: usize = 2;
+/// Twin of `MAP_COUNTER_POOL_FULL`.
+pub const MAP_COUNTER_POOL_FULL: usize = 3;
+/// Twin of `MAP_COUNTER_OUT_OF_RANGE`.
+pub const MAP_COUNTER_OUT_OF_RANGE: usize = 4;
+/// Twin of `MAP_COUNTER_ARGS`.
+pub const MAP_COUNTER_ARGS: usize = 5;
+/// Twin of `MAP_COUNTERS`.
+pub const MAP_COUNTERS: usize = 8;
+
+/// Twin of `block_key()`.
+pub fn block_key(b: [u32; 3]) -> u32 {
+    b[0] | (b[1] << 11) | (b[2] << 22)
+}
+
+/// Twin of `block_of_key()`.
+pub fn block_of_key(key: u32) -> [u32; 3] {
+    [key & 0x7ff, (key >> 11) & 0x7ff, key >> 22]
+}
+
+/// Twin of `block_hash()`.
+pub fn block_hash(b: [u32; 3]) -> u32 {
+    let mut h = b[0].wrapping_mul(73_856_093) ^ b[1].wrapping_mul(19_349_663) ^ b[2].wrapping_mul(83_492_791);
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x045d_9f3b);
+    h ^= h >> 16;
+    h
+}
+
+/// Twin of `voxel_in_block()`.
+pub fn voxel_in_block(x: u32, y: u32, z: u32) -> u32 {
+    (x & 7) | ((y & 7) << 3) | ((z & 7) << 6)
+}
+
+/// What map_lookup.wgsl reads: the voxel words (a dense box or a sparse pool) and the sparse
+/// map's hash table (empty or a placeholder for a dense map).
+#[derive(Clone, Copy, Debug)]
+pub struct MapRef<'a> {
+    /// Voxel words.
+    pub tsdf_volume: &'a [u32],
+    /// (key, pool index) per hash slot.
+    pub block_table: &'a [u32],
+}
+
+impl<'a> MapRef<'a> {
+    /// A dense box's voxels.
+    pub fn dense(tsdf_volume: &'a [u32]) -> Self {
+        Self { tsdf_volume, block_table: &[] }
+    }
+}
+
+/// Twin of `find_block()` (without its memo of the last block, which changes no result).
+pub fn find_block(block_table: &[u32], d: &VolumeDesc, b: [u32; 3]) -> u32 {
+    let key = block_key(b);
+    let mask = d.hash_slots - 1;
+    let mut s = block_hash(b) & mask;
+    for _ in 0..MAP_MAX_PROBES {
+        let k = block_table[2 * s as usize];
+        if k == key {
+            return block_table[2 * s as usize + 1];
+        }
+        if k == EMPTY_KEY {
+            return NO_BLOCK;
+        }
+        s = (s + 1) & mask;
+    }
+    NO_BLOCK
+}
+
+/// Twin of `voxel_slot()`.
+pub fn voxel_slot(map: MapRef<'_>, d: &VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
+    if d.kind == MAP_DENSE {
+        return voxel_index(d, x, y, z);
+    }
+    let block = find_block(map.block_table, d, [x, y, z].map(|v| v >> BRICK_SHIFT));
+    if block == NO_BLOCK {
+        return NO_SLOT;
+    }
+    block * BLOCK_VOXELS + voxel_in_block(x, y, z)
+}
+
+/// Twin of `map_word()`.
+pub fn map_word(map: MapRef<'_>, d: &VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
+    let s = voxel_slot(map, d, x, y, z);
+    if s == NO_SLOT {
+        return 0;
+    }
+    map.tsdf_volume[s as usize]
 }
 
 /// `m * v` for a column-major 4x4 matrix, as WGSL `mat4x4<f32> * vec4<f32>`.

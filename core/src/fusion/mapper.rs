@@ -1,54 +1,246 @@
 // SPDX-License-Identifier: MIT
-//! The mapper stage: a TSDF store and the integration of a depth (and colour) image into it at
-//! the pose a pose buffer holds — the tracker's, or one the host writes (pose-driven mapping).
+//! The mapper stage: a map (dense box or sparse voxel blocks, [`crate::map`]) and the
+//! integration of a depth (and colour) image into it at the pose a pose buffer holds — the
+//! tracker's, or one the host writes (pose-driven mapping).
 
+use crate::engine::FrameEncoder;
 use crate::kernels::GpuIntrinsics;
+use crate::kernels::block_alloc::{self, BlockAllocParams};
+use crate::kernels::block_assign::{self, BlockAssignParams};
+use crate::kernels::block_integrate::{self, BlockIntegrateParams};
+use crate::kernels::block_list_args::{self, BlockListArgsParams};
+use crate::kernels::block_visible::{self, BlockVisibleParams};
 use crate::kernels::tsdf_integrate::{self, TsdfIntegrateParams};
+use crate::map::{Map, SparseMap};
 use crate::preprocess::DepthPreprocessor;
-use crate::tsdf::{DenseTsdfVolume, TsdfConfig, TsdfStore};
+use crate::tsdf::{TsdfConfig, TsdfStore};
 use crate::{Gpu, Result};
 
-/// A dense TSDF volume and its integration kernel, bound to one preprocessor and pose buffer.
+/// The integration kernels of one map kind, bound to a preprocessor and a pose buffer.
+#[derive(Debug)]
+enum Integration {
+    /// `tsdf_integrate` over the dense box's columns.
+    Dense { bind_group: wgpu::BindGroup },
+    /// The sparse map's allocation, visibility and block integration.
+    Sparse {
+        alloc: wgpu::BindGroup,
+        assign: wgpu::BindGroup,
+        visible: wgpu::BindGroup,
+        args: wgpu::BindGroup,
+        integrate: wgpu::BindGroup,
+    },
+}
+
+/// A map and its integration, bound to one preprocessor and pose buffer.
 #[derive(Debug)]
 pub struct Mapper {
-    volume: DenseTsdfVolume,
-    _params: wgpu::Buffer,
-    bind_group: wgpu::BindGroup,
+    map: Map,
+    _params: Vec<wgpu::Buffer>,
+    integration: Integration,
+    image_size: [u32; 2],
 }
 
 impl Mapper {
-    /// A volume of `config` with its voxel (0, 0, 0) corner at `origin_in_world`, fusing the
-    /// preprocessor's depth (unfiltered when the filter is on, as KinectFusion does) and colour
-    /// at the pose in `pose` (a `CameraPose` at offset 0).
-    pub fn new(gpu: &Gpu, config: TsdfConfig, origin_in_world: [f32; 3], preprocessor: &DepthPreprocessor, pose: &wgpu::Buffer) -> Result<Self> {
-        let volume = DenseTsdfVolume::new(gpu, config, origin_in_world)?;
-        let p = TsdfIntegrateParams {
-            volume: volume.desc(),
-            intrinsics: GpuIntrinsics::from(preprocessor.levels[0].intrinsics),
-            color_enabled: u32::from(volume.has_color()),
-            max_depth_m: preprocessor.config().max_depth_m,
-            ..Default::default()
-        };
-        let params = gpu.uniform_buffer("core.tsdf_integrate.params", &p);
+    /// A map of `config` (its kind included) with its box's voxel (0, 0, 0) corner at
+    /// `origin_in_world`, fusing the preprocessor's depth (unfiltered when the filter is on, as
+    /// KinectFusion does) and colour at the pose in `pose` (a `CameraPose` at offset 0).
+    pub fn new(
+        gpu: &Gpu,
+        config: TsdfConfig,
+        origin_in_world: [f32; 3],
+        preprocessor: &DepthPreprocessor,
+        pose: &wgpu::Buffer,
+    ) -> Result<Self> {
+        let map = Map::new(gpu, config, origin_in_world)?;
+        let intrinsics = GpuIntrinsics::from(preprocessor.levels[0].intrinsics);
+        let max_depth_m = preprocessor.config().max_depth_m;
         let depth_m = Self::fused_depth(preprocessor);
-        let bind_group =
-            tsdf_integrate::Bindings { params: &params, pose, depth_m, color: &preprocessor.color, tsdf_volume: volume.voxels(), color_volume: volume.colors(), surface_bricks: volume.surface_bricks() }.bind_group(gpu);
-        Ok(Self { volume, _params: params, bind_group })
+        let volume = map.desc();
+        let color_enabled = u32::from(map.has_color());
+        let (params, integration) = match &map {
+            Map::Dense(dense) => {
+                let params = gpu.uniform_buffer(
+                    "core.tsdf_integrate.params",
+                    &TsdfIntegrateParams {
+                        volume,
+                        intrinsics,
+                        color_enabled,
+                        max_depth_m,
+                        ..Default::default()
+                    },
+                );
+                let bind_group = tsdf_integrate::Bindings {
+                    params: &params,
+                    pose,
+                    depth_m,
+                    color: &preprocessor.color,
+                    tsdf_volume: dense.voxels(),
+                    color_volume: dense.colors(),
+                    surface_bricks: dense.surface_bricks(),
+                }
+                .bind_group(gpu);
+                (vec![params], Integration::Dense { bind_group })
+            }
+            Map::Sparse(sparse) => {
+                let counters = sparse.counters();
+                let alloc_params = gpu.uniform_buffer(
+                    "core.block_alloc.params",
+                    &BlockAllocParams { volume, intrinsics },
+                );
+                let assign_params =
+                    gpu.uniform_buffer("core.block_assign.params", &BlockAssignParams { volume });
+                let visible_params = gpu.uniform_buffer(
+                    "core.block_visible.params",
+                    &BlockVisibleParams {
+                        volume,
+                        intrinsics,
+                        max_depth_m,
+                        ..Default::default()
+                    },
+                );
+                let args_params = gpu.uniform_buffer(
+                    "core.block_list_args.params",
+                    &BlockListArgsParams {
+                        max_workgroups: gpu.limits.max_compute_workgroups_per_dimension,
+                        ..Default::default()
+                    },
+                );
+                let integrate_params = gpu.uniform_buffer(
+                    "core.block_integrate.params",
+                    &BlockIntegrateParams {
+                        volume,
+                        intrinsics,
+                        color_enabled,
+                        ..Default::default()
+                    },
+                );
+                let integration = Integration::Sparse {
+                    alloc: block_alloc::Bindings {
+                        params: &alloc_params,
+                        pose,
+                        depth_m,
+                        block_table: sparse.block_table(),
+                        map_counters: counters,
+                    }
+                    .bind_group(gpu),
+                    assign: block_assign::Bindings {
+                        params: &assign_params,
+                        block_table: sparse.block_table(),
+                        block_coords: sparse.block_coords(),
+                        map_counters: counters,
+                    }
+                    .bind_group(gpu),
+                    visible: block_visible::Bindings {
+                        params: &visible_params,
+                        pose,
+                        block_coords: sparse.block_coords(),
+                        map_counters: counters,
+                        visible_blocks: sparse.visible_blocks(),
+                    }
+                    .bind_group(gpu),
+                    args: block_list_args::Bindings {
+                        params: &args_params,
+                        map_counters: counters,
+                    }
+                    .bind_group(gpu),
+                    integrate: block_integrate::Bindings {
+                        params: &integrate_params,
+                        pose,
+                        depth_m,
+                        color: &preprocessor.color,
+                        tsdf_volume: sparse.voxels(),
+                        color_volume: sparse.colors(),
+                        surface_bricks: sparse.surface_bricks(),
+                        block_coords: sparse.block_coords(),
+                        visible_blocks: sparse.visible_blocks(),
+                        map_counters: counters,
+                    }
+                    .bind_group(gpu),
+                };
+                (
+                    vec![
+                        alloc_params,
+                        assign_params,
+                        visible_params,
+                        args_params,
+                        integrate_params,
+                    ],
+                    integration,
+                )
+            }
+        };
+        let k = preprocessor.levels[0].intrinsics;
+        Ok(Self {
+            map,
+            _params: params,
+            integration,
+            image_size: [k.width_px, k.height_px],
+        })
     }
 
     /// The depth this mapper fuses (the unfiltered depth when the bilateral filter is on).
     pub fn fused_depth(preprocessor: &DepthPreprocessor) -> &wgpu::Buffer {
-        preprocessor.depth_unfiltered_m.as_ref().unwrap_or(&preprocessor.levels[0].depth_m)
+        preprocessor
+            .depth_unfiltered_m
+            .as_ref()
+            .unwrap_or(&preprocessor.levels[0].depth_m)
     }
 
-    /// The store.
-    pub fn volume(&self) -> &DenseTsdfVolume {
-        &self.volume
+    /// The map.
+    pub fn volume(&self) -> &Map {
+        &self.map
     }
 
-    /// Records the integration (skipped on the GPU when the pose is disabled).
-    pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
-        let d = self.volume.desc();
-        gpu.kernels.tsdf_integrate.dispatch_in(pass, &self.bind_group, [d.dim_x, d.dim_y, 1]);
+    /// The sparse map, when the map is one.
+    pub fn sparse(&self) -> Option<&SparseMap> {
+        self.map.sparse()
+    }
+
+    /// Records the integration as stage `stage` of a frame (skipped on the GPU when the pose
+    /// is disabled). A sparse map first clears its visible count, then allocates, assigns,
+    /// lists the visible blocks and integrates them.
+    pub fn encode(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
+        if let Map::Sparse(sparse) = &self.map {
+            let visible_word = (crate::cpu::shared::MAP_COUNTER_VISIBLE * 4) as u64;
+            frame
+                .encoder()
+                .clear_buffer(sparse.counters(), visible_word, Some(4));
+        }
+        self.record(gpu, &mut frame.stage(stage));
+    }
+
+    /// Records the integration into an open compute pass, after [`Self::encode`] cleared a
+    /// sparse map's visible count.
+    fn record(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        let d = self.map.desc();
+        match &self.integration {
+            Integration::Dense { bind_group } => {
+                gpu.kernels
+                    .tsdf_integrate
+                    .dispatch_in(pass, bind_group, [d.dim_x, d.dim_y, 1])
+            }
+            Integration::Sparse {
+                alloc,
+                assign,
+                visible,
+                args,
+                integrate,
+            } => {
+                let [w, h] = self.image_size;
+                gpu.kernels.block_alloc.dispatch_in(pass, alloc, [w, h, 1]);
+                gpu.kernels
+                    .block_assign
+                    .dispatch_in(pass, assign, [d.hash_slots, 1, 1]);
+                gpu.kernels
+                    .block_visible
+                    .dispatch_in(pass, visible, [d.pool_blocks, 1, 1]);
+                gpu.kernels
+                    .block_list_args
+                    .dispatch_in(pass, args, [1, 1, 1]);
+                if let Map::Sparse(sparse) = &self.map {
+                    block_integrate::dispatch_indirect_in(gpu, pass, integrate, sparse.counters());
+                }
+            }
+        }
     }
 }

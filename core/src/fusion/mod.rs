@@ -39,7 +39,8 @@ use crate::engine::{FrameEncoder, ReadbackRing, StageTime, StageTimer};
 use crate::gpu::GpuCounts;
 use crate::kernels::track_solve::TrackState;
 use crate::preprocess::{DepthPreprocessor, PreprocessConfig};
-use crate::tsdf::{DenseTsdfVolume, TsdfConfig, TsdfStore};
+use crate::map::Map;
+use crate::tsdf::{TsdfConfig, TsdfStore};
 use crate::{Error, Gpu, Result, RgbdCalibration, RgbdFrame, Se3};
 
 pub use crate::pose::twist_exp;
@@ -414,7 +415,7 @@ impl KinectFusion {
     }
 
     /// The TSDF store (for mesh extraction and free-view raycasts).
-    pub fn volume(&self) -> &DenseTsdfVolume {
+    pub fn volume(&self) -> &Map {
         self.mapper.volume()
     }
 
@@ -501,7 +502,7 @@ impl KinectFusion {
             self.tracker.encode_in(gpu, &mut pass);
             self.tracker.encode_keep_previous(gpu, &mut pass);
         }
-        self.mapper.encode_in(gpu, &mut fe.stage("integrate"));
+        self.mapper.encode(gpu, &mut fe, "integrate");
         self.predictor.encode(gpu, &mut fe, "predict");
         let (slot, slot_buffer) = self.readbacks.free_slot().expect("a readback slot was freed above");
         fe.encoder().copy_buffer_to_buffer(self.tracker.state_buffer(), 0, slot_buffer, 0, tracker::TRACK_STATE_BYTES);

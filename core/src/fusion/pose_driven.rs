@@ -14,7 +14,8 @@ use crate::engine::FrameEncoder;
 use crate::fusion::mapper::Mapper;
 use crate::fusion::predictor::{DepthHint, Predictor, camera_pose, pose_buffer};
 use crate::preprocess::{DepthPreprocessor, PreprocessConfig};
-use crate::tsdf::{DenseTsdfVolume, TsdfConfig};
+use crate::map::Map;
+use crate::tsdf::TsdfConfig;
 use crate::{Gpu, Result, RgbdCalibration, RgbdFrame, Se3};
 
 /// Fuses frames at poses the caller gives.
@@ -40,7 +41,7 @@ impl PoseDrivenMapper {
     }
 
     /// The TSDF store.
-    pub fn volume(&self) -> &DenseTsdfVolume {
+    pub fn volume(&self) -> &Map {
         self.mapper.volume()
     }
 
@@ -56,7 +57,7 @@ impl PoseDrivenMapper {
         gpu.write_buffer(&self.pose, &[camera_pose(Some(world_from_camera))]);
         let mut fe = FrameEncoder::new(gpu, "core.pose_driven.frame", None);
         self.preprocessor.encode_in(gpu, &mut fe.stage("preprocess"));
-        self.mapper.encode_in(gpu, &mut fe.stage("integrate"));
+        self.mapper.encode(gpu, &mut fe, "integrate");
         if let Some(p) = &self.predictor {
             p.encode(gpu, &mut fe, "predict");
         }

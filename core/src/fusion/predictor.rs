@@ -77,8 +77,8 @@ pub struct RaycastTarget {
     depth_range_tiles: wgpu::Buffer,
     range_params: wgpu::Buffer,
     range_bind_group: wgpu::BindGroup,
-    /// Bricks of the store along each axis (one `raycast_range` invocation each).
-    bricks: [u32; 3],
+    /// Surface-brick words of the store (one `raycast_range` invocation each).
+    bricks: u32,
     _normals_params: wgpu::Buffer,
     normals_bind_group: wgpu::BindGroup,
 }
@@ -109,7 +109,7 @@ impl RaycastTarget {
         let tiles = Self::tiles(intrinsics);
         let depth_range_tiles = gpu.storage_buffer::<[u32; 2]>(&name("depth_range_tiles"), (tiles[0] * tiles[1]) as usize);
         let range_params = gpu.uniform_buffer(&name("range_params"), &RaycastRangeParams::default());
-        let range_bind_group = raycast_range::Bindings { params: &range_params, pose: &pose, surface_bricks: store.surface_bricks(), depth_range_tiles: &depth_range_tiles }.bind_group(gpu);
+        let range_bind_group = raycast_range::Bindings { params: &range_params, pose: &pose, surface_bricks: store.surface_bricks(), depth_range_tiles: &depth_range_tiles, block_coords: store.block_coords() }.bind_group(gpu);
         let placeholder;
         let depth_hint_raw = match &hint {
             Some(h) => h.depth_raw,
@@ -128,6 +128,7 @@ impl RaycastTarget {
             color_rgba8: &color_rgba8,
             depth_hint_raw,
             depth_range_tiles: &depth_range_tiles,
+            block_table: store.block_table(),
         }
         .bind_group(gpu);
         let np = SurfaceNormalsParams { width_px: intrinsics.width_px, height_px: intrinsics.height_px, min_cross_norm_sq: MIN_NORMAL_CROSS_NORM_SQ, ..Default::default() };
@@ -147,7 +148,7 @@ impl RaycastTarget {
             depth_range_tiles,
             range_params,
             range_bind_group,
-            bricks: crate::cpu::shared::brick_dims(&store.desc()),
+            bricks: store.desc().brick_count() as u32,
             _normals_params: normals_params,
             normals_bind_group,
         }
@@ -206,7 +207,7 @@ impl RaycastTarget {
     /// Records the range tiles, the raycast and the normals into an open compute pass (the
     /// tiles cleared before it).
     fn dispatch_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
-        gpu.kernels.raycast_range.dispatch_in(pass, &self.range_bind_group, self.bricks);
+        gpu.kernels.raycast_range.dispatch_in(pass, &self.range_bind_group, [self.bricks, 1, 1]);
         let size = [self.intrinsics.width_px, self.intrinsics.height_px, 1];
         gpu.kernels.raycast.dispatch_in(pass, &self.bind_group, size);
         gpu.kernels.surface_normals.dispatch_in(pass, &self.normals_bind_group, size);

@@ -193,7 +193,7 @@ pub fn max_capacity_triangles(gpu: &Gpu) -> u32 {
 /// triangles is [`Error::OutputOverflow`] with the triangle count it needs.
 pub async fn extract_triangles(gpu: &Gpu, store: &dyn TsdfStore, options: &MeshOptions) -> Result<Vec<McVertex>> {
     let volume = store.desc();
-    let grid = McGrid::new(&volume)?;
+    let grid = McGrid::for_volume(&volume)?;
     let max_per_dimension = gpu.limits.max_compute_workgroups_per_dimension;
     let max_capacity = options.max_capacity_triangles.unwrap_or(u32::MAX).clamp(1, max_capacity_triangles(gpu));
     let first_capacity = options.capacity_triangles.map(|c| c.clamp(1, max_capacity));
@@ -214,14 +214,24 @@ pub async fn extract_triangles(gpu: &Gpu, store: &dyn TsdfStore, options: &MeshO
         _pad0: 0,
     };
     let scan_params = gpu.uniform_buffer("core.mc_scan.params", &scan_params);
-    let count_bg = mc_count::Bindings { params: &count_params, tsdf_volume: store.voxels(), mc_table: &table, block_counts: &block_counts }.bind_group(gpu);
+    let count_bg = mc_count::Bindings { params: &count_params, tsdf_volume: store.voxels(), mc_table: &table, block_counts: &block_counts, block_table: store.block_table(), block_coords: store.block_coords() }.bind_group(gpu);
     let scan_bg = mc_scan::Bindings { params: &scan_params, block_counts: &block_counts, block_offsets: &block_offsets, active_blocks: &active_blocks, counters: &counters }.bind_group(gpu);
     // Records mc_generate for triangles first..first + capacity into a new buffer.
     let generate = |encoder: &mut wgpu::CommandEncoder, first: u32, capacity: u32| {
         let params = gpu.uniform_buffer("core.mc_generate.params", &McGenerateParams::new(volume, grid, first, capacity, store.has_color()));
         let vertices = gpu.storage_buffer::<McVertex>("core.mc.vertices", 3 * capacity as usize);
-        let bg = mc_generate::Bindings { params: &params, tsdf_volume: store.voxels(), colors: store.colors(), mc_table: &table, active_blocks: &active_blocks, block_offsets: &block_offsets, vertices: &vertices }
-            .bind_group(gpu);
+        let bg = mc_generate::Bindings {
+            params: &params,
+            tsdf_volume: store.voxels(),
+            colors: store.colors(),
+            mc_table: &table,
+            active_blocks: &active_blocks,
+            block_offsets: &block_offsets,
+            vertices: &vertices,
+            block_table: store.block_table(),
+            block_coords: store.block_coords(),
+        }
+        .bind_group(gpu);
         crate::kernels::mc_generate::encode_indirect(gpu, encoder, &bg, &counters);
         vertices
     };
@@ -276,9 +286,15 @@ pub fn extract_mesh_cpu(tsdf_volume: &[u32], colors: Option<&[u32]>, volume: &Vo
 /// Dispatch-size limit the CPU path assumes (WebGPU's default).
 pub const CPU_MAX_WORKGROUPS_PER_DIMENSION: u32 = 65_535;
 
-/// CPU twin of [`extract_triangles`], with an output sized to the total.
+/// CPU twin of [`extract_triangles`] for a dense box, with an output sized to the total.
 pub fn extract_triangles_cpu(tsdf_volume: &[u32], colors: Option<&[u32]>, volume: &VolumeDesc) -> Result<Vec<McVertex>> {
-    let grid = McGrid::new(volume)?;
+    extract_map_triangles_cpu(tsdf_volume, colors, &[0], &[0], volume)
+}
+
+/// CPU twin of [`extract_triangles`] for a map of either kind (`block_table` and
+/// `block_coords`: a sparse map's hash table and key per pool block).
+pub fn extract_map_triangles_cpu(tsdf_volume: &[u32], colors: Option<&[u32]>, block_table: &[u32], block_coords: &[u32], volume: &VolumeDesc) -> Result<Vec<McVertex>> {
+    let grid = McGrid::for_volume(volume)?;
     let n_voxels = volume.voxel_count();
     if tsdf_volume.len() < n_voxels || colors.is_some_and(|c| c.len() < n_voxels) {
         return Err(Error::InvalidConfig(format!(
@@ -289,7 +305,7 @@ pub fn extract_triangles_cpu(tsdf_volume: &[u32], colors: Option<&[u32]>, volume
     }
     let table = mc_table::mc_table().packed();
     let mut block_counts = vec![0u32; grid.n_blocks as usize];
-    cpu::mc_count(&McCountParams::new(*volume, grid), tsdf_volume, &table, &mut block_counts);
+    cpu::mc_count(&McCountParams::new(*volume, grid), tsdf_volume, &table, &mut block_counts, block_table, block_coords);
     let mut block_offsets = vec![0u32; grid.n_blocks as usize];
     let mut active_blocks = vec![0u32; grid.active_blocks_len(CPU_MAX_WORKGROUPS_PER_DIMENSION)];
     let mut counters = McCounters::default();
@@ -299,7 +315,7 @@ pub fn extract_triangles_cpu(tsdf_volume: &[u32], colors: Option<&[u32]>, volume
     let mut soup = vec![McVertex::default(); 3 * total as usize];
     let p = McGenerateParams::new(*volume, grid, 0, total, colors.is_some());
     let [x, y, z] = counters.generate_workgroups();
-    cpu::mc_generate(&p, tsdf_volume, colors.unwrap_or(&[0]), &table, &active_blocks, &block_offsets, &mut soup, x * y * z);
+    cpu::mc_generate(&p, tsdf_volume, colors.unwrap_or(&[0]), &table, &active_blocks, &block_offsets, &mut soup, block_table, block_coords, x * y * z);
     Ok(soup)
 }
 

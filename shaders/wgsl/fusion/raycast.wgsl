@@ -77,6 +77,8 @@ struct RaycastParams {
 // `raycast_range`: !bits(nearest z), bits(farthest z); 0 farthest: none), when
 // `range_tile_px` is non-zero; one placeholder word otherwise.
 @group(0) @binding(8) var<storage, read> depth_range_tiles: array<u32>;
+// A sparse map's hash table (map.wgsl); one placeholder word for a dense map.
+@group(0) @binding(9) var<storage, read> block_table: array<u32>;
 
 const OPAQUE: u32 = 0xff000000u;
 
@@ -86,13 +88,27 @@ fn write_miss(ix: u32) {
     color_rgba8[ix] = 0u;
 }
 
-// The nearest voxel's word at a world point, or 0 (never observed) outside the volume.
-fn nearest_word(d: VolumeDesc, p_world: vec3<f32>) -> u32 {
-    let g = floor((p_world - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m);
+// The slot of the nearest voxel to a world point (map_lookup.wgsl): NO_SLOT outside the box or
+// where a sparse map has no block.
+fn nearest_slot(d: VolumeDesc, p_world: vec3<f32>) -> u32 {
+    let g = floor((p_world - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m) + vec3<f32>(voxel_anchor(d));
     if g.x < 0.0 || g.y < 0.0 || g.z < 0.0 || g.x >= f32(d.dim_x) || g.y >= f32(d.dim_y) || g.z >= f32(d.dim_z) {
-        return 0u;
+        return NO_SLOT;
     }
-    return tsdf_volume[voxel_index(d, u32(g.x), u32(g.y), u32(g.z))];
+    return voxel_slot(d, u32(g.x), u32(g.y), u32(g.z));
+}
+
+// The ray parameter at which the ray (origin `o`, reciprocal direction `inv_dir`) leaves the
+// block of 8³ voxels that holds the world point `p`.
+fn block_exit_t(d: VolumeDesc, o: vec3<f32>, inv_dir: vec3<f32>, p: vec3<f32>) -> f32 {
+    // Blocks are aligned to the anchor (a multiple of a block from the box's corner).
+    let anchor_m = vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m);
+    let edge_m = f32(1u << BRICK_SHIFT) * d.voxel_size_m;
+    let lo = anchor_m + floor((p - anchor_m) / edge_m) * edge_m;
+    let t_a = (lo - o) * inv_dir;
+    let t_b = (lo + vec3<f32>(edge_m) - o) * inv_dir;
+    let t_out = max(t_a, t_b);
+    return min(min(t_out.x, t_out.y), t_out.z);
 }
 
 // The depth measured at pixel `ix`, metres, or NaN where the sensor gave no return.
@@ -151,7 +167,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let origin = world_from_camera[3].xyz;
     let dir = (world_from_camera * vec4<f32>(ray_cam * inv_len, 0.0)).xyz;
     // Clip to the box of voxel centres (where trilinear samples exist) and the depth range.
-    let lo = vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m) + vec3<f32>(0.5 * d.voxel_size_m);
+    let lo = box_corner_in_world(d) + vec3<f32>(0.5 * d.voxel_size_m);
     let hi = lo + vec3<f32>(f32(d.dim_x - 1u), f32(d.dim_y - 1u), f32(d.dim_z - 1u)) * d.voxel_size_m;
     // Axis-parallel rays: a tiny stand-in keeps the slab test finite.
     let safe_dir = select(dir, vec3<f32>(1e-12), abs(dir) < vec3<f32>(1e-12));
@@ -198,7 +214,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var t_hit = 0.0;
     for (var i = 0u; i < params.max_steps && t < t_end; i++) {
         let p = origin + dir * t;
-        let word = nearest_word(d, p);
+        let slot = nearest_slot(d, p);
+        if slot == NO_SLOT && d.kind == MAP_SPARSE {
+            // A block a sparse map never allocated holds no surface: cross it in one step.
+            prev = TsdfSample(0.0, false);
+            prev_nearest = false;
+            prev_t = t;
+            t = max(block_exit_t(d, origin, inv_dir, p) + 0.01 * d.voxel_size_m, t + min_step);
+            continue;
+        }
+        var word = 0u;
+        if slot != NO_SLOT {
+            word = tsdf_volume[slot];
+        }
         if voxel_weight(word) == 0u {
             prev = TsdfSample(0.0, false);
             prev_nearest = false;
@@ -248,7 +276,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     vertex_in_world[ix] = vec4<f32>(p, 1.0);
     depth_m[ix] = t_hit * z_per_t;
     // Nearest voxel centre's colour.
-    let g = (p - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m;
+    let g = (p - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m + vec3<f32>(voxel_anchor(d));
     let c = min(vec3<u32>(max(g, vec3<f32>(0.0))), vec3<u32>(d.dim_x - 1u, d.dim_y - 1u, d.dim_z - 1u));
-    color_rgba8[ix] = color_volume[min(voxel_index(d, c.x, c.y, c.z), arrayLength(&color_volume) - 1u)] | OPAQUE;
+    let c_slot = voxel_slot(d, c.x, c.y, c.z);
+    var rgb = 0u;
+    if c_slot != NO_SLOT {
+        rgb = color_volume[min(c_slot, arrayLength(&color_volume) - 1u)];
+    }
+    color_rgba8[ix] = rgb | OPAQUE;
 }

@@ -2,19 +2,12 @@
 //! Each invocation walks one voxel column (x, y) along z (as KinectFusion does: one thread per
 //! column keeps the workgroup count small), only over the stretch of the column inside the
 //! camera's frustum (the half-lines 0 < z_cam <= `max_depth_m` + μ and pixel bounds, solved in
-//! closed form per column, one voxel of margin each side), and updates each voxel
-//! (000-digest §1.3.2, Eq. 1.6-1.8): projects its centre into the depth image (nearest pixel),
-//! takes the signed distance along the optical axis sdf = depth - z (positive in front of the
-//! surface), skips voxels outside the image, without depth, or more than μ behind the surface,
-//! and folds min(1, sdf / μ) into the running weighted average, weight capped at `max_weight`.
-//! With colour on, voxels within the truncation band also average the pixel's colour with the
-//! same weights. A voxel left with a TSDF below FAR_TSDF marks its brick in `surface_bricks`
-//! (for the raycast's empty-space skipping). Nothing is fused when the pose is inactive (a
-//! lost frame).
-#import invalid
-#import camera
-#import camera_pose
-#import tsdf
+//! closed form per column, one voxel of margin each side), and updates each voxel with
+//! `integrate_voxel` (shared/tsdf_update.wgsl: projective TSDF running average, colour, and the
+//! brick mark in `surface_bricks` for the raycast's empty-space skipping). The dense map only;
+//! the sparse one integrates with `block_integrate`. Nothing is fused when the pose is inactive
+//! (a lost frame).
+#import tsdf_update
 
 struct TsdfIntegrateParams {
     // The volume.
@@ -87,46 +80,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let z0 = u32(max(floor(range.x) - 1.0, 0.0));
     let z1 = u32(min(ceil(range.y) + 1.0, f32(d.dim_z - 1u)));
     for (var z = z0; z <= z1; z++) {
-        integrate_voxel(d, gid.x, gid.y, z);
-    }
-}
-
-fn integrate_voxel(d: VolumeDesc, x: u32, y: u32, z: u32) {
-    let p_world = voxel_centre_in_world(d, x, y, z);
-    let p_cam = (pose.camera_from_world * vec4<f32>(p_world, 1.0)).xyz;
-    if !(p_cam.z > 0.0) {
-        return;
-    }
-    let k = params.intrinsics;
-    let u = floor(k.fx_px * p_cam.x / p_cam.z + k.cx_px + 0.5);
-    let v = floor(k.fy_px * p_cam.y / p_cam.z + k.cy_px + 0.5);
-    if !(u >= 0.0 && v >= 0.0 && u < f32(k.width_px) && v < f32(k.height_px)) {
-        return;
-    }
-    let pixel = u32(v) * k.width_px + u32(u);
-    let depth = depth_m[pixel];
-    if !is_valid_f32(depth) {
-        return;
-    }
-    let sdf = depth - p_cam.z;
-    if sdf < -d.truncation_m {
-        return;
-    }
-    let tsdf = min(1.0, sdf / d.truncation_m);
-    let ix = voxel_index(d, x, y, z);
-    let word = tsdf_volume[ix];
-    let w = voxel_weight(word);
-    let updated = (voxel_tsdf(word) * f32(w) + tsdf) / f32(w + 1u);
-    tsdf_volume[ix] = pack_voxel(updated, min(w + 1u, d.max_weight));
-    if voxel_tsdf(pack_voxel(updated, 1u)) < FAR_TSDF {
-        let b = brick_index(d, x, y, z);
-        if atomicLoad(&surface_bricks[b]) == 0u {
-            atomicStore(&surface_bricks[b], 1u);
-        }
-    }
-    if params.color_enabled != 0u && tsdf < 1.0 {
-        let c_old = unpack_rgb8(color_volume[ix]);
-        let c_new = (c_old * f32(w) + color[pixel].rgb) / f32(w + 1u);
-        color_volume[ix] = pack_rgb8(c_new);
+        integrate_voxel(d, voxel_centre_in_world(d, gid.x, gid.y, z), voxel_index(d, gid.x, gid.y, z), brick_index(d, gid.x, gid.y, z));
     }
 }

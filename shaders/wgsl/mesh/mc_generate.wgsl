@@ -16,8 +16,7 @@
 //! at the two edge voxels (one-sided next to an unobserved voxel or the volume's border),
 //! interpolated along the edge (what trilinear interpolation reduces to on an edge). Its colour
 //! interpolates the edge voxels' colours (white without colour). Its `edge_id` =
-//! voxel_index(base) * 3 + axis is the same in every cell sharing the edge, for welding.
-#import tsdf
+//! voxel_slot(base) * 3 + axis is the same in every cell sharing the edge, for welding.
 #import marching_cubes
 #import mc_counters
 #import workgroup_scan
@@ -47,7 +46,9 @@ struct McVertex {
     y_m: f32,
     // World z, metres.
     z_m: f32,
-    // Voxel edge the vertex lies on: `voxel_index(lower voxel) * 3 + axis`; equal for every cell sharing the edge, so it welds triangles into an indexed mesh.
+    // Voxel edge the vertex lies on: `voxel_slot(lower voxel) * 3 + axis` (the voxel's index in the
+    // dense box or the sparse pool); equal for every cell sharing the edge, so it welds triangles
+    // into an indexed mesh.
     edge_id: u32,
     // Unit normal x (toward free space).
     normal_x: f32,
@@ -81,6 +82,10 @@ var<workgroup> sh_cell_case: array<u32, MC_CELLS_PER_BLOCK>;
 @group(0) @binding(5) var<storage, read> block_offsets: array<u32>;
 // Out: `3 * capacity_triangles` [`McVertex`].
 @group(0) @binding(6) var<storage, read_write> vertices: array<McVertex>;
+// A sparse map's hash table (map.wgsl); one placeholder word for a dense map.
+@group(0) @binding(7) var<storage, read> block_table: array<u32>;
+// A sparse map's key per pool block; one placeholder word for a dense map.
+@group(0) @binding(8) var<storage, read> block_coords: array<u32>;
 
 fn unit_f32(axis: u32) -> vec3<f32> {
     return vec3<f32>(unit_u32(axis));
@@ -99,12 +104,12 @@ fn mc_voxel_gradient(d: VolumeDesc, v: vec3<u32>, c: f32) -> vec3<f32> {
         var t_plus = 0.0;
         var t_minus = 0.0;
         if plus_ok {
-            let w = tsdf_volume[voxel_index(d, v.x + u.x, v.y + u.y, v.z + u.z)];
+            let w = map_word(d, v.x + u.x, v.y + u.y, v.z + u.z);
             plus_ok = voxel_weight(w) != 0u;
             t_plus = voxel_tsdf(w);
         }
         if minus_ok {
-            let w = tsdf_volume[voxel_index(d, v.x - u.x, v.y - u.y, v.z - u.z)];
+            let w = map_word(d, v.x - u.x, v.y - u.y, v.z - u.z);
             minus_ok = voxel_weight(w) != 0u;
             t_minus = voxel_tsdf(w);
         }
@@ -132,9 +137,10 @@ fn mc_vertex_normal(d: VolumeDesc, base: vec3<u32>, end: vec3<u32>, axis: u32, v
 }
 
 fn mc_edge_vertex(d: VolumeDesc, base: vec3<u32>, axis: u32) -> McVertex {
-    let ix0 = voxel_index(d, base.x, base.y, base.z);
+    // Both ends lie in allocated blocks: the cell's case came from their words.
+    let ix0 = voxel_slot(d, base.x, base.y, base.z);
     let end = base + unit_u32(axis);
-    let ix1 = voxel_index(d, end.x, end.y, end.z);
+    let ix1 = voxel_slot(d, end.x, end.y, end.z);
     let v0 = voxel_tsdf(tsdf_volume[ix0]);
     let v1 = voxel_tsdf(tsdf_volume[ix1]);
     let t = v0 / (v0 - v1);
@@ -163,7 +169,7 @@ fn main(@builtin(workgroup_id) wg_id: vec3<u32>, @builtin(num_workgroups) n_wg: 
         return;
     }
     let d = params.volume;
-    let origin = mc_block_origin(block_ix, params.n_blocks_x, params.n_blocks_y);
+    let origin = mc_block_origin(d, block_ix, params.n_blocks_x, params.n_blocks_y);
     let cell = origin + mc_local_cell(local_ix);
     var case_ix = 0u;
     if mc_cell_in_volume(d, cell) {

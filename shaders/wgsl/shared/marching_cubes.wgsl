@@ -4,13 +4,16 @@
 // in bricks ("blocks") of 8 x 8 x 4 = MC_CELLS_PER_BLOCK cells, so a surface touches few
 // blocks; blocks are numbered x fastest over n_blocks_x x n_blocks_y x n_blocks_z, cells inside
 // a block x fastest. Blocks at the far faces overhang the volume; their outside cells count as
-// empty. Corner c sits at offset (c & 1, (c >> 1) & 1, (c >> 2) & 1); bit c of the case is set
+// empty. In a sparse map, MC block i is the lower (i even) or upper half along z of pool block
+// i / 2, at the coordinates `block_coords` holds (declared by the importing kernel, with
+// `block_table` and `tsdf_volume` for map_lookup.wgsl); an unused pool block's key (EMPTY_KEY)
+// lies past the box, so its cells count as empty too. Corner c sits at offset (c & 1, (c >> 1) & 1, (c >> 2) & 1); bit c of the case is set
 // when its TSDF is negative. Cube edge e runs along axis e / 4 from the offset given by mc_edge_start_offset.
 // The table (`mc_table`, declared by the importing kernel) is generated in
 // core/src/mesh/mc_table.rs: 4 words per case, word 0 = edge mask | triangle count << 12,
 // words 1..2 = the triangles' cube edges as nibbles.
-// Mirrors core/src/cpu/marching_cubes.rs.
-#import tsdf
+// Mirrors core/src/cpu/mesh/marching_cubes.rs.
+#import map_lookup
 
 const MC_BLOCK_CELLS_X: u32 = 8u;
 const MC_BLOCK_CELLS_Y: u32 = 8u;
@@ -22,7 +25,10 @@ fn unit_u32(axis: u32) -> vec3<u32> {
 }
 
 // First cell of block `block_ix`.
-fn mc_block_origin(block_ix: u32, n_blocks_x: u32, n_blocks_y: u32) -> vec3<u32> {
+fn mc_block_origin(d: VolumeDesc, block_ix: u32, n_blocks_x: u32, n_blocks_y: u32) -> vec3<u32> {
+    if d.kind == MAP_SPARSE {
+        return (block_of_key(block_coords[block_ix / 2u]) << vec3<u32>(BRICK_SHIFT)) + vec3<u32>(0u, 0u, (block_ix % 2u) * MC_BLOCK_CELLS_Z);
+    }
     let block = vec3<u32>(block_ix % n_blocks_x, (block_ix / n_blocks_x) % n_blocks_y, block_ix / (n_blocks_x * n_blocks_y));
     return block * vec3<u32>(MC_BLOCK_CELLS_X, MC_BLOCK_CELLS_Y, MC_BLOCK_CELLS_Z);
 }
@@ -65,7 +71,7 @@ fn mc_case_from_flags(corner_flags: u32) -> u32 {
 fn mc_cell_case(d: VolumeDesc, cell: vec3<u32>) -> u32 {
     var corner_flags = 0u;
     for (var corner = 0u; corner < 8u; corner++) {
-        let word = tsdf_volume[voxel_index(d, cell.x + (corner & 1u), cell.y + ((corner >> 1u) & 1u), cell.z + ((corner >> 2u) & 1u))];
+        let word = map_word(d, cell.x + (corner & 1u), cell.y + ((corner >> 1u) & 1u), cell.z + ((corner >> 2u) & 1u));
         corner_flags |= mc_voxel_flags(word) << (4u * corner);
     }
     return mc_case_from_flags(corner_flags);

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
-// Dense TSDF volume (000-digest §1.3.2): `dim_x * dim_y * dim_z` voxels, x fastest, one u32 each
+// TSDF voxels (000-digest §1.3.2) of a box of `dim_x * dim_y * dim_z` voxels, one u32 each
 // packing a signed-normalised 16-bit TSDF in [-1, 1] (units of the truncation distance; low half,
-// two's complement) and a 16-bit integration weight (high half; 0 = never observed). Voxel
+// two's complement) and a 16-bit integration weight (high half; 0 = never observed). A dense map
+// stores them all, x fastest (voxel_index); a sparse one only its allocated blocks (map.wgsl). Voxel
 // (x, y, z) has its centre at origin + (x + 0.5, y + 0.5, z + 0.5) * voxel_size, in world metres.
 // Mirrors `VolumeDesc` in core/src/tsdf.rs and the helpers in core/src/cpu/shared.rs.
 
@@ -14,7 +15,8 @@ struct VolumeDesc {
     dim_z: u32,
     // Cap of the integration weight.
     max_weight: u32,
-    // World x of voxel (0, 0, 0)'s outer corner, metres.
+    // World x of the anchor voxel's outer corner (voxel_anchor: (0, 0, 0) for a dense box),
+    // metres.
     origin_x_m: f32,
     // World y of the origin corner, metres.
     origin_y_m: f32,
@@ -24,9 +26,14 @@ struct VolumeDesc {
     voxel_size_m: f32,
     // Truncation distance μ, metres.
     truncation_m: f32,
-    _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // MAP_DENSE (0): every voxel of the box is stored, at voxel_index(); MAP_SPARSE (1): blocks
+    // of 8³ voxels are allocated where surfaces are, found through the hash table of
+    // shared/map.wgsl, and the box is the addressable range of block keys.
+    kind: u32,
+    // Sparse: slots of the block hash table (a power of two); dense: 0.
+    hash_slots: u32,
+    // Sparse: blocks in the voxel pool; dense: 0.
+    pool_blocks: u32,
 }
 
 const TSDF_SCALE: f32 = 32767.0;
@@ -54,8 +61,29 @@ fn voxel_index(d: VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
     return x + d.dim_x * (y + d.dim_y * z);
 }
 
+const MAP_DENSE: u32 = 0u;
+const MAP_SPARSE: u32 = 1u;
+
+// The voxel whose outer corner the origin gives: (0, 0, 0) for a dense box; the middle of a
+// sparse map's box (rounded down to a block: a sparse box spans 164 m at 1 cm, and its corner
+// that far away would cost f32 positions near the camera tens of micrometres), so positions are
+// computed from voxel offsets to it, small numbers near the first camera.
+fn voxel_anchor(d: VolumeDesc) -> vec3<u32> {
+    if d.kind == MAP_SPARSE {
+        return (vec3<u32>(d.dim_x, d.dim_y, d.dim_z) >> vec3<u32>(BRICK_SHIFT + 1u)) << vec3<u32>(BRICK_SHIFT);
+    }
+    return vec3<u32>(0u);
+}
+
 fn voxel_centre_in_world(d: VolumeDesc, x: u32, y: u32, z: u32) -> vec3<f32> {
-    return vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m) + (vec3<f32>(f32(x), f32(y), f32(z)) + vec3<f32>(0.5)) * d.voxel_size_m;
+    let offset = vec3<i32>(vec3<u32>(x, y, z)) - vec3<i32>(voxel_anchor(d));
+    return vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m) + (vec3<f32>(offset) + vec3<f32>(0.5)) * d.voxel_size_m;
+}
+
+// World position of the box's voxel (0, 0, 0) outer corner (far away for a sparse map: for
+// clipping, not for positions).
+fn box_corner_in_world(d: VolumeDesc) -> vec3<f32> {
+    return vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m) - vec3<f32>(voxel_anchor(d)) * d.voxel_size_m;
 }
 
 // TSDF in [-1, 1] and weight -> one voxel word. The TSDF rounds to nearest, ties to even.

@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: MIT
-// Trilinear sampling of the TSDF volume bound as the module-scope `tsdf_volume` (declared by
-// the importing kernel, with `params.volume` its description). Mirrors
-// core/src/cpu/shared.rs::{sample_tsdf, tsdf_gradient}.
-#import tsdf
+// Trilinear sampling of a map of either kind, bound as the module-scope `tsdf_volume` and
+// `block_table` (declared by the importing kernel, see map_lookup.wgsl). Mirrors
+// core/src/cpu/shared.rs::sample_tsdf.
+#import map_lookup
 
 struct TsdfSample {
     // Interpolated TSDF, truncation units.
@@ -15,8 +15,12 @@ struct TsdfSample {
 // the 8 words are read unconditionally and blended by x, then y, then z (no loop and no early
 // exit, so SIMD implementations keep all lanes together and nothing spills to local memory).
 fn sample_tsdf(d: VolumeDesc, p_world: vec3<f32>) -> TsdfSample {
+    // Voxel coordinates relative to the anchor (small near the first camera, so the fractions
+    // keep f32's precision), then the anchor added as an integer.
     let g = (p_world - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m - vec3<f32>(0.5);
-    let base_f = floor(g);
+    let base_rel = floor(g);
+    let anchor = vec3<f32>(voxel_anchor(d));
+    let base_f = base_rel + anchor;
     var out: TsdfSample;
     out.tsdf = 0.0;
     out.valid = false;
@@ -24,15 +28,40 @@ fn sample_tsdf(d: VolumeDesc, p_world: vec3<f32>) -> TsdfSample {
         return out;
     }
     let b = vec3<u32>(base_f);
-    let f = g - base_f;
-    let w000 = tsdf_volume[voxel_index(d, b.x, b.y, b.z)];
-    let w100 = tsdf_volume[voxel_index(d, b.x + 1u, b.y, b.z)];
-    let w010 = tsdf_volume[voxel_index(d, b.x, b.y + 1u, b.z)];
-    let w110 = tsdf_volume[voxel_index(d, b.x + 1u, b.y + 1u, b.z)];
-    let w001 = tsdf_volume[voxel_index(d, b.x, b.y, b.z + 1u)];
-    let w101 = tsdf_volume[voxel_index(d, b.x + 1u, b.y, b.z + 1u)];
-    let w011 = tsdf_volume[voxel_index(d, b.x, b.y + 1u, b.z + 1u)];
-    let w111 = tsdf_volume[voxel_index(d, b.x + 1u, b.y + 1u, b.z + 1u)];
+    let f = g - base_rel;
+    var w000: u32;
+    var w100: u32;
+    var w010: u32;
+    var w110: u32;
+    var w001: u32;
+    var w101: u32;
+    var w011: u32;
+    var w111: u32;
+    if d.kind == MAP_SPARSE && all((b & vec3<u32>(7u)) < vec3<u32>(7u)) {
+        // The 8 voxels share one block (343 of 512 positions): one lookup.
+        let block = find_block(d, b >> vec3<u32>(BRICK_SHIFT));
+        if block == NO_BLOCK {
+            return out;
+        }
+        let s = block * BLOCK_VOXELS + voxel_in_block(b.x, b.y, b.z);
+        w000 = tsdf_volume[s];
+        w100 = tsdf_volume[s + 1u];
+        w010 = tsdf_volume[s + 8u];
+        w110 = tsdf_volume[s + 9u];
+        w001 = tsdf_volume[s + 64u];
+        w101 = tsdf_volume[s + 65u];
+        w011 = tsdf_volume[s + 72u];
+        w111 = tsdf_volume[s + 73u];
+    } else {
+        w000 = map_word(d, b.x, b.y, b.z);
+        w100 = map_word(d, b.x + 1u, b.y, b.z);
+        w010 = map_word(d, b.x, b.y + 1u, b.z);
+        w110 = map_word(d, b.x + 1u, b.y + 1u, b.z);
+        w001 = map_word(d, b.x, b.y, b.z + 1u);
+        w101 = map_word(d, b.x + 1u, b.y, b.z + 1u);
+        w011 = map_word(d, b.x, b.y + 1u, b.z + 1u);
+        w111 = map_word(d, b.x + 1u, b.y + 1u, b.z + 1u);
+    }
     // A weight of 0 (never observed) has all high bits 0.
     let observed = min(min(min(w000, w100), min(w010, w110)), min(min(w001, w101), min(w011, w111))) >= 0x10000u;
     let x00 = mix(voxel_tsdf(w000), voxel_tsdf(w100), f.x);

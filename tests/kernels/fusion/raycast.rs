@@ -97,12 +97,13 @@ fn render(s: &Setup, voxels: &[u32], colors: &[u32]) -> (Images, Images) {
     // Bindings: params, pose, volume, colours, then the outputs, the depth hint, the tiles.
     let inputs: [&[u8]; 3] = [bytemuck::bytes_of(&s.pose), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)];
     use webfusion_tests::Slot::{In, Out};
-    let slots = [In(inputs[0]), In(inputs[1]), In(inputs[2]), Out(16 * n), Out(4 * n), Out(4 * n), In(bytemuck::cast_slice(hint)), In(bytemuck::cast_slice(tiles))];
+    let no_blocks = [0u32];
+    let slots = [In(inputs[0]), In(inputs[1]), In(inputs[2]), Out(16 * n), Out(4 * n), Out(4 * n), In(bytemuck::cast_slice(hint)), In(bytemuck::cast_slice(tiles)), In(bytemuck::cast_slice(&no_blocks))];
     let out = webfusion_tests::run_kernel_slots(&gpu, &gpu.kernels.raycast, p, &slots, [p.intrinsics.width_px, p.intrinsics.height_px, 1]);
     finish(&gpu);
     let g = Images { vertex: cast(&out[0]), depth: cast(&out[1]), color: cast(&out[2]) };
     let mut c = Images { vertex: vec![[0.0; 4]; n], depth: vec![0.0; n], color: vec![0; n] };
-    cpu::raycast(p, &s.pose, voxels, colors, &mut c.vertex, &mut c.depth, &mut c.color, hint, tiles);
+    cpu::raycast(p, &s.pose, voxels, colors, &mut c.vertex, &mut c.depth, &mut c.color, hint, tiles, &no_blocks);
     (g, c)
 }
 
@@ -303,7 +304,7 @@ fn range_tiles(desc: VolumeDesc, voxels: &[u32], s: &Setup) -> Vec<u32> {
     let (tiles_x, tiles_y) = (k.width_px.div_ceil(RANGE_TILE_PX), k.height_px.div_ceil(RANGE_TILE_PX));
     let rp = RaycastRangeParams { volume: desc, intrinsics: k, tile_px: RANGE_TILE_PX, tiles_x, tiles_y, min_depth_m: s.params.min_depth_m, max_depth_m: s.params.max_depth_m, ..Default::default() };
     let mut tiles = vec![0u32; (2 * tiles_x * tiles_y) as usize];
-    cpu::raycast_range(&rp, &s.pose, &cpu::shared::surface_bricks(&desc, voxels), &mut tiles);
+    cpu::raycast_range(&rp, &s.pose, &cpu::shared::surface_bricks(&desc, voxels), &mut tiles, &[0]);
     tiles
 }
 

@@ -38,11 +38,12 @@ fn run(p: &RaycastRangeParams, pose: &CameraPose, bricks: &[u32]) -> (Vec<u32>, 
     let gpu = gpu();
     let n = (2 * p.tiles_x * p.tiles_y) as usize;
     let zeros = vec![0u32; n];
-    let bricks_dims = cpu::shared::brick_dims(&p.volume);
-    let out = run_kernel_slots(&gpu, &gpu.kernels.raycast_range, p, &[Slot::In(bytemuck::bytes_of(pose)), Slot::In(bytemuck::cast_slice(bricks)), Slot::InOut(bytemuck::cast_slice(&zeros))], bricks_dims);
+    let no_blocks = [0u32];
+    let slots = [Slot::In(bytemuck::bytes_of(pose)), Slot::In(bytemuck::cast_slice(bricks)), Slot::InOut(bytemuck::cast_slice(&zeros)), Slot::In(bytemuck::cast_slice(&no_blocks))];
+    let out = run_kernel_slots(&gpu, &gpu.kernels.raycast_range, p, &slots, [p.volume.brick_count() as u32, 1, 1]);
     finish(&gpu);
     let mut c = zeros;
-    cpu::raycast_range(p, pose, bricks, &mut c);
+    cpu::raycast_range(p, pose, bricks, &mut c, &no_blocks);
     (cast(&out[0]), c)
 }
 

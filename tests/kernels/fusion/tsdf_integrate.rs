@@ -109,7 +109,7 @@ fn full_sweep(p: &(TsdfIntegrateParams, CameraPose), depth_m: &[f32], voxels: &[
 
 /// Compares voxel and colour words under the tolerances above; returns the number of voxels
 /// differing beyond one LSB.
-fn compare_volumes(gpu: (&[u32], &[u32]), cpu: (&[u32], &[u32])) -> Result<usize, String> {
+pub(crate) fn compare_volumes(gpu: (&[u32], &[u32]), cpu: (&[u32], &[u32])) -> Result<usize, String> {
     let (gv, gc) = gpu;
     let (cv, cc) = cpu;
     let touched = cv.iter().filter(|&&w| voxel_weight(w) > 0).count().max(1);

@@ -319,7 +319,7 @@ fn timed_passes(gpu: &Gpu, store: &dyn TsdfStore, capacity: u32) -> ([f64; 3], M
     let sp = McScanParams { n_blocks: grid.n_blocks, capacity_triangles: capacity, max_workgroups_per_dimension: max, _pad0: 0 };
     let sp_buf = gpu.uniform_buffer("test.mc_scan.params", &sp);
     let gp_buf = gpu.uniform_buffer("test.mc_generate.params", &McGenerateParams::new(desc, grid, 0, capacity, store.has_color()));
-    let count_bg = mc_count::Bindings { params: &cp_buf, tsdf_volume: store.voxels(), mc_table: &table, block_counts: &block_counts }.bind_group(gpu);
+    let count_bg = mc_count::Bindings { params: &cp_buf, tsdf_volume: store.voxels(), mc_table: &table, block_counts: &block_counts, block_table: store.block_table(), block_coords: store.block_coords() }.bind_group(gpu);
     let scan_bg = mc_scan::Bindings { params: &sp_buf, block_counts: &block_counts, block_offsets: &block_offsets, active_blocks: &active_blocks, counters: &counters }.bind_group(gpu);
     let gen_bg = mc_generate::Bindings {
         params: &gp_buf,
@@ -329,6 +329,8 @@ fn timed_passes(gpu: &Gpu, store: &dyn TsdfStore, capacity: u32) -> ([f64; 3], M
         active_blocks: &active_blocks,
         block_offsets: &block_offsets,
         vertices: &vertices,
+        block_table: store.block_table(),
+        block_coords: store.block_coords(),
     }
     .bind_group(gpu);
     pollster::block_on(gpu.wait(None)).unwrap();

@@ -4,7 +4,7 @@
 use webfusion_core::cpu;
 use webfusion_core::kernels::mc_count::{MC_CELLS_PER_BLOCK, MC_COUNT_WG_SIZE, McCountParams, McGrid};
 use webfusion_core::mesh::mc_table::mc_table;
-use webfusion_tests::{cast, finish, gpu, run_kernel};
+use webfusion_tests::{Slot, cast, finish, gpu, run_kernel_slots};
 
 use crate::mesh::extraction::{TestVolume, assert_negative_control_u32, compare_u32, random_field, sphere};
 
@@ -18,10 +18,11 @@ fn run(vol: &TestVolume, max_per_dimension: u32) -> (Vec<u32>, Vec<u32>) {
     let table = mc_table().packed();
     let [x, y, z] = grid.count_workgroups(max_per_dimension);
     assert!(x * y * z * MC_COUNT_WG_SIZE >= grid.n_blocks && x <= max_per_dimension, "dispatch {x}x{y}x{z} covers {} blocks", grid.n_blocks);
-    let inputs: [&[u8]; 2] = [bytemuck::cast_slice(&vol.words), bytemuck::cast_slice(&table)];
-    let out = run_kernel(&gpu, &gpu.kernels.mc_count, &p, &inputs, &[4 * grid.n_blocks as usize], [x * MC_COUNT_WG_SIZE, y, z]);
+    let no_blocks = [0u32];
+    let slots = [Slot::In(bytemuck::cast_slice(&vol.words)), Slot::In(bytemuck::cast_slice(&table)), Slot::Out(4 * grid.n_blocks as usize), Slot::In(bytemuck::cast_slice(&no_blocks)), Slot::In(bytemuck::cast_slice(&no_blocks))];
+    let out = run_kernel_slots(&gpu, &gpu.kernels.mc_count, &p, &slots, [x * MC_COUNT_WG_SIZE, y, z]);
     let mut c = vec![0; grid.n_blocks as usize];
-    cpu::mc_count(&p, &vol.words, &table, &mut c);
+    cpu::mc_count(&p, &vol.words, &table, &mut c, &no_blocks, &no_blocks);
     finish(&gpu);
     (cast(&out[0]), c)
 }

@@ -8,7 +8,7 @@ use webfusion_core::kernels::mc_count::{McCountParams, McGrid};
 use webfusion_core::kernels::mc_generate::{McGenerateParams, McVertex};
 use webfusion_core::kernels::mc_scan::{McCounters, McScanParams};
 use webfusion_core::mesh::mc_table::mc_table;
-use webfusion_tests::{SENTINEL_F32, cast, finish, gpu, run_kernel};
+use webfusion_tests::{SENTINEL_F32, Slot, cast, finish, gpu, run_kernel_slots};
 
 use crate::mesh::extraction::{TestVolume, assert_negative_control_soup, assert_welds_exactly, compare_soups, random_field, sphere};
 
@@ -24,7 +24,7 @@ fn blocks(vol: &TestVolume, max_workgroups_per_dimension: u32) -> Blocks {
     let grid = McGrid::new(&vol.desc).unwrap();
     let table = mc_table().packed();
     let mut counts = vec![0; grid.n_blocks as usize];
-    cpu::mc_count(&McCountParams::new(vol.desc, grid), &vol.words, &table, &mut counts);
+    cpu::mc_count(&McCountParams::new(vol.desc, grid), &vol.words, &table, &mut counts, &[0], &[0]);
     let mut block_offsets = vec![0; grid.n_blocks as usize];
     let mut active_blocks = vec![0; grid.active_blocks_len(max_workgroups_per_dimension)];
     let mut counters = McCounters::default();
@@ -42,20 +42,24 @@ fn run(vol: &TestVolume, first: u32, capacity: u32, max_per_dimension: u32) -> (
     let p = McGenerateParams::new(vol.desc, b.grid, first, capacity, vol.colors.is_some());
     let table = mc_table().packed();
     let [x, y, z] = b.counters.generate_workgroups();
-    let inputs: [&[u8]; 5] = [
-        bytemuck::cast_slice(&vol.words),
-        bytemuck::cast_slice(vol.colors_or_placeholder()),
-        bytemuck::cast_slice(&table),
-        bytemuck::cast_slice(&b.active_blocks),
-        bytemuck::cast_slice(&b.block_offsets),
-    ];
     let n_vertices = 3 * capacity as usize;
+    let no_blocks = [0u32];
+    let slots = [
+        Slot::In(bytemuck::cast_slice(&vol.words)),
+        Slot::In(bytemuck::cast_slice(vol.colors_or_placeholder())),
+        Slot::In(bytemuck::cast_slice(&table)),
+        Slot::In(bytemuck::cast_slice(&b.active_blocks)),
+        Slot::In(bytemuck::cast_slice(&b.block_offsets)),
+        Slot::Out(n_vertices * std::mem::size_of::<McVertex>()),
+        Slot::In(bytemuck::cast_slice(&no_blocks)),
+        Slot::In(bytemuck::cast_slice(&no_blocks)),
+    ];
     let wg = gpu.kernels.mc_generate.kernel.workgroup_size;
-    let out = run_kernel(&gpu, &gpu.kernels.mc_generate, &p, &inputs, &[n_vertices * std::mem::size_of::<McVertex>()], [x * wg[0], y, z]);
+    let out = run_kernel_slots(&gpu, &gpu.kernels.mc_generate, &p, &slots, [x * wg[0], y, z]);
     let s = SENTINEL_F32.to_bits();
     let sentinel: McVertex = bytemuck::cast([s; 8]);
     let mut c = vec![sentinel; n_vertices];
-    cpu::mc_generate(&p, &vol.words, vol.colors_or_placeholder(), &table, &b.active_blocks, &b.block_offsets, &mut c, x * y * z);
+    cpu::mc_generate(&p, &vol.words, vol.colors_or_placeholder(), &table, &b.active_blocks, &b.block_offsets, &mut c, &no_blocks, &no_blocks, x * y * z);
     finish(&gpu);
     (cast(&out[0]), c)
 }

@@ -1,22 +1,36 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/fusion/raycast.wgsl`.
 
-use crate::cpu::shared::{FAR_TSDF, INVALID, INVALID_VEC4, TsdfSample, back_project, dot3, is_valid_f32, kinect_sigma_m, sample_tsdf, transform_vector, voxel_index, voxel_tsdf, voxel_weight};
+use crate::cpu::shared::{BRICK_SHIFT, FAR_TSDF, INVALID, INVALID_VEC4, MAP_SPARSE, MapRef, NO_SLOT, TsdfSample, back_project, box_corner_in_world, dot3, is_valid_f32, kinect_sigma_m, sample_tsdf, transform_vector, voxel_anchor, voxel_slot, voxel_tsdf, voxel_weight};
 use crate::cpu::fusion::raycast_range::tile_depth_range;
 use crate::kernels::raycast::{CameraPose, RaycastParams};
 use crate::tsdf::VolumeDesc;
 
 const OPAQUE: u32 = 0xff00_0000;
 
-/// Twin of `nearest_word()`.
-pub fn nearest_word(tsdf_volume: &[u32], d: &VolumeDesc, p_world: [f32; 3]) -> u32 {
+/// Twin of `nearest_slot()`.
+pub fn nearest_slot(map: MapRef<'_>, d: &VolumeDesc, p_world: [f32; 3]) -> u32 {
     let origin = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
-    let g: [f32; 3] = std::array::from_fn(|i| ((p_world[i] - origin[i]) / d.voxel_size_m).floor());
+    let anchor = voxel_anchor(d);
+    let g: [f32; 3] = std::array::from_fn(|i| ((p_world[i] - origin[i]) / d.voxel_size_m).floor() + anchor[i] as f32);
     let dims = [d.dim_x, d.dim_y, d.dim_z];
     if (0..3).any(|i| g[i] < 0.0 || g[i] >= dims[i] as f32) {
-        return 0;
+        return NO_SLOT;
     }
-    tsdf_volume[voxel_index(d, g[0] as u32, g[1] as u32, g[2] as u32) as usize]
+    voxel_slot(map, d, g[0] as u32, g[1] as u32, g[2] as u32)
+}
+
+/// Twin of `block_exit_t()`.
+pub fn block_exit_t(d: &VolumeDesc, o: [f32; 3], inv_dir: [f32; 3], p: [f32; 3]) -> f32 {
+    let anchor_m = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
+    let edge_m = (1u32 << BRICK_SHIFT) as f32 * d.voxel_size_m;
+    let t_out: [f32; 3] = std::array::from_fn(|i| {
+        let lo = anchor_m[i] + ((p[i] - anchor_m[i]) / edge_m).floor() * edge_m;
+        let t_a = (lo - o[i]) * inv_dir[i];
+        let t_b = (lo + edge_m - o[i]) * inv_dir[i];
+        t_a.max(t_b)
+    });
+    t_out[0].min(t_out[1]).min(t_out[2])
 }
 
 /// Twin of `hint_at()`.
@@ -63,7 +77,9 @@ pub fn raycast(
     color_rgba8: &mut [u32],
     depth_hint_raw: &[u32],
     depth_range_tiles: &[u32],
+    block_table: &[u32],
 ) {
+    let map = MapRef { tsdf_volume, block_table };
     let k = &params.intrinsics;
     let d = &params.volume;
     if pose.enabled == 0 {
@@ -83,12 +99,13 @@ pub fn raycast(
             let m = &pose.world_from_camera;
             let origin = [m[3][0], m[3][1], m[3][2]];
             let dir = transform_vector(m, ray_cam.map(|c| c * inv_len));
-            let lo = [d.origin_x_m + 0.5 * d.voxel_size_m, d.origin_y_m + 0.5 * d.voxel_size_m, d.origin_z_m + 0.5 * d.voxel_size_m];
+            let lo = box_corner_in_world(d).map(|c| c + 0.5 * d.voxel_size_m);
             let dims = [d.dim_x, d.dim_y, d.dim_z];
             let hi: [f32; 3] = std::array::from_fn(|i| lo[i] + (dims[i] - 1) as f32 * d.voxel_size_m);
             let safe_dir = dir.map(|c| if c.abs() < 1e-12 { 1e-12 } else { c });
-            let t0: [f32; 3] = std::array::from_fn(|i| (lo[i] - origin[i]) * (1.0 / safe_dir[i]));
-            let t1: [f32; 3] = std::array::from_fn(|i| (hi[i] - origin[i]) * (1.0 / safe_dir[i]));
+            let inv_dir = safe_dir.map(|c| 1.0 / c);
+            let t0: [f32; 3] = std::array::from_fn(|i| (lo[i] - origin[i]) * inv_dir[i]);
+            let t1: [f32; 3] = std::array::from_fn(|i| (hi[i] - origin[i]) * inv_dir[i]);
             let t_near: [f32; 3] = std::array::from_fn(|i| t0[i].min(t1[i]));
             let t_far: [f32; 3] = std::array::from_fn(|i| t0[i].max(t1[i]));
             let mut t = t_near[0].max(t_near[1]).max(t_near[2]).max(params.min_depth_m / z_per_t);
@@ -125,7 +142,18 @@ pub fn raycast(
             let at = |t: f32| std::array::from_fn(|i| origin[i] + dir[i] * t);
             let mut i = 0;
             while i < params.max_steps && t < t_end {
-                let word = nearest_word(tsdf_volume, d, at(t));
+                let p = at(t);
+                let slot = nearest_slot(map, d, p);
+                if slot == NO_SLOT && d.kind == MAP_SPARSE {
+                    // A block a sparse map never allocated: crossed in one step.
+                    prev = TsdfSample { tsdf: 0.0, valid: false };
+                    prev_nearest = false;
+                    prev_t = t;
+                    t = (block_exit_t(d, origin, inv_dir, p) + 0.01 * d.voxel_size_m).max(t + min_step);
+                    i += 1;
+                    continue;
+                }
+                let word = if slot == NO_SLOT { 0 } else { tsdf_volume[slot as usize] };
                 if voxel_weight(word) == 0 {
                     prev = TsdfSample { tsdf: 0.0, valid: false };
                     prev_nearest = false;
@@ -142,14 +170,14 @@ pub fn raycast(
                     i += 1;
                     continue;
                 }
-                let s = sample_tsdf(tsdf_volume, d, at(t));
+                let s = sample_tsdf(map, d, at(t));
                 if s.valid && s.tsdf <= 0.0 {
                     // A crossing from + to -, or (no positive sample before it) a ray that
                     // starts inside an object or enters it from unobserved space: it ends.
                     if prev.valid && prev.tsdf > 0.0 {
                         let mut before = prev;
                         if prev_nearest {
-                            let exact = sample_tsdf(tsdf_volume, d, at(prev_t));
+                            let exact = sample_tsdf(map, d, at(prev_t));
                             if exact.valid && exact.tsdf > 0.0 {
                                 before = exact;
                             }
@@ -177,9 +205,11 @@ pub fn raycast(
             vertex_in_world[ix] = [p[0], p[1], p[2], 1.0];
             depth_m[ix] = t_hit * z_per_t;
             let origin_v = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
-            let c: [u32; 3] = std::array::from_fn(|i| (((p[i] - origin_v[i]) / d.voxel_size_m).max(0.0) as u32).min(dims[i] - 1));
-            let cix = (voxel_index(d, c[0], c[1], c[2]) as usize).min(color_volume.len() - 1);
-            color_rgba8[ix] = color_volume[cix] | OPAQUE;
+            let anchor = voxel_anchor(d);
+            let c: [u32; 3] = std::array::from_fn(|i| (((p[i] - origin_v[i]) / d.voxel_size_m + anchor[i] as f32).max(0.0) as u32).min(dims[i] - 1));
+            let c_slot = voxel_slot(map, d, c[0], c[1], c[2]);
+            let rgb = if c_slot == NO_SLOT { 0 } else { color_volume[(c_slot as usize).min(color_volume.len() - 1)] };
+            color_rgba8[ix] = rgb | OPAQUE;
         }
     }
 }

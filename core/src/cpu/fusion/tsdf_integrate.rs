@@ -2,7 +2,9 @@
 //! CPU reference of `shaders/wgsl/fusion/tsdf_integrate.wgsl`.
 
 use crate::cpu::shared::{FAR_TSDF, brick_index, is_valid_f32, pack_rgb8, pack_voxel, transform_point, transform_vector, unpack_rgb8, voxel_centre_in_world, voxel_index, voxel_tsdf, voxel_weight};
+use crate::kernels::GpuIntrinsics;
 use crate::kernels::tsdf_integrate::{CameraPose, TsdfIntegrateParams};
+use crate::tsdf::VolumeDesc;
 
 /// Twin of `frustum_interval()`: the z-index interval `[lo, hi]` of the column points `a + k b`
 /// (camera frame) inside the frustum; empty when `lo > hi`.
@@ -47,42 +49,47 @@ pub fn tsdf_integrate(params: &TsdfIntegrateParams, pose: &CameraPose, depth_m: 
             let z0 = (range[0].floor() - 1.0).max(0.0) as u32;
             let z1 = (range[1].ceil() + 1.0).min((d.dim_z - 1) as f32) as u32;
             for gz in z0..=z1 {
-                let p_world = voxel_centre_in_world(d, gx, gy, gz);
-                let p_cam = transform_point(&pose.camera_from_world, p_world);
-                if !(p_cam[2] > 0.0) {
-                    continue;
-                }
-                let k = &params.intrinsics;
-                let u = (k.fx_px * p_cam[0] / p_cam[2] + k.cx_px + 0.5).floor();
-                let v = (k.fy_px * p_cam[1] / p_cam[2] + k.cy_px + 0.5).floor();
-                if !(u >= 0.0 && v >= 0.0 && u < k.width_px as f32 && v < k.height_px as f32) {
-                    continue;
-                }
-                let pixel = (v as u32 * k.width_px + u as u32) as usize;
-                let depth = depth_m[pixel];
-                if !is_valid_f32(depth) {
-                    continue;
-                }
-                let sdf = depth - p_cam[2];
-                if sdf < -d.truncation_m {
-                    continue;
-                }
-                let tsdf = (sdf / d.truncation_m).min(1.0);
-                let ix = voxel_index(d, gx, gy, gz) as usize;
-                let word = tsdf_volume[ix];
-                let w = voxel_weight(word);
-                let updated = (voxel_tsdf(word) * w as f32 + tsdf) / (w + 1) as f32;
-                tsdf_volume[ix] = pack_voxel(updated, (w + 1).min(d.max_weight));
-                if voxel_tsdf(pack_voxel(updated, 1)) < FAR_TSDF {
-                    surface_bricks[brick_index(d, gx, gy, gz) as usize] = 1;
-                }
-                if params.color_enabled != 0 && tsdf < 1.0 {
-                    let c_old = unpack_rgb8(color_volume[ix]);
-                    let c = color[pixel];
-                    let c_new: [f32; 3] = std::array::from_fn(|i| (c_old[i] * w as f32 + c[i]) / (w + 1) as f32);
-                    color_volume[ix] = pack_rgb8(c_new);
-                }
+                integrate_voxel(&params.intrinsics, params.color_enabled, d, pose, depth_m, color, tsdf_volume, color_volume, surface_bricks, voxel_centre_in_world(d, gx, gy, gz), voxel_index(d, gx, gy, gz), brick_index(d, gx, gy, gz));
             }
         }
+    }
+}
+
+/// Twin of `integrate_voxel()` (shared/tsdf_update.wgsl): updates the voxel centred at
+/// `p_world`, stored at `ix`, whose brick word is `brick`.
+#[expect(clippy::too_many_arguments, reason = "the globals the WGSL function reads, then its arguments")]
+pub fn integrate_voxel(k: &GpuIntrinsics, color_enabled: u32, d: &VolumeDesc, pose: &CameraPose, depth_m: &[f32], color: &[[f32; 4]], tsdf_volume: &mut [u32], color_volume: &mut [u32], surface_bricks: &mut [u32], p_world: [f32; 3], ix: u32, brick: u32) {
+    let p_cam = transform_point(&pose.camera_from_world, p_world);
+    if !(p_cam[2] > 0.0) {
+        return;
+    }
+    let u = (k.fx_px * p_cam[0] / p_cam[2] + k.cx_px + 0.5).floor();
+    let v = (k.fy_px * p_cam[1] / p_cam[2] + k.cy_px + 0.5).floor();
+    if !(u >= 0.0 && v >= 0.0 && u < k.width_px as f32 && v < k.height_px as f32) {
+        return;
+    }
+    let pixel = (v as u32 * k.width_px + u as u32) as usize;
+    let depth = depth_m[pixel];
+    if !is_valid_f32(depth) {
+        return;
+    }
+    let sdf = depth - p_cam[2];
+    if sdf < -d.truncation_m {
+        return;
+    }
+    let tsdf = (sdf / d.truncation_m).min(1.0);
+    let ix = ix as usize;
+    let word = tsdf_volume[ix];
+    let w = voxel_weight(word);
+    let updated = (voxel_tsdf(word) * w as f32 + tsdf) / (w + 1) as f32;
+    tsdf_volume[ix] = pack_voxel(updated, (w + 1).min(d.max_weight));
+    if voxel_tsdf(pack_voxel(updated, 1)) < FAR_TSDF {
+        surface_bricks[brick as usize] = 1;
+    }
+    if color_enabled != 0 && tsdf < 1.0 {
+        let c_old = unpack_rgb8(color_volume[ix]);
+        let c = color[pixel];
+        let c_new: [f32; 3] = std::array::from_fn(|i| (c_old[i] * w as f32 + c[i]) / (w + 1) as f32);
+        color_volume[ix] = pack_rgb8(c_new);
     }
 }

@@ -3,7 +3,7 @@
 //! same names and argument order (the WGSL's module-scope `tsdf_volume` and `mc_table` come
 //! first here).
 
-use crate::cpu::shared::{voxel_index, voxel_tsdf, voxel_weight};
+use crate::cpu::shared::{BRICK_SHIFT, MAP_SPARSE, MapRef, block_of_key, map_word, voxel_tsdf, voxel_weight};
 use crate::kernels::mc_count::{MC_BLOCK_CELLS_X, MC_BLOCK_CELLS_Y, MC_BLOCK_CELLS_Z};
 use crate::tsdf::VolumeDesc;
 
@@ -38,8 +38,12 @@ pub fn unit_u32(axis: u32) -> [u32; 3] {
     [u32::from(axis == 0), u32::from(axis == 1), u32::from(axis == 2)]
 }
 
-/// Twin of `mc_block_origin()`.
-pub fn mc_block_origin(block_ix: u32, n_blocks_x: u32, n_blocks_y: u32) -> [u32; 3] {
+/// Twin of `mc_block_origin()` (`block_coords`: a sparse map's key per pool block).
+pub fn mc_block_origin(d: &VolumeDesc, block_coords: &[u32], block_ix: u32, n_blocks_x: u32, n_blocks_y: u32) -> [u32; 3] {
+    if d.kind == MAP_SPARSE {
+        let b = block_of_key(block_coords[(block_ix / 2) as usize]).map(|v| v << BRICK_SHIFT);
+        return [b[0], b[1], b[2] + (block_ix % 2) * MC_BLOCK_CELLS_Z];
+    }
     [block_ix % n_blocks_x * MC_BLOCK_CELLS_X, (block_ix / n_blocks_x) % n_blocks_y * MC_BLOCK_CELLS_Y, block_ix / (n_blocks_x * n_blocks_y) * MC_BLOCK_CELLS_Z]
 }
 
@@ -84,10 +88,10 @@ pub fn mc_case_from_flags(corner_flags: u32) -> u32 {
 }
 
 /// Twin of `mc_cell_case()`.
-pub fn mc_cell_case(tsdf_volume: &[u32], d: &VolumeDesc, cell: [u32; 3]) -> u32 {
+pub fn mc_cell_case(map: MapRef<'_>, d: &VolumeDesc, cell: [u32; 3]) -> u32 {
     let mut corner_flags = 0;
     for corner in 0..8u32 {
-        let word = tsdf_volume[voxel_index(d, cell[0] + (corner & 1), cell[1] + ((corner >> 1) & 1), cell[2] + ((corner >> 2) & 1)) as usize];
+        let word = map_word(map, d, cell[0] + (corner & 1), cell[1] + ((corner >> 1) & 1), cell[2] + ((corner >> 2) & 1));
         corner_flags |= mc_voxel_flags(word) << (4 * corner);
     }
     mc_case_from_flags(corner_flags)

@@ -61,7 +61,17 @@ impl McGrid {
         Ok(Self { cells, n_blocks_x, n_blocks_y, n_blocks_z, n_blocks: n_blocks as u32 })
     }
 
-    /// Cells, `(dim_x - 1) * (dim_y - 1) * (dim_z - 1)`.
+    /// The grid marching cubes runs over in `volume`: the dense box's blocks of cells, or for a
+    /// sparse map two blocks of 8 x 8 x 4 cells per pool block (an unused one is empty).
+    pub fn for_volume(volume: &VolumeDesc) -> Result<Self> {
+        if volume.kind != crate::cpu::shared::MAP_SPARSE {
+            return Self::new(volume);
+        }
+        let n_blocks = 2 * volume.pool_blocks;
+        Ok(Self { cells: [volume.dim_x - 1, volume.dim_y - 1, volume.dim_z - 1], n_blocks_x: 1, n_blocks_y: 1, n_blocks_z: n_blocks, n_blocks })
+    }
+
+        /// Cells, `(dim_x - 1) * (dim_y - 1) * (dim_z - 1)`.
     pub fn n_cells(&self) -> u64 {
         self.cells.iter().map(|&c| u64::from(c)).product()
     }

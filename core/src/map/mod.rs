@@ -1,0 +1,447 @@
+// SPDX-License-Identifier: MIT
+//! The map: where fused geometry lives, in one of two kinds behind one description
+//! ([`VolumeDesc`], `shaders/wgsl/shared/map.wgsl`):
+//!
+//! - **dense** ([`DenseTsdfVolume`]): every voxel of a box, x fastest. Simple, and the
+//!   reference the sparse map is tested against; a room does not fit in it.
+//! - **sparse** ([`SparseMap`], voxel-block hashing after Nießner et al. 2013 and InfiniTAM):
+//!   only blocks of 8³ voxels near measured surfaces are stored, in a bounded pool, and a hash
+//!   table maps block coordinates to pool blocks. Its box is the addressable range of block keys
+//!   (2048 x 2048 x 1023 blocks: 164 x 164 x 82 m at 1 cm voxels) centred on the first camera,
+//!   so the world grows wherever the camera looks.
+//!
+//! Every kernel that reads a map reads both kinds (`map_lookup.wgsl`); integration differs:
+//! the dense box is swept column by column in the frustum (`tsdf_integrate`), the sparse map
+//! runs, per frame, `block_alloc` (insert the blocks of every pixel's truncation band),
+//! `block_assign` (pool blocks for new keys), `block_visible` (the allocated blocks in the
+//! frustum), `block_list_args` (their count as a dispatch size) and `block_integrate` (one
+//! workgroup per visible block). Capacity is explicit: the pool's size comes from a memory
+//! budget, and a full pool or hash table is counted on the GPU ([`MapStats`]), never written
+//! past: a key without a block reads as unobserved.
+
+use crate::cpu::shared::{
+    BLOCK_VOXELS, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_HASH_FULL,
+    MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_POOL_FULL, MAP_COUNTER_VISIBLE, MAP_COUNTERS, MAP_SPARSE,
+    block_of_key,
+};
+use crate::tsdf::{TsdfConfig, TsdfStore, VolumeDesc};
+use crate::{Error, Gpu, Result};
+
+pub use crate::tsdf::DenseTsdfVolume;
+
+/// Voxels along x, y and z of a sparse map's box: 2048, 2048 and 1023 blocks of 8 (block keys
+/// pack 11, 11 and 10 bits; the all-ones key marks a free hash slot).
+pub const SPARSE_DIMS_VOXELS: [u32; 3] = [2048 * 8, 2048 * 8, 1023 * 8];
+/// Default pool size, blocks of 8³ voxels: 32768 blocks take 64 MiB of TSDF words (and as much
+/// colour), what the default dense box takes, and fit WebGPU's default 128 MiB binding.
+pub const DEFAULT_POOL_BLOCKS: u32 = 32768;
+/// Most pool blocks: the voxel words of one pool are one binding, at most 128 MiB in the browser.
+pub const MAX_POOL_BLOCKS: u32 = 65536;
+/// Bytes one pool block costs with colour: TSDF and colour words, its surface-brick word, its
+/// key, its visible-list slot and two hash slots (the table is kept at most half full).
+pub const BLOCK_BYTES_WITH_COLOR: u64 = BLOCK_VOXELS as u64 * 8 + 4 + 4 + 4 + 2 * 8;
+
+/// Which kind of map.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MapKind {
+    /// Every voxel of a box.
+    #[default]
+    Dense,
+    /// Voxel blocks allocated where surfaces are (voxel-block hashing).
+    Sparse,
+}
+
+impl MapKind {
+    /// The name the command line and stats use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Dense => "dense",
+            Self::Sparse => "sparse",
+        }
+    }
+}
+
+impl std::str::FromStr for MapKind {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "dense" => Ok(Self::Dense),
+            "sparse" => Ok(Self::Sparse),
+            other => Err(Error::InvalidConfig(format!(
+                "unknown map kind `{other}`: expected dense or sparse"
+            ))),
+        }
+    }
+}
+
+/// Pool blocks a memory budget holds (with colour), clamped to [1, [`MAX_POOL_BLOCKS`]].
+pub fn pool_blocks_for_budget(budget_bytes: u64) -> u32 {
+    (budget_bytes / BLOCK_BYTES_WITH_COLOR).clamp(1, u64::from(MAX_POOL_BLOCKS)) as u32
+}
+
+/// Hash slots for a pool: the next power of two at or above twice its blocks (at most half full).
+pub fn hash_slots_for_pool(pool_blocks: u32) -> u32 {
+    (2 * pool_blocks).next_power_of_two()
+}
+
+/// What a sparse map's counters say.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MapStats {
+    /// Pool blocks in use.
+    pub blocks_used: u32,
+    /// Pool blocks in all.
+    pub pool_blocks: u32,
+    /// Blocks the last frame integrated.
+    pub visible_blocks: u32,
+    /// Block insertions that found no hash slot (cumulative).
+    pub hash_full: u32,
+    /// Blocks refused for want of pool (cumulative, once per key and frame).
+    pub pool_full: u32,
+    /// Surface samples outside the map's box (cumulative).
+    pub out_of_range: u32,
+}
+
+impl MapStats {
+    /// From the counters' words.
+    pub fn from_words(words: &[u32], pool_blocks: u32) -> Self {
+        Self {
+            blocks_used: words[MAP_COUNTER_BLOCKS_USED],
+            pool_blocks,
+            visible_blocks: words[MAP_COUNTER_VISIBLE],
+            hash_full: words[MAP_COUNTER_HASH_FULL],
+            pool_full: words[MAP_COUNTER_POOL_FULL],
+            out_of_range: words[MAP_COUNTER_OUT_OF_RANGE],
+        }
+    }
+
+    /// Whether some surface could not be stored (the map is incomplete there).
+    pub fn exhausted(&self) -> bool {
+        self.hash_full > 0 || self.pool_full > 0
+    }
+}
+
+/// One block of a map, downloaded: its block coordinates in the map's box and its 512 voxel
+/// words (and colour words, when colour is fused), x fastest.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MapBlock {
+    /// Block coordinates (voxel coordinates / 8).
+    pub coords: [u32; 3],
+    /// TSDF + weight words.
+    pub voxels: Vec<u32>,
+    /// RGB8 words (empty without colour).
+    pub colors: Vec<u32>,
+}
+
+/// A sparse voxel-block map on the GPU.
+#[derive(Debug)]
+pub struct SparseMap {
+    config: TsdfConfig,
+    desc: VolumeDesc,
+    voxels: wgpu::Buffer,
+    colors: wgpu::Buffer,
+    surface_bricks: wgpu::Buffer,
+    block_table: wgpu::Buffer,
+    block_coords: wgpu::Buffer,
+    counters: wgpu::Buffer,
+    visible_blocks: wgpu::Buffer,
+}
+
+impl SparseMap {
+    /// An empty map of `config.pool_blocks` blocks whose box has its voxel (0, 0, 0) corner at
+    /// `origin_in_world` (see [`TsdfConfig::origin_for_first_camera`]).
+    pub fn new(gpu: &Gpu, config: TsdfConfig, origin_in_world: [f32; 3]) -> Result<Self> {
+        config.validate(gpu.limits.max_storage_buffer_binding_size)?;
+        let desc = config.desc(origin_in_world);
+        let pool = desc.pool_blocks as usize;
+        let voxels = gpu.storage_buffer::<u32>("core.map.voxels", pool * BLOCK_VOXELS as usize);
+        let colors = gpu.storage_buffer::<u32>(
+            "core.map.colors",
+            if config.color {
+                pool * BLOCK_VOXELS as usize
+            } else {
+                1
+            },
+        );
+        let surface_bricks = gpu.storage_buffer::<u32>("core.map.surface_bricks", pool);
+        let block_table =
+            gpu.storage_buffer::<u32>("core.map.block_table", 2 * desc.hash_slots as usize);
+        let block_coords = gpu.storage_buffer::<u32>("core.map.block_coords", pool);
+        let visible_blocks = gpu.storage_buffer::<u32>("core.map.visible_blocks", pool);
+        let counters = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("core.map.counters"),
+            size: (MAP_COUNTERS * 4) as u64,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::INDIRECT
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let map = Self {
+            config,
+            desc,
+            voxels,
+            colors,
+            surface_bricks,
+            block_table,
+            block_coords,
+            counters,
+            visible_blocks,
+        };
+        map.reset(gpu);
+        Ok(map)
+    }
+
+    /// The settings it was created with.
+    pub fn config(&self) -> &TsdfConfig {
+        &self.config
+    }
+
+    /// The counters (`MAP_COUNTER_*` words; the indirect dispatch size of `block_integrate`).
+    pub fn counters(&self) -> &wgpu::Buffer {
+        &self.counters
+    }
+
+    /// The pool indices of the last frame's visible blocks.
+    pub fn visible_blocks(&self) -> &wgpu::Buffer {
+        &self.visible_blocks
+    }
+
+    /// Reads the counters (waits for the GPU).
+    pub async fn stats(&self, gpu: &Gpu) -> Result<MapStats> {
+        let words: Vec<u32> = gpu.read_buffer(&self.counters, MAP_COUNTERS).await?;
+        Ok(MapStats::from_words(&words, self.desc.pool_blocks))
+    }
+
+    /// Downloads every allocated block, sorted by block key (a canonical order, whatever order
+    /// the GPU allocated them in). Waits for the GPU.
+    pub async fn download_blocks(&self, gpu: &Gpu) -> Result<Vec<MapBlock>> {
+        let used = self.stats(gpu).await?.blocks_used as usize;
+        let n = used * BLOCK_VOXELS as usize;
+        let keys: Vec<u32> = gpu.read_buffer(&self.block_coords, used).await?;
+        let voxels: Vec<u32> = gpu.read_buffer(&self.voxels, n).await?;
+        let colors: Vec<u32> = if self.config.color {
+            gpu.read_buffer(&self.colors, n).await?
+        } else {
+            Vec::new()
+        };
+        let mut order: Vec<usize> = (0..used).collect();
+        order.sort_by_key(|&i| keys[i]);
+        let words = |all: &[u32], i: usize| {
+            if all.is_empty() {
+                Vec::new()
+            } else {
+                all[i * BLOCK_VOXELS as usize..(i + 1) * BLOCK_VOXELS as usize].to_vec()
+            }
+        };
+        Ok(order
+            .into_iter()
+            .map(|i| MapBlock {
+                coords: block_of_key(keys[i]),
+                voxels: words(&voxels, i),
+                colors: words(&colors, i),
+            })
+            .collect())
+    }
+}
+
+impl SparseMap {
+    /// Replaces the map's contents with `blocks` (as [`Self::download_blocks`] gives them; any
+    /// order): block `i` goes to pool block `i`, its key into the hash table by the probing the
+    /// kernels use. More blocks than the pool, a block outside the box or a full probe sequence
+    /// is an error and leaves the map empty.
+    pub fn upload_blocks(&self, gpu: &Gpu, blocks: &[MapBlock]) -> Result<()> {
+        self.reset(gpu);
+        let d = self.desc;
+        let bad = |why: String| Err(Error::InvalidConfig(format!("uploading {} map blocks: {why}", blocks.len())));
+        if blocks.len() > d.pool_blocks as usize {
+            return bad(format!("the pool holds {} blocks", d.pool_blocks));
+        }
+        let n_box = [d.dim_x, d.dim_y, d.dim_z].map(|v| v >> crate::cpu::shared::BRICK_SHIFT);
+        let mut table = vec![EMPTY_KEY; 2 * d.hash_slots as usize];
+        let mut keys = vec![EMPTY_KEY; d.pool_blocks as usize];
+        let voxel_words = BLOCK_VOXELS as usize;
+        let mut voxels = vec![0u32; blocks.len() * voxel_words];
+        let mut colors = vec![0u32; if self.config.color { blocks.len() * voxel_words } else { 0 }];
+        let mut surface = vec![0u32; blocks.len()];
+        for (i, block) in blocks.iter().enumerate() {
+            if (0..3).any(|a| block.coords[a] >= n_box[a]) {
+                return bad(format!("block {:?} lies outside the box of {n_box:?} blocks", block.coords));
+            }
+            if block.voxels.len() != voxel_words || (self.config.color && block.colors.len() != voxel_words) {
+                return bad(format!("block {:?} has {} voxel and {} colour words, not {voxel_words}", block.coords, block.voxels.len(), block.colors.len()));
+            }
+            let key = crate::cpu::shared::block_key(block.coords);
+            let mask = d.hash_slots - 1;
+            let mut s = crate::cpu::shared::block_hash(block.coords) & mask;
+            let mut placed = false;
+            for _ in 0..crate::cpu::shared::MAP_MAX_PROBES {
+                let k = table[2 * s as usize];
+                if k == key {
+                    return bad(format!("block {:?} is given twice", block.coords));
+                }
+                if k == EMPTY_KEY {
+                    table[2 * s as usize] = key;
+                    table[2 * s as usize + 1] = i as u32;
+                    placed = true;
+                    break;
+                }
+                s = (s + 1) & mask;
+            }
+            if !placed {
+                return bad(format!("no hash slot within {} probes of block {:?}", crate::cpu::shared::MAP_MAX_PROBES, block.coords));
+            }
+            keys[i] = key;
+            voxels[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.voxels);
+            if self.config.color {
+                colors[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.colors);
+            }
+            let far = crate::cpu::shared::FAR_TSDF;
+            surface[i] = u32::from(block.voxels.iter().any(|&w| crate::cpu::shared::voxel_weight(w) > 0 && crate::cpu::shared::voxel_tsdf(w) < far));
+        }
+        gpu.write_buffer(&self.block_table, &table);
+        gpu.write_buffer(&self.block_coords, &keys);
+        gpu.write_buffer(&self.voxels, &voxels);
+        if self.config.color {
+            gpu.write_buffer(&self.colors, &colors);
+        }
+        gpu.write_buffer(&self.surface_bricks, &surface);
+        let mut counters = [0u32; MAP_COUNTERS];
+        counters[MAP_COUNTER_BLOCKS_USED] = blocks.len() as u32;
+        gpu.write_buffer(&self.counters, &counters);
+        Ok(())
+    }
+}
+
+impl TsdfStore for SparseMap {
+    fn desc(&self) -> VolumeDesc {
+        self.desc
+    }
+    fn voxels(&self) -> &wgpu::Buffer {
+        &self.voxels
+    }
+    fn colors(&self) -> &wgpu::Buffer {
+        &self.colors
+    }
+    fn surface_bricks(&self) -> &wgpu::Buffer {
+        &self.surface_bricks
+    }
+    fn block_table(&self) -> &wgpu::Buffer {
+        &self.block_table
+    }
+    fn block_coords(&self) -> &wgpu::Buffer {
+        &self.block_coords
+    }
+    fn has_color(&self) -> bool {
+        self.config.color
+    }
+    fn reset(&self, gpu: &Gpu) {
+        gpu.fill_buffer(&self.block_table, EMPTY_KEY);
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("core.map.reset"),
+            });
+        for b in [
+            &self.voxels,
+            &self.colors,
+            &self.surface_bricks,
+            &self.block_coords,
+            &self.counters,
+            &self.visible_blocks,
+        ] {
+            encoder.clear_buffer(b, 0, None);
+        }
+        gpu.queue.submit([encoder.finish()]);
+    }
+    fn memory_bytes(&self) -> u64 {
+        [
+            &self.voxels,
+            &self.colors,
+            &self.surface_bricks,
+            &self.block_table,
+            &self.block_coords,
+            &self.counters,
+            &self.visible_blocks,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum()
+    }
+}
+
+/// A map of either kind.
+#[derive(Debug)]
+pub enum Map {
+    /// Every voxel of a box.
+    Dense(DenseTsdfVolume),
+    /// Voxel blocks where surfaces are.
+    Sparse(SparseMap),
+}
+
+impl Map {
+    /// An empty map of `config.kind`, its box's voxel (0, 0, 0) corner at `origin_in_world`.
+    pub fn new(gpu: &Gpu, config: TsdfConfig, origin_in_world: [f32; 3]) -> Result<Self> {
+        Ok(match config.kind {
+            MapKind::Dense => Self::Dense(DenseTsdfVolume::new(gpu, config, origin_in_world)?),
+            MapKind::Sparse => Self::Sparse(SparseMap::new(gpu, config, origin_in_world)?),
+        })
+    }
+
+    /// Its kind.
+    pub fn kind(&self) -> MapKind {
+        match self {
+            Self::Dense(_) => MapKind::Dense,
+            Self::Sparse(_) => MapKind::Sparse,
+        }
+    }
+
+    /// The sparse map, if it is one.
+    pub fn sparse(&self) -> Option<&SparseMap> {
+        match self {
+            Self::Sparse(m) => Some(m),
+            Self::Dense(_) => None,
+        }
+    }
+
+    fn store(&self) -> &dyn TsdfStore {
+        match self {
+            Self::Dense(m) => m,
+            Self::Sparse(m) => m,
+        }
+    }
+}
+
+impl TsdfStore for Map {
+    fn desc(&self) -> VolumeDesc {
+        self.store().desc()
+    }
+    fn voxels(&self) -> &wgpu::Buffer {
+        self.store().voxels()
+    }
+    fn colors(&self) -> &wgpu::Buffer {
+        self.store().colors()
+    }
+    fn surface_bricks(&self) -> &wgpu::Buffer {
+        self.store().surface_bricks()
+    }
+    fn block_table(&self) -> &wgpu::Buffer {
+        self.store().block_table()
+    }
+    fn block_coords(&self) -> &wgpu::Buffer {
+        self.store().block_coords()
+    }
+    fn has_color(&self) -> bool {
+        self.store().has_color()
+    }
+    fn reset(&self, gpu: &Gpu) {
+        self.store().reset(gpu);
+    }
+    fn memory_bytes(&self) -> u64 {
+        self.store().memory_bytes()
+    }
+}
+
+/// Whether `desc` describes a sparse map.
+pub fn is_sparse(desc: &VolumeDesc) -> bool {
+    desc.kind == MAP_SPARSE
+}

@@ -1,0 +1,72 @@
+// SPDX-License-Identifier: MIT
+//! Each invocation tests one allocated block of a sparse map against the camera's view and
+//! appends it to `visible_blocks` (atomicAdd on MAP_COUNTER_VISIBLE; the list has a slot for
+//! every pool block, so it cannot overflow) when integration may change one of its voxels: the
+//! block's box, bounded by its 8 corners in the camera frame, reaches in front of the camera,
+//! not beyond `max_depth_m` + μ, and its projection (the bounding rectangle of the corners'
+//! projections, widened by half a pixel for the nearest-pixel rounding) meets the image. A box
+//! that straddles the camera plane counts as visible. The visible list's order depends on the
+//! order invocations run; its set does not. Nothing is listed when the pose is disabled.
+#import camera
+#import camera_pose
+#import map
+
+struct BlockVisibleParams {
+    // The sparse map.
+    volume: VolumeDesc,
+    // Intrinsics of the depth image.
+    intrinsics: Intrinsics,
+    // Farthest valid depth, metres: blocks wholly beyond it plus μ take no update.
+    max_depth_m: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: BlockVisibleParams;
+// The pose the depth is fused at.
+@group(0) @binding(1) var<storage, read> pose: CameraPose;
+// The key of each pool block in use.
+@group(0) @binding(2) var<storage, read> block_coords: array<u32>;
+// The map's counters (map.wgsl).
+@group(0) @binding(3) var<storage, read_write> map_counters: array<atomic<u32>>;
+// Out: the pool indices of the visible blocks, in any order (MAP_COUNTER_VISIBLE of them).
+@group(0) @binding(4) var<storage, read_write> visible_blocks: array<u32>;
+
+@compute @workgroup_size(256, 1, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let block = gid.x;
+    if block >= atomicLoad(&map_counters[MAP_COUNTER_BLOCKS_USED]) || pose.enabled == 0u {
+        return;
+    }
+    let d = params.volume;
+    let k = params.intrinsics;
+    let edge_m = f32(1u << BRICK_SHIFT) * d.voxel_size_m;
+    let lo_voxel = vec3<i32>(block_of_key(block_coords[block]) << vec3<u32>(BRICK_SHIFT)) - vec3<i32>(voxel_anchor(d));
+    let lo = vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m) + vec3<f32>(lo_voxel) * d.voxel_size_m;
+    var z_near = 1e30;
+    var z_far = -1e30;
+    var uv_min = vec2<f32>(1e30);
+    var uv_max = vec2<f32>(-1e30);
+    for (var corner = 0u; corner < 8u; corner++) {
+        let offset = vec3<f32>(f32(corner & 1u), f32((corner >> 1u) & 1u), f32(corner >> 2u)) * edge_m;
+        let p = (pose.camera_from_world * vec4<f32>(lo + offset, 1.0)).xyz;
+        z_near = min(z_near, p.z);
+        z_far = max(z_far, p.z);
+        if p.z > 0.0 {
+            let uv = vec2<f32>(k.fx_px * p.x / p.z + k.cx_px, k.fy_px * p.y / p.z + k.cy_px);
+            uv_min = min(uv_min, uv);
+            uv_max = max(uv_max, uv);
+        }
+    }
+    if z_far <= 0.0 || z_near > params.max_depth_m + d.truncation_m {
+        return;
+    }
+    if z_near > 0.0 {
+        let size = vec2<f32>(f32(k.width_px), f32(k.height_px));
+        if any(uv_max < vec2<f32>(-0.5)) || any(uv_min >= size - vec2<f32>(0.5)) {
+            return;
+        }
+    }
+    visible_blocks[atomicAdd(&map_counters[MAP_COUNTER_VISIBLE], 1u)] = block;
+}
