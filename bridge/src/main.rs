@@ -114,6 +114,10 @@ struct BenchArgs {
     /// by one on the next frame (0: preprocessing only).
     #[arg(long, default_value_t = 10)]
     fusion_frames: usize,
+    /// The map the pipeline fuses into: `dense` (the default cube) or `sparse` (voxel blocks
+    /// of the same voxel size, the default pool).
+    #[arg(long, default_value = "dense")]
+    map_kind: webfusion_core::map::MapKind,
     #[command(flatten)]
     calibration: CalibrationArgs,
 }
@@ -374,7 +378,10 @@ fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> an
     use webfusion_core::engine::FrameEncoder;
     use webfusion_core::fusion::{FusionConfig, KinectFusion};
     let n = args.fusion_frames.min(source.frame_count().saturating_sub(1));
-    let mut fusion = KinectFusion::new(gpu, source.calibration(), FusionConfig::default())?;
+    let mut config = FusionConfig::default();
+    config.tsdf.kind = args.map_kind;
+    let mut fusion = KinectFusion::new(gpu, source.calibration(), config)?;
+    println!("map: {} ({:.0} MiB)", args.map_kind.name(), webfusion_core::tsdf::TsdfStore::memory_bytes(fusion.volume()) as f64 / 1048576.0);
     for i in 0..n {
         pollster::block_on(fusion.submit_frame(gpu, &source.read_frame(i)?))?;
     }
@@ -388,7 +395,7 @@ fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> an
         ("preprocess (whole chain)", Box::new(|fe| fusion.preprocessor().encode_in(gpu, &mut fe.stage("preprocess")))),
         ("track (every level, to convergence)", Box::new(|fe| fusion.tracker().encode_in(gpu, &mut fe.stage("track")))),
         ("keep the reference", Box::new(|fe| fusion.tracker().encode_keep_previous(gpu, &mut fe.stage("keep")))),
-        ("integrate", Box::new(|fe| fusion.mapper().encode_in(gpu, &mut fe.stage("integrate")))),
+        ("integrate", Box::new(|fe| fusion.mapper().encode(gpu, fe, "integrate"))),
         ("raycast + prediction pyramid", Box::new(|fe| fusion.predictor().encode(gpu, fe, "predict"))),
     ];
     let tracker = fusion.tracker();

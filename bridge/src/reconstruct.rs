@@ -27,9 +27,16 @@ pub(crate) struct ReconstructArgs {
     /// Voxel edge length, metres (default: 3 m / voxels per axis).
     #[arg(long)]
     voxel_size: Option<f32>,
-    /// Voxels per axis of the cubic volume.
+    /// Voxels per axis of the cubic volume (`--map-kind dense`).
     #[arg(long, default_value_t = webfusion_core::tsdf::DEFAULT_VOLUME_DIM_VOXELS)]
     volume: u32,
+    /// The map: `dense` (a cube of `--volume`³ voxels placed by the first camera) or `sparse`
+    /// (voxel blocks allocated wherever surfaces are seen, centred on the first camera).
+    #[arg(long, default_value = "dense")]
+    map_kind: webfusion_core::map::MapKind,
+    /// GPU memory for a sparse map's voxel pool and colour, MiB (at most 65536 blocks of 8³).
+    #[arg(long, default_value_t = 128)]
+    map_budget_mib: u64,
     /// Put the first camera at the volume's centre instead of in front of it (for a camera
     /// that turns in place).
     #[arg(long)]
@@ -80,7 +87,7 @@ impl ReconstructArgs {
     fn config(&self) -> anyhow::Result<FusionConfig> {
         let mut config = FusionConfig::default();
         let voxel = self.voxel_size.unwrap_or(webfusion_core::tsdf::DEFAULT_VOLUME_SIZE_M / self.volume as f32);
-        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, ..TsdfConfig::cube(self.volume, voxel) };
+        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, kind: self.map_kind, pool_blocks: webfusion_core::map::pool_blocks_for_budget(self.map_budget_mib << 20), ..TsdfConfig::cube(self.volume, voxel) };
         config.icp.iterations_per_level = self.icp_iterations.clone();
         config.icp.dist_thresh_m = self.icp_dist;
         config.icp.angle_thresh_rad = self.icp_angle_deg.to_radians();
@@ -168,6 +175,18 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
 
+    let map_stats = match fusion.mapper().sparse() {
+        Some(map) => {
+            let stats = pollster::block_on(map.stats(&gpu))?;
+            let used_mib = (u64::from(stats.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR) as f64 / 1048576.0;
+            println!("sparse map: {} of {} blocks used ({used_mib:.1} MiB of {:.1} MiB)", stats.blocks_used, stats.pool_blocks, fusion.volume().memory_bytes() as f64 / 1048576.0);
+            if stats.exhausted() {
+                eprintln!("warning: the map ran out of room ({} insertions without a hash slot, {} blocks refused by the full pool): surfaces there were not fused; raise --map-budget-mib or the voxel size", stats.hash_full, stats.pool_full);
+            }
+            Some(stats)
+        }
+        None => None,
+    };
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     if !args.no_mesh {
@@ -222,7 +241,14 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         "frames_per_s": n_frames as f64 / wall_s,
         "host_per_frame": { "submits": per_frame(host.submits), "waits": per_frame(host.host_waits), "readbacks": per_frame(host.readbacks) },
         "icp_iterations_per_frame": mean_iterations,
-        "volume": { "dims_voxels": fusion.config().tsdf.dims_voxels, "voxel_size_m": fusion.config().tsdf.voxel_size_m, "truncation_m": fusion.config().tsdf.truncation_m, "memory_bytes": fusion.volume().memory_bytes() },
+        "volume": {
+            "kind": fusion.config().tsdf.kind.name(),
+            "dims_voxels": fusion.config().tsdf.box_dims_voxels(),
+            "voxel_size_m": fusion.config().tsdf.voxel_size_m,
+            "truncation_m": fusion.config().tsdf.truncation_m,
+            "memory_bytes": fusion.volume().memory_bytes(),
+            "sparse": map_stats.map(|m| serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "used_bytes": u64::from(m.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR, "hash_full": m.hash_full, "pool_full": m.pool_full, "out_of_range": m.out_of_range })),
+        },
         "stages_ms": times.to_json(),
     });
     let stats_path = args.out.join("stats.json");
