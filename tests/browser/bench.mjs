@@ -16,7 +16,7 @@ import { join } from 'node:path';
 import { gzipSync } from 'node:zlib';
 import { launchChromium, options, startBridge, waitFor } from './lib.mjs';
 
-const { webfusion, dist, sample, out, volume, voxelMm } = options({ out: 'out/bench-web', volume: 256, 'voxel-mm': 20 });
+const { webfusion, dist, sample, out, map, volume, voxelMm } = options({ out: 'out/bench-web', map: 'dense', volume: 256, 'voxel-mm': 20 });
 const repeatArg = process.argv.indexOf('--repeat');
 const repeat = repeatArg > 0 ? Number(process.argv[repeatArg + 1]) : 1;
 if (!(Number.isInteger(repeat) && repeat >= 1)) throw new Error(`--repeat needs a whole number >= 1, got ${process.argv[repeatArg + 1]}`);
@@ -28,7 +28,7 @@ const wasmBytes = readFileSync(wasm[0]);
 /** One native run, then one browser run, on the same frames and settings. */
 async function runOnce() {
   const t0 = Date.now();
-  const native = spawnSync(webfusion, ['reconstruct', sample, '--out', join(out, 'native'), '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh'], { encoding: 'utf8' });
+  const native = spawnSync(webfusion, ['reconstruct', sample, '--out', join(out, 'native'), '--map-kind', map, '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh'], { encoding: 'utf8' });
   if (native.status !== 0) throw new Error(`webfusion reconstruct failed: ${native.stderr}`);
   const nativeWallS = (Date.now() - t0) / 1000;
   const stats = JSON.parse(readFileSync(join(out, 'native', 'stats.json'), 'utf8'));
@@ -39,7 +39,7 @@ async function runOnce() {
   try {
     const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
     const tLoad = Date.now();
-    await page.goto(`http://${bridge.addr}/?volume=${volume}&voxel_mm=${voxelMm}&centred=1&autoplay=1`);
+    await page.goto(`http://${bridge.addr}/?map=${map}&volume=${volume}&voxel_mm=${voxelMm}&centred=1&autoplay=1`);
     const first = await waitFor(page, 'the first frame', (s) => s.frames_done >= 1, 300_000);
     firstMs = Date.now() - tLoad;
     const tFirst = Date.now();

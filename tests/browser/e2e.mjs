@@ -14,13 +14,16 @@
 // Prints one line per check and a closing "e2e: N passed, M failed"; exits non-zero on failure.
 //
 // usage: node tests/browser/e2e.mjs [--webfusion target/release/webfusion] [--dist dist]
-//          [--sample data/sample/fr1_rpy.wfr] [--out out/e2e] [--volume 128] [--voxel-mm 40]
+//          [--sample data/sample/fr1_rpy.wfr] [--out out/e2e] [--map sparse|dense] [--volume 128]
+//          [--voxel-mm 40]
+// The main page fuses into --map (default sparse: the voxel-block map); the second page keeps
+// the app's default map.
 import { spawnSync } from 'node:child_process';
 import { readFileSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { decodePng, launchChromium, options, parseTum, startBridge, waitFor } from './lib.mjs';
 
-const { webfusion, dist, sample, out, volume, voxelMm } = options({ out: 'out/e2e', volume: 128, 'voxel-mm': 40 });
+const { webfusion, dist, sample, out, map, volume, voxelMm } = options({ out: 'out/e2e', map: 'sparse', volume: 128, 'voxel-mm': 40 });
 // Browser vs native positions, no alignment. The same WGSL runs on two adapters (SwiftShader,
 // lavapipe) whose f32 arithmetic differs in the last bits; where a level's convergence test
 // lands on different sides of its threshold the two runs take a different number of
@@ -43,10 +46,10 @@ try {
   // 1. The native reference on the same frames and settings.
   const native = join(out, 'native');
   const t0 = Date.now();
-  const run = spawnSync(webfusion, ['reconstruct', sample, '--out', native, '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh'], { encoding: 'utf8' });
+  const run = spawnSync(webfusion, ['reconstruct', sample, '--out', native, '--map-kind', map, '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh'], { encoding: 'utf8' });
   if (run.status !== 0) throw new Error(`webfusion reconstruct failed: ${run.stderr}`);
   const nativeTrajectory = parseTum(readFileSync(join(native, 'trajectory.txt'), 'utf8'));
-  console.log(`native reference: ${nativeTrajectory.length} frames in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
+  console.log(`native reference (${map} map): ${nativeTrajectory.length} frames in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
 
   // 2. The bridge and the page.
   bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0');
@@ -57,7 +60,7 @@ try {
   // Chromium logs each refused reconnect attempt itself; those are expected while the bridge is down.
   page.on('console', (m) => { if (m.type() === 'error' && !m.text().includes('WebSocket connection to')) consoleErrors.push(m.text()); });
   page.on('pageerror', (e) => consoleErrors.push(String(e)));
-  const url = `http://${bridge.addr}/?volume=${volume}&voxel_mm=${voxelMm}&centred=1&autoplay=1`;
+  const url = `http://${bridge.addr}/?map=${map}&volume=${volume}&voxel_mm=${voxelMm}&centred=1&autoplay=1`;
   const tOpen = Date.now();
   await page.goto(url);
   const first = await waitFor(page, 'the first frame', (s) => s.frames_done >= 1, FRAME_TIMEOUT_MS);

@@ -16,7 +16,7 @@ export function options(defaults) {
   const o = { webfusion: 'target/release/webfusion', dist: 'dist', sample: 'data/sample/fr1_rpy.wfr', ...defaults, ...given };
   const out = resolve(o.out);
   mkdirSync(out, { recursive: true });
-  return { webfusion: resolve(o.webfusion), dist: resolve(o.dist), sample: resolve(o.sample), out, volume: Number(o.volume), voxelMm: Number(o['voxel-mm']) };
+  return { webfusion: resolve(o.webfusion), dist: resolve(o.dist), sample: resolve(o.sample), out, map: o.map, volume: Number(o.volume), voxelMm: Number(o['voxel-mm']) };
 }
 
 /** Chromium flags that give WebGPU (SwiftShader) and a visible canvas, headless (see ../shared/TOOLCHAIN.md). */

@@ -15,6 +15,7 @@ use std::rc::Rc;
 use wasm_bindgen::prelude::*;
 use web_time::Instant;
 use webfusion_core::fusion::FusionConfig;
+use webfusion_core::map::MapKind;
 use webfusion_core::protocol::{Control, Delivery, FrameMessage, Hello, Message, PlaybackState, parse_rate};
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, VolumePlacement};
 use webfusion_core::{Gpu, GpuOptions, RgbdCalibration};
@@ -60,7 +61,9 @@ impl Settings {
         let dims: u32 = ui::value("set-volume").parse().map_err(|_| "volume size must be a whole number of voxels".to_owned())?;
         let voxel_m = number("set-voxel-mm", "voxel size")? / 1000.0;
         let truncation_voxels = number("set-trunc-vox", "truncation")?;
+        let kind: MapKind = ui::value("set-map").parse().map_err(|e: webfusion_core::Error| e.to_string())?;
         let tsdf = TsdfConfig {
+            kind,
             truncation_m: truncation_voxels * voxel_m,
             placement: if ui::value("set-centred").is_empty() { VolumePlacement::InFront } else { VolumePlacement::Centred },
             ..TsdfConfig::cube(dims, voxel_m)
@@ -84,6 +87,7 @@ fn fill_settings_form(query: &std::collections::HashMap<String, String>) -> (Set
     let icp = &defaults.icp;
     let iterations: Vec<String> = icp.iterations_per_level.iter().map(u32::to_string).collect();
     let fields = [
+        ("set-map", "map", t.kind.name().to_owned()),
         ("set-volume", "volume", t.dims_voxels[0].to_string()),
         ("set-voxel-mm", "voxel_mm", format!("{:.2}", t.voxel_size_m * 1000.0)),
         ("set-trunc-vox", "trunc_vox", DEFAULT_TRUNCATION_VOXELS.to_string()),
@@ -766,13 +770,13 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         None => "ATE: the source has no ground truth".to_owned(),
     };
     let v = &f.volume;
+    let map = if v.pool_blocks > 0 { format!("sparse map, {} blocks of 8³", v.pool_blocks) } else { format!("volume {}³", v.dims_voxels[0]) };
     lines.push(format!(
-        "{ate} · latency {} · in flight {} · dropped {} · reconnects {} · volume {}³ × {:.1} mm = {:.0} MiB",
+        "{ate} · latency {} · in flight {} · dropped {} · reconnects {} · {map} × {:.1} mm = {:.0} MiB",
         f.latency_ms.map_or_else(|| "-".to_owned(), |ms| format!("{ms:.0} ms")),
         f.frames_in_flight,
         s.frames_dropped,
         s.reconnects,
-        v.dims_voxels[0],
         v.voxel_size_m * 1000.0,
         v.memory_bytes as f64 / (1 << 20) as f64,
     ));

@@ -14,6 +14,7 @@ use std::rc::Rc;
 
 use glam::DVec3;
 use web_time::Instant;
+use webfusion_core::map::MapKind;
 use webfusion_core::eval::{Alignment, RunningAte};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, RaycastTarget, TrackingState};
 use webfusion_core::io::{TUM_TRAJECTORY_HEADER, push_tum_line};
@@ -417,7 +418,7 @@ impl FusionMode {
             recovered_frames: self.recovered_frames,
             ate_rmse_m: self.alignment.as_ref().map(|(_, rmse)| *rmse),
             ate_pairs: self.ate.len(),
-            volume: VolumeStatus { dims_voxels: t.dims_voxels, voxel_size_m: t.voxel_size_m, truncation_m: t.truncation_m, memory_bytes: t.memory_bytes() },
+            volume: VolumeStatus { kind: t.kind.name(), dims_voxels: t.box_dims_voxels(), pool_blocks: if t.kind == MapKind::Sparse { t.pool_blocks } else { 0 }, voxel_size_m: t.voxel_size_m, truncation_m: t.truncation_m, memory_bytes: t.memory_bytes() },
             latency_ms: self.latency_ms,
         }
     }

@@ -51,7 +51,12 @@ pub(crate) struct StageMedians {
 /// The volume the pipeline fuses into.
 #[derive(Clone, Copy, Debug, Serialize, PartialEq)]
 pub(crate) struct VolumeStatus {
+    /// dense or sparse.
+    pub(crate) kind: &'static str,
+    /// The dense box's voxels per axis, or the sparse map's addressable box.
     pub(crate) dims_voxels: [u32; 3],
+    /// Blocks of 8³ voxels in a sparse map's pool (0 for a dense box).
+    pub(crate) pool_blocks: u32,
     pub(crate) voxel_size_m: f32,
     pub(crate) truncation_m: f32,
     pub(crate) memory_bytes: u64,

@@ -12,8 +12,8 @@ struct TsdfSample {
 }
 
 // TSDF at a world point, trilinearly interpolated between the 8 surrounding voxel centres:
-// the 8 words are read unconditionally and blended by x, then y, then z (no loop and no early
-// exit, so SIMD implementations keep all lanes together and nothing spills to local memory).
+// the 8 words are read (at fixed offsets in a dense box or within one sparse block, else one
+// lookup each) and blended by x, then y, then z.
 fn sample_tsdf(d: VolumeDesc, p_world: vec3<f32>) -> TsdfSample {
     // Voxel coordinates relative to the anchor (small near the first camera, so the fractions
     // keep f32's precision), then the anchor added as an integer.
@@ -37,30 +37,49 @@ fn sample_tsdf(d: VolumeDesc, p_world: vec3<f32>) -> TsdfSample {
     var w101: u32;
     var w011: u32;
     var w111: u32;
-    if d.kind == MAP_SPARSE && all((b & vec3<u32>(7u)) < vec3<u32>(7u)) {
-        // The 8 voxels share one block (343 of 512 positions): one lookup.
-        let block = find_block(d, b >> vec3<u32>(BRICK_SHIFT));
-        if block == NO_BLOCK {
-            return out;
+    let one_block = d.kind == MAP_SPARSE && all((b & vec3<u32>(7u)) < vec3<u32>(7u));
+    if d.kind == MAP_DENSE || one_block {
+        // The 8 words at fixed offsets from the first: rows of the dense box, or (the 8 voxels
+        // in one block, 343 of 512 positions) rows of that block, found with one lookup.
+        var s = 0u;
+        var row = 0u;
+        var slice = 0u;
+        if d.kind == MAP_DENSE {
+            s = voxel_index(d, b.x, b.y, b.z);
+            row = d.dim_x;
+            slice = d.dim_x * d.dim_y;
+        } else {
+            let block = find_block(d, b >> vec3<u32>(BRICK_SHIFT));
+            if block == NO_BLOCK {
+                return out;
+            }
+            s = block * BLOCK_VOXELS + voxel_in_block(b.x, b.y, b.z);
+            row = 8u;
+            slice = 64u;
         }
-        let s = block * BLOCK_VOXELS + voxel_in_block(b.x, b.y, b.z);
         w000 = tsdf_volume[s];
         w100 = tsdf_volume[s + 1u];
-        w010 = tsdf_volume[s + 8u];
-        w110 = tsdf_volume[s + 9u];
-        w001 = tsdf_volume[s + 64u];
-        w101 = tsdf_volume[s + 65u];
-        w011 = tsdf_volume[s + 72u];
-        w111 = tsdf_volume[s + 73u];
+        w010 = tsdf_volume[s + row];
+        w110 = tsdf_volume[s + row + 1u];
+        w001 = tsdf_volume[s + slice];
+        w101 = tsdf_volume[s + slice + 1u];
+        w011 = tsdf_volume[s + slice + row];
+        w111 = tsdf_volume[s + slice + row + 1u];
     } else {
-        w000 = map_word(d, b.x, b.y, b.z);
-        w100 = map_word(d, b.x + 1u, b.y, b.z);
-        w010 = map_word(d, b.x, b.y + 1u, b.z);
-        w110 = map_word(d, b.x + 1u, b.y + 1u, b.z);
-        w001 = map_word(d, b.x, b.y, b.z + 1u);
-        w101 = map_word(d, b.x + 1u, b.y, b.z + 1u);
-        w011 = map_word(d, b.x, b.y + 1u, b.z + 1u);
-        w111 = map_word(d, b.x + 1u, b.y + 1u, b.z + 1u);
+        // A sparse sample across blocks: each corner looked up (one loop, so the lookup's
+        // probe loop is compiled once).
+        var w: array<u32, 8>;
+        for (var c = 0u; c < 8u; c++) {
+            w[c] = map_word(d, b.x + (c & 1u), b.y + ((c >> 1u) & 1u), b.z + (c >> 2u));
+        }
+        w000 = w[0];
+        w100 = w[1];
+        w010 = w[2];
+        w110 = w[3];
+        w001 = w[4];
+        w101 = w[5];
+        w011 = w[6];
+        w111 = w[7];
     }
     // A weight of 0 (never observed) has all high bits 0.
     let observed = min(min(min(w000, w100), min(w010, w110)), min(min(w001, w101), min(w011, w111))) >= 0x10000u;
