@@ -335,7 +335,10 @@ impl TsdfStore for SparseMap {
         self.config.color
     }
     fn reset(&self, gpu: &Gpu) {
+        // Free slots and unused pool blocks hold EMPTY_KEY (a key past the box: marching cubes
+        // finds no cell in such a block).
         gpu.fill_buffer(&self.block_table, EMPTY_KEY);
+        gpu.fill_buffer(&self.block_coords, EMPTY_KEY);
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -345,7 +348,6 @@ impl TsdfStore for SparseMap {
             &self.voxels,
             &self.colors,
             &self.surface_bricks,
-            &self.block_coords,
             &self.counters,
             &self.visible_blocks,
         ] {
