@@ -6,6 +6,7 @@
 use crate::kernels::prediction_down::{self, PredictionDownParams};
 use crate::engine::FrameEncoder;
 use crate::kernels::raycast::{self, CameraPose, DEFAULT_MAX_STEPS, DEFAULT_STEP_FACTOR, RaycastParams};
+use crate::kernels::raycast_hint_tiles::{self, RaycastHintTilesParams};
 use crate::kernels::raycast_range::{self, RaycastRangeParams};
 use crate::kernels::surface_normals::{self, SurfaceNormalsParams};
 use crate::kernels::GpuIntrinsics;
@@ -77,6 +78,9 @@ pub struct RaycastTarget {
     depth_range_tiles: wgpu::Buffer,
     range_params: wgpu::Buffer,
     range_bind_group: wgpu::BindGroup,
+    /// With a depth hint: `raycast_hint_tiles` (its params and bind group), which spares
+    /// `raycast_range` the tiles whose rays all have a hint.
+    hint_tiles: Option<(wgpu::Buffer, wgpu::BindGroup)>,
     /// Surface-brick words of the store (one `raycast_range` invocation each).
     bricks: u32,
     _normals_params: wgpu::Buffer,
@@ -118,6 +122,12 @@ impl RaycastTarget {
                 &placeholder
             }
         };
+        let hint_tiles = hint.as_ref().map(|h| {
+            let p = RaycastHintTilesParams { intrinsics: GpuIntrinsics::from(intrinsics), tile_px: RANGE_TILE_PX, tiles_x: tiles[0], tiles_y: tiles[1], hint_metres_per_unit: h.metres_per_unit };
+            let params = gpu.uniform_buffer(&name("hint_tiles_params"), &p);
+            let bind_group = raycast_hint_tiles::Bindings { params: &params, depth_hint_raw, depth_range_tiles: &depth_range_tiles }.bind_group(gpu);
+            (params, bind_group)
+        });
         let bind_group = raycast::Bindings {
             params: &params,
             pose: &pose,
@@ -148,6 +158,7 @@ impl RaycastTarget {
             depth_range_tiles,
             range_params,
             range_bind_group,
+            hint_tiles,
             bricks: store.desc().brick_count() as u32,
             _normals_params: normals_params,
             normals_bind_group,
@@ -204,9 +215,13 @@ impl RaycastTarget {
         encoder.clear_buffer(&self.depth_range_tiles, 0, None);
     }
 
-    /// Records the range tiles, the raycast and the normals into an open compute pass (the
-    /// tiles cleared before it).
+    /// Records the range tiles (those a hinted prediction reads), the raycast and the normals
+    /// into an open compute pass (the tiles cleared before it).
     fn dispatch_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        if let Some((_, hint_tiles)) = &self.hint_tiles {
+            let tiles = Self::tiles(self.intrinsics);
+            gpu.kernels.raycast_hint_tiles.dispatch_in(pass, hint_tiles, [tiles[0], tiles[1], 1]);
+        }
         gpu.kernels.raycast_range.dispatch_in(pass, &self.range_bind_group, [self.bricks, 1, 1]);
         let size = [self.intrinsics.width_px, self.intrinsics.height_px, 1];
         gpu.kernels.raycast.dispatch_in(pass, &self.bind_group, size);

@@ -14,11 +14,15 @@
 //!
 //! Tiles hold two words, both combined with atomicMax from a cleared (zero) buffer so that no
 //! float atomics are needed: !bits(nearest z) and bits(farthest z) (positive floats order as
-//! their bits). A tile whose farthest word is 0 meets no surface brick. Nothing is written when
+//! their bits). A tile whose farthest word is 0 meets no surface brick; one marked TILE_UNUSED
+//! (every ray in it has a depth hint, `raycast_hint_tiles`) is left as it is. Nothing is written when
 //! the pose is disabled (the raycast writes nothing either).
 #import camera
 #import camera_pose
 #import map
+
+// A tile's far word when no ray of the tile reads it (set by `raycast_hint_tiles`).
+const TILE_UNUSED: u32 = 0xffffffffu;
 
 // The nearest plane a box is clipped at when the raycast's own nearest depth is 0, metres.
 const MIN_CLIP_DEPTH_M: f32 = 1e-3;
@@ -135,6 +139,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var ty = t_lo.y; ty <= t_hi.y; ty++) {
         for (var tx = t_lo.x; tx <= t_hi.x; tx++) {
             let t = ty * params.tiles_x + tx;
+            // A tile `raycast_hint_tiles` marked (all its rays have a hint) needs no interval.
+            if atomicLoad(&depth_range_tiles[2u * t + 1u]) == TILE_UNUSED {
+                continue;
+            }
             atomicMax(&depth_range_tiles[2u * t], near_word);
             atomicMax(&depth_range_tiles[2u * t + 1u], far_word);
         }

@@ -16,19 +16,19 @@ use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
 use webfusion_core::{PinholeIntrinsics, Se3};
 use webfusion_tests::{Slot, cast, finish, gpu, run_kernel_slots};
 
-const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 129.4, fy_px: 129.2, cx_px: 79.6, cy_px: 63.8, width_px: 160, height_px: 120 };
+pub(crate) const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 129.4, fy_px: 129.2, cx_px: 79.6, cy_px: 63.8, width_px: 160, height_px: 120 };
 const MIN_DEPTH_M: f32 = 0.3;
 const MAX_DEPTH_M: f32 = 5.0;
 
 /// A sphere of 0.2 m at (0.3, 0.1, 1.0) in a 64³ volume of 4 cm voxels in front of the origin.
-fn scene() -> (VolumeDesc, Vec<u32>) {
+pub(crate) fn scene() -> (VolumeDesc, Vec<u32>) {
     let config = TsdfConfig::cube(64, 0.04);
     let desc = config.desc(config.origin_for_first_camera(&Se3::IDENTITY));
     let voxels = tsdf_from_sdf(&desc, 1, |p| ((p[0] - 0.3).powi(2) + (p[1] - 0.1).powi(2) + (p[2] - 1.0).powi(2)).sqrt() - 0.2);
     (desc, voxels)
 }
 
-fn params(desc: VolumeDesc) -> RaycastRangeParams {
+pub(crate) fn params(desc: VolumeDesc) -> RaycastRangeParams {
     let (tiles_x, tiles_y) = (K.width_px.div_ceil(RANGE_TILE_PX), K.height_px.div_ceil(RANGE_TILE_PX));
     RaycastRangeParams { volume: desc, intrinsics: GpuIntrinsics::from(K), tile_px: RANGE_TILE_PX, tiles_x, tiles_y, min_depth_m: MIN_DEPTH_M, max_depth_m: MAX_DEPTH_M, ..Default::default() }
 }
@@ -58,7 +58,7 @@ fn tiles_differ(g: &[u32], c: &[u32]) -> usize {
 }
 
 /// Camera depth (z) of the sphere's first hit along pixel (x, y)'s ray from `world_from_camera`.
-fn sphere_depth(world_from_camera: &Se3, x: u32, y: u32) -> Option<f64> {
+pub(crate) fn sphere_depth(world_from_camera: &Se3, x: u32, y: u32) -> Option<f64> {
     let ray_cam = DVec3::new((f64::from(x) - f64::from(K.cx_px)) / f64::from(K.fx_px), (f64::from(y) - f64::from(K.cy_px)) / f64::from(K.fy_px), 1.0);
     let dir = world_from_camera.rotation * ray_cam.normalize();
     let o = world_from_camera.translation_m;

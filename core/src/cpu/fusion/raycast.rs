@@ -3,6 +3,7 @@
 
 use crate::cpu::shared::{BRICK_SHIFT, FAR_TSDF, INVALID, INVALID_VEC4, MAP_SPARSE, MapRef, NO_SLOT, TsdfSample, back_project, box_corner_in_world, dot3, is_valid_f32, kinect_sigma_m, sample_tsdf, transform_vector, voxel_anchor, voxel_slot, voxel_tsdf, voxel_weight};
 use crate::cpu::fusion::raycast_range::tile_depth_range;
+use crate::kernels::GpuIntrinsics;
 use crate::kernels::raycast::{CameraPose, RaycastParams};
 use crate::tsdf::VolumeDesc;
 
@@ -33,19 +34,19 @@ pub fn block_exit_t(d: &VolumeDesc, o: [f32; 3], inv_dir: [f32; 3], p: [f32; 3])
     t_out[0].min(t_out[1]).min(t_out[2])
 }
 
-/// Twin of `hint_at()`.
-pub fn hint_at(params: &RaycastParams, depth_hint_raw: &[u32], ix: u32) -> f32 {
+/// Twin of `hint_at()` (shared/depth_hint.wgsl; `hint_metres_per_unit` is the importing
+/// kernel's parameter).
+pub fn hint_at(hint_metres_per_unit: f32, depth_hint_raw: &[u32], ix: u32) -> f32 {
     let raw_units = (depth_hint_raw[(ix / 2) as usize] >> ((ix & 1) * 16)) & 0xffff;
     if raw_units == 0 {
         return INVALID;
     }
-    raw_units as f32 * params.hint_metres_per_unit
+    raw_units as f32 * hint_metres_per_unit
 }
 
 /// Twin of `depth_hint_range()`: (nearest, farthest) depth, NaN when there is none.
-pub fn depth_hint_range(params: &RaycastParams, depth_hint_raw: &[u32], x: u32, y: u32) -> (f32, f32) {
-    let k = &params.intrinsics;
-    let own = hint_at(params, depth_hint_raw, y * k.width_px + x);
+pub fn depth_hint_range(k: &GpuIntrinsics, hint_metres_per_unit: f32, depth_hint_raw: &[u32], x: u32, y: u32) -> (f32, f32) {
+    let own = hint_at(hint_metres_per_unit, depth_hint_raw, y * k.width_px + x);
     if is_valid_f32(own) {
         return (own, own);
     }
@@ -55,7 +56,7 @@ pub fn depth_hint_range(params: &RaycastParams, depth_hint_raw: &[u32], x: u32, 
         let ys = [y, y, y + r, y - r.min(y)];
         for i in 0..4 {
             if xs[i] < k.width_px && ys[i] < k.height_px {
-                let h = hint_at(params, depth_hint_raw, ys[i] * k.width_px + xs[i]);
+                let h = hint_at(hint_metres_per_unit, depth_hint_raw, ys[i] * k.width_px + xs[i]);
                 if is_valid_f32(h) {
                     range = if is_valid_f32(range.0) { (range.0.min(h), range.1.max(h)) } else { (h, h) };
                 }
@@ -113,7 +114,7 @@ pub fn raycast(
             let max_step = params.step_factor * d.truncation_m;
             let mut hinted = false;
             if params.use_depth_hint != 0 {
-                let (near, far) = depth_hint_range(params, depth_hint_raw, gx, gy);
+                let (near, far) = depth_hint_range(&params.intrinsics, params.hint_metres_per_unit, depth_hint_raw, gx, gy);
                 if is_valid_f32(near) {
                     t = t.max((near - params.hint_margin_m - 3.0 * kinect_sigma_m(near)) / z_per_t);
                     t_end = t_end.min((far + params.hint_margin_m + 3.0 * kinect_sigma_m(far)) / z_per_t);

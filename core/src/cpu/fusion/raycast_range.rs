@@ -4,6 +4,9 @@
 use crate::cpu::shared::{BRICK_SHIFT, MAP_SPARSE, block_of_key, brick_dims, transform_point, voxel_anchor};
 use crate::kernels::raycast_range::{CameraPose, RaycastRangeParams};
 
+/// Twin of `TILE_UNUSED`: the far word of a tile no ray reads (`raycast_hint_tiles`).
+pub const TILE_UNUSED: u32 = u32::MAX;
+
 /// Twin of `MIN_CLIP_DEPTH_M`.
 pub const MIN_CLIP_DEPTH_M: f32 = 1e-3;
 
@@ -83,6 +86,9 @@ pub fn raycast_range(params: &RaycastRangeParams, pose: &CameraPose, surface_bri
         for ty in ty0..=ty1 {
             for tx in tx0..=tx1 {
                 let t = (ty * params.tiles_x + tx) as usize;
+                if depth_range_tiles[2 * t + 1] == TILE_UNUSED {
+                    continue;
+                }
                 depth_range_tiles[2 * t] = depth_range_tiles[2 * t].max(near_word);
                 depth_range_tiles[2 * t + 1] = depth_range_tiles[2 * t + 1].max(far_word);
             }
