@@ -158,7 +158,6 @@ impl TsdfConfig {
             origin_z_m: origin_in_world[2],
             voxel_size_m: self.voxel_size_m,
             truncation_m: self.truncation_m,
-            ..Default::default()
         }
     }
 

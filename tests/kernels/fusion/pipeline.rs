@@ -67,7 +67,7 @@ fn track_the_analytic_room(config: FusionConfig) {
             eprintln!("frame {i}: absolute {t_mm:.3} mm {r_deg:.4}°, relative {rt_mm:.3} mm {rr_deg:.4}°, {:?}", report.icp.last());
             assert!(rt_mm < 1.0 && rr_deg < 0.1, "frame {i}: relative error {rt_mm:.3} mm / {rr_deg:.4}°");
         } else {
-            assert_eq!(report.state, TrackingState::Initialised);
+            assert_eq!(report.state, TrackingState::Initialised, "the first frame defines the world");
         }
         assert!(t_mm < 2.0 && r_deg < 0.2, "frame {i}: absolute error {t_mm:.3} mm / {r_deg:.4}°");
         previous = Some(report.world_from_camera);
