@@ -96,6 +96,10 @@ try {
   check('trajectory matches native', pairs === nativeTrajectory.length && browserTrajectory.length === nativeTrajectory.length && rmse < TOLERANCE_RMSE_M && max < TOLERANCE_MAX_M,
     `${pairs} of ${nativeTrajectory.length} poses paired; browser vs native RMSE ${(rmse * 1000).toFixed(3)} mm, max ${(max * 1000).toFixed(3)} mm (limits ${TOLERANCE_RMSE_M * 1000} and ${TOLERANCE_MAX_M * 1000} mm, no alignment)`);
 
+  const v = done.volume;
+  check('the map reports its use', v.kind === map && (map !== 'sparse' || (v.blocks_used > 100 && v.blocks_used <= v.pool_blocks && !v.full)),
+    `${v.kind} map: ${v.blocks_used} of ${v.pool_blocks} blocks used, full ${v.full}, ${(v.memory_bytes / 1048576).toFixed(0)} MiB`);
+
   // 5. The free 3D view shows the model.
   const shot = await page.locator('#view-free').screenshot({ path: join(out, 'free_view.png') });
   const png = decodePng(shot);

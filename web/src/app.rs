@@ -770,7 +770,7 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         None => "ATE: the source has no ground truth".to_owned(),
     };
     let v = &f.volume;
-    let map = if v.pool_blocks > 0 { format!("sparse map, {} blocks of 8³", v.pool_blocks) } else { format!("volume {}³", v.dims_voxels[0]) };
+    let map = if v.pool_blocks > 0 { format!("sparse map, {} of {} blocks of 8³ used{}", v.blocks_used, v.pool_blocks, if v.full { " (FULL: new surfaces are not fused; raise the voxel size)" } else { "" }) } else { format!("volume {}³", v.dims_voxels[0]) };
     lines.push(format!(
         "{ate} · latency {} · in flight {} · dropped {} · reconnects {} · {map} × {:.1} mm = {:.0} MiB",
         f.latency_ms.map_or_else(|| "-".to_owned(), |ms| format!("{ms:.0} ms")),

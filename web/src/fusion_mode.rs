@@ -14,7 +14,7 @@ use std::rc::Rc;
 
 use glam::DVec3;
 use web_time::Instant;
-use webfusion_core::map::MapKind;
+use webfusion_core::map::{MapKind, MapStats};
 use webfusion_core::eval::{Alignment, RunningAte};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, RaycastTarget, TrackingState};
 use webfusion_core::io::{TUM_TRAJECTORY_HEADER, push_tum_line};
@@ -116,6 +116,8 @@ pub(crate) struct FusionMode {
     tracking: &'static str,
     lost_frames: u64,
     recovered_frames: u64,
+    /// A sparse map's counters as of the last report.
+    map: Option<MapStats>,
     stages: [Window; 6],
     frame_instants: VecDeque<Instant>,
     host: HostPerFrame,
@@ -164,6 +166,7 @@ impl FusionMode {
             run_origin: Se3::IDENTITY,
             tracking: "idle",
             lost_frames: 0,
+            map: None,
             recovered_frames: 0,
             stages: Default::default(),
             frame_instants: VecDeque::new(),
@@ -299,6 +302,9 @@ impl FusionMode {
             self.alignment = self.ate.alignment_and_rmse_m().ok();
         }
         self.tracking = report.state.name();
+        if report.map.is_some() {
+            self.map = report.map;
+        }
         match report.state {
             TrackingState::Lost(_) => self.lost_frames += 1,
             TrackingState::Recovered => self.recovered_frames += 1,
@@ -418,7 +424,16 @@ impl FusionMode {
             recovered_frames: self.recovered_frames,
             ate_rmse_m: self.alignment.as_ref().map(|(_, rmse)| *rmse),
             ate_pairs: self.ate.len(),
-            volume: VolumeStatus { kind: t.kind.name(), dims_voxels: t.box_dims_voxels(), pool_blocks: if t.kind == MapKind::Sparse { t.pool_blocks } else { 0 }, voxel_size_m: t.voxel_size_m, truncation_m: t.truncation_m, memory_bytes: t.memory_bytes() },
+            volume: VolumeStatus {
+                kind: t.kind.name(),
+                dims_voxels: t.box_dims_voxels(),
+                pool_blocks: if t.kind == MapKind::Sparse { t.pool_blocks } else { 0 },
+                blocks_used: self.map.map_or(0, |m| m.blocks_used),
+                full: self.map.is_some_and(|m| m.exhausted()),
+                voxel_size_m: t.voxel_size_m,
+                truncation_m: t.truncation_m,
+                memory_bytes: t.memory_bytes(),
+            },
             latency_ms: self.latency_ms,
         }
     }

@@ -57,6 +57,10 @@ pub(crate) struct VolumeStatus {
     pub(crate) dims_voxels: [u32; 3],
     /// Blocks of 8³ voxels in a sparse map's pool (0 for a dense box).
     pub(crate) pool_blocks: u32,
+    /// Of those, blocks in use (as of the last report).
+    pub(crate) blocks_used: u32,
+    /// A sparse map ran out of pool blocks or hash slots: surfaces seen since were not fused.
+    pub(crate) full: bool,
     pub(crate) voxel_size_m: f32,
     pub(crate) truncation_m: f32,
     pub(crate) memory_bytes: u64,

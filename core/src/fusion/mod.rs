@@ -39,7 +39,7 @@ use crate::engine::{FrameEncoder, ReadbackRing, StageTime, StageTimer};
 use crate::gpu::GpuCounts;
 use crate::kernels::track_solve::TrackState;
 use crate::preprocess::{DepthPreprocessor, PreprocessConfig};
-use crate::map::Map;
+use crate::map::{Map, MapStats};
 use crate::tsdf::{TsdfConfig, TsdfStore};
 use crate::{Error, Gpu, Result, RgbdCalibration, RgbdFrame, Se3};
 
@@ -358,6 +358,9 @@ pub struct FrameReport {
     /// What the host did with the GPU while submitting this frame: submissions, waits (0
     /// unless every readback slot was in flight) and readbacks (1: its summary).
     pub host: GpuCounts,
+    /// A sparse map's counters after this frame (read back with the frame's summary): blocks
+    /// used and any exhaustion; `None` for a dense map.
+    pub map: Option<MapStats>,
 }
 
 /// What a frame's readback slot carries besides its bytes.
@@ -373,6 +376,10 @@ struct FrameTag {
 
 /// Byte offset of the timestamps in a frame's readback (after the `TrackState`).
 const TIMESTAMPS_OFFSET: u64 = tracker::TRACK_STATE_BYTES.next_multiple_of(8);
+/// Byte offset of a sparse map's counters in a frame's readback (after the timestamps).
+const MAP_COUNTERS_OFFSET: u64 = TIMESTAMPS_OFFSET + StageTimer::BYTES;
+/// Bytes of a frame's readback.
+const READBACK_BYTES: u64 = MAP_COUNTERS_OFFSET + (crate::cpu::shared::MAP_COUNTERS * 4) as u64;
 
 /// The KinectFusion pipeline on one GPU, for one camera.
 #[derive(Debug)]
@@ -405,7 +412,7 @@ impl KinectFusion {
         let predictor = Predictor::new(gpu, mapper.volume(), preprocessor.levels[0].intrinsics, config.icp.iterations_per_level.len(), &state, Some(DepthHint::from_preprocessor(&preprocessor)), depth_range);
         let tracker = IcpTracker::new(gpu, &config.icp, &preprocessor, &predictor, state)?;
         let timer = StageTimer::new(gpu, "core.fusion");
-        let readbacks = ReadbackRing::new(gpu, "core.fusion", TIMESTAMPS_OFFSET + StageTimer::BYTES, MAX_FRAMES_IN_FLIGHT);
+        let readbacks = ReadbackRing::new(gpu, "core.fusion", READBACK_BYTES, MAX_FRAMES_IN_FLIGHT);
         Ok(Self { config, preprocessor, tracker, mapper, predictor, timer, readbacks, reports: VecDeque::new(), run: 0, frames_submitted: 0, last_pose: Se3::IDENTITY })
     }
 
@@ -506,6 +513,9 @@ impl KinectFusion {
         self.predictor.encode(gpu, &mut fe, "predict");
         let (slot, slot_buffer) = self.readbacks.free_slot().expect("a readback slot was freed above");
         fe.encoder().copy_buffer_to_buffer(self.tracker.state_buffer(), 0, slot_buffer, 0, tracker::TRACK_STATE_BYTES);
+        if let Some(map) = self.mapper.sparse() {
+            fe.encoder().copy_buffer_to_buffer(map.counters(), 0, slot_buffer, MAP_COUNTERS_OFFSET, READBACK_BYTES - MAP_COUNTERS_OFFSET);
+        }
         let (commands, stages) = fe.finish(Some((slot_buffer, TIMESTAMPS_OFFSET)));
         let submission = gpu.submit([commands]);
         let mut host = gpu.counters.snapshot() - before;
@@ -553,7 +563,11 @@ impl KinectFusion {
             let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[TIMESTAMPS_OFFSET as usize..][..8 * n]);
             StageTimesMs::from_stages(&timer.stage_times(&tag.stages, &ticks))
         });
-        let report = report_from_state(&state, &self.config, self.preprocessor.levels[0].intrinsics.pixel_count(), tag.index, gpu_ms, tag.encode_ms, ms_since(tag.submitted_at), tag.host);
+        let mut report = report_from_state(&state, &self.config, self.preprocessor.levels[0].intrinsics.pixel_count(), tag.index, gpu_ms, tag.encode_ms, ms_since(tag.submitted_at), tag.host);
+        report.map = self.mapper.sparse().map(|m| {
+            let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[MAP_COUNTERS_OFFSET as usize..READBACK_BYTES as usize]);
+            MapStats::from_words(&words, m.desc().pool_blocks)
+        });
         self.last_pose = report.world_from_camera;
         self.reports.push_back(report);
         Ok(())
@@ -597,7 +611,7 @@ pub fn report_from_state(state: &TrackState, config: &FusionConfig, pixels: usiz
             })
             .collect()
     };
-    FrameReport { index, world_from_camera: Se3::from_cols_f32(&state.pose.world_from_camera), state: tracking, icp, gpu_ms, encode_ms, latency_ms, host }
+    FrameReport { index, world_from_camera: Se3::from_cols_f32(&state.pose.world_from_camera), state: tracking, icp, gpu_ms, encode_ms, latency_ms, host, map: None }
 }
 
 fn ms_since(t: Instant) -> f64 {

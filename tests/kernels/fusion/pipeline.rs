@@ -122,11 +122,14 @@ fn a_sparse_map_tracks_real_frames_as_the_dense_box_does() {
     let mut dense = KinectFusion::new(&gpu, dataset.calibration(), dense).expect("dense pipeline");
     let mut sparse = KinectFusion::new(&gpu, dataset.calibration(), sparse).expect("sparse pipeline");
     let mut worst = (0.0f64, 0.0f64);
+    let mut last_counters = None;
     for i in 0..20 {
         let frame = dataset.read_frame(i).expect("frame");
         let d = pollster::block_on(dense.process_frame(&gpu, &frame)).expect("dense frame");
         let s = pollster::block_on(sparse.process_frame(&gpu, &frame)).expect("sparse frame");
         assert!(!s.state.is_lost(), "frame {i} lost with the sparse map: {:?}", s.state);
+        assert!(d.map.is_none(), "a dense box reports no map counters");
+        last_counters = s.map;
         let diff = d.world_from_camera.inverse() * s.world_from_camera;
         worst = (worst.0.max(diff.translation_m.length() * 1e3), worst.1.max(diff.rotation_angle_rad().to_degrees()));
     }
@@ -135,6 +138,7 @@ fn a_sparse_map_tracks_real_frames_as_the_dense_box_does() {
     assert!(worst.0 < 1.0 && worst.1 < 0.1, "trajectories apart by up to {:.3} mm / {:.4}°", worst.0, worst.1);
     assert!(!stats.exhausted() && stats.out_of_range == 0, "the map had room: {stats:?}");
     assert!(stats.blocks_used > 100 && stats.visible_blocks > 50, "blocks were allocated and integrated: {stats:?}");
+    assert_eq!(last_counters, Some(stats), "the last frame's report carries the map's counters");
     finish(&gpu);
 }
 
