@@ -117,6 +117,8 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let mut iterations = [0u64; 4];
     let mut tracked_frames = 0u64;
     let mut host = webfusion_core::GpuCounts::default();
+    // A sparse map's counters, as the last report carried them.
+    let mut map_stats = None;
     let mut last_done: Option<std::time::Instant> = None;
     let started = std::time::Instant::now();
     // Frames stream through the GPU: the next frame is read and submitted while the GPU still
@@ -148,6 +150,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         host.submits += report.host.submits;
         host.host_waits += report.host.host_waits;
         host.readbacks += report.host.readbacks;
+        map_stats = report.map.or(map_stats);
         if let TrackingState::Lost(reason) = report.state {
             eprintln!("\nframe {}: tracking lost ({reason:?}); keeping the last good pose", report.index);
             lost.push(report.index);
@@ -176,18 +179,13 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
 
-    let map_stats = match fusion.mapper().sparse() {
-        Some(map) => {
-            let stats = pollster::block_on(map.stats(&gpu))?;
-            let used_mib = (u64::from(stats.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR) as f64 / 1048576.0;
-            println!("sparse map: {} of {} blocks used ({used_mib:.1} MiB of {:.1} MiB)", stats.blocks_used, stats.pool_blocks, fusion.volume().memory_bytes() as f64 / 1048576.0);
-            if stats.exhausted() {
-                eprintln!("warning: the map ran out of room ({} insertions without a hash slot, {} blocks refused by the full pool): surfaces there were not fused; raise --map-budget-mib or the voxel size", stats.hash_full, stats.pool_full);
-            }
-            Some(stats)
+    if let Some(stats) = map_stats {
+        let used_mib = (u64::from(stats.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR) as f64 / 1048576.0;
+        println!("sparse map: {} of {} blocks used ({used_mib:.1} MiB of {:.1} MiB)", stats.blocks_used, stats.pool_blocks, fusion.volume().memory_bytes() as f64 / 1048576.0);
+        if stats.exhausted() {
+            eprintln!("warning: the map ran out of room ({} insertions without a hash slot, {} blocks refused by the full pool): surfaces there were not fused; raise --map-budget-mib or the voxel size", stats.hash_full, stats.pool_full);
         }
-        None => None,
-    };
+    }
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     if !args.no_mesh {

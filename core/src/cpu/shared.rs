@@ -258,29 +258,29 @@ pub struct MapRef<'a> {
     pub block_table: &'a [u32],
 }
 
-impl<'a> MapRef<'a> {
-    /// A dense box's voxels.
-    pub fn dense(tsdf_volume: &'a [u32]) -> Self {
-        Self { tsdf_volume, block_table: &[] }
-    }
-}
-
-/// Twin of `find_block()` (without its memo of the last block, which changes no result).
-pub fn find_block(block_table: &[u32], d: &VolumeDesc, b: [u32; 3]) -> u32 {
+/// The probe sequence of `find_block()` and `insert_block()` (map.wgsl), one after another:
+/// the hash slot holding block `b`'s key or, where it is absent, the first free slot on its
+/// probe sequence; `None` when neither comes within `MAP_MAX_PROBES` slots.
+pub fn probe_slot(block_table: &[u32], d: &VolumeDesc, b: [u32; 3]) -> Option<usize> {
     let key = block_key(b);
     let mask = d.hash_slots - 1;
     let mut s = block_hash(b) & mask;
     for _ in 0..MAP_MAX_PROBES {
         let k = block_table[2 * s as usize];
-        if k == key {
-            return block_table[2 * s as usize + 1];
-        }
-        if k == EMPTY_KEY {
-            return NO_BLOCK;
+        if k == key || k == EMPTY_KEY {
+            return Some(s as usize);
         }
         s = (s + 1) & mask;
     }
-    NO_BLOCK
+    None
+}
+
+/// Twin of `find_block()` (without its memo of the last block, which changes no result).
+pub fn find_block(block_table: &[u32], d: &VolumeDesc, b: [u32; 3]) -> u32 {
+    match probe_slot(block_table, d, b) {
+        Some(s) if block_table[2 * s] == block_key(b) => block_table[2 * s + 1],
+        _ => NO_BLOCK,
+    }
 }
 
 /// Twin of `voxel_slot()`.

@@ -21,7 +21,7 @@
 
 use crate::cpu::shared::{
     BLOCK_VOXELS, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_HASH_FULL,
-    MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_POOL_FULL, MAP_COUNTER_VISIBLE, MAP_COUNTERS, MAP_SPARSE,
+    MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_POOL_FULL, MAP_COUNTER_VISIBLE, MAP_COUNTERS,
     block_of_key,
 };
 use crate::tsdf::{TsdfConfig, TsdfStore, VolumeDesc};
@@ -271,25 +271,14 @@ impl SparseMap {
                 return bad(format!("block {:?} has {} voxel and {} colour words, not {voxel_words}", block.coords, block.voxels.len(), block.colors.len()));
             }
             let key = crate::cpu::shared::block_key(block.coords);
-            let mask = d.hash_slots - 1;
-            let mut s = crate::cpu::shared::block_hash(block.coords) & mask;
-            let mut placed = false;
-            for _ in 0..crate::cpu::shared::MAP_MAX_PROBES {
-                let k = table[2 * s as usize];
-                if k == key {
-                    return bad(format!("block {:?} is given twice", block.coords));
-                }
-                if k == EMPTY_KEY {
-                    table[2 * s as usize] = key;
-                    table[2 * s as usize + 1] = i as u32;
-                    placed = true;
-                    break;
-                }
-                s = (s + 1) & mask;
-            }
-            if !placed {
+            let Some(s) = crate::cpu::shared::probe_slot(&table, &d, block.coords) else {
                 return bad(format!("no hash slot within {} probes of block {:?}", crate::cpu::shared::MAP_MAX_PROBES, block.coords));
+            };
+            if table[2 * s] == key {
+                return bad(format!("block {:?} is given twice", block.coords));
             }
+            table[2 * s] = key;
+            table[2 * s + 1] = i as u32;
             keys[i] = key;
             voxels[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.voxels);
             if self.config.color {
@@ -389,14 +378,6 @@ impl Map {
         })
     }
 
-    /// Its kind.
-    pub fn kind(&self) -> MapKind {
-        match self {
-            Self::Dense(_) => MapKind::Dense,
-            Self::Sparse(_) => MapKind::Sparse,
-        }
-    }
-
     /// The sparse map, if it is one.
     pub fn sparse(&self) -> Option<&SparseMap> {
         match self {
@@ -441,9 +422,4 @@ impl TsdfStore for Map {
     fn memory_bytes(&self) -> u64 {
         self.store().memory_bytes()
     }
-}
-
-/// Whether `desc` describes a sparse map.
-pub fn is_sparse(desc: &VolumeDesc) -> bool {
-    desc.kind == MAP_SPARSE
 }

@@ -2,7 +2,7 @@
 //! CPU reference of `shaders/wgsl/map/block_alloc.wgsl`. Pixels run one after another, so the
 //! table's layout is one of the layouts the GPU may produce; compare tables by key set.
 
-use crate::cpu::shared::{BRICK_SHIFT, EMPTY_KEY, MAP_COUNTER_HASH_FULL, MAP_COUNTER_OUT_OF_RANGE, MAP_MAX_PROBES, back_project, block_hash, block_key, is_valid_f32, transform_point, voxel_anchor};
+use crate::cpu::shared::{BRICK_SHIFT, MAP_COUNTER_HASH_FULL, MAP_COUNTER_OUT_OF_RANGE, back_project, block_key, is_valid_f32, probe_slot, transform_point, voxel_anchor};
 use crate::kernels::block_alloc::{BlockAllocParams, CameraPose};
 use crate::tsdf::VolumeDesc;
 
@@ -20,23 +20,12 @@ fn wgsl_sign(x: f32) -> f32 {
     }
 }
 
-/// Twin of `insert_block()`.
+/// Twin of `insert_block()` (invocations one after another: a compare-exchange never fails).
 pub fn insert_block(d: &VolumeDesc, b: [u32; 3], block_table: &mut [u32], map_counters: &mut [u32]) {
-    let key = block_key(b);
-    let mask = d.hash_slots - 1;
-    let mut s = block_hash(b) & mask;
-    for _ in 0..MAP_MAX_PROBES {
-        let k = block_table[2 * s as usize];
-        if k == key {
-            return;
-        }
-        if k == EMPTY_KEY {
-            block_table[2 * s as usize] = key;
-            return;
-        }
-        s = (s + 1) & mask;
+    match probe_slot(block_table, d, b) {
+        Some(s) => block_table[2 * s] = block_key(b),
+        None => map_counters[MAP_COUNTER_HASH_FULL] += 1,
     }
-    map_counters[MAP_COUNTER_HASH_FULL] += 1;
 }
 
 /// Inserts the blocks of every pixel's truncation band, as the kernel's invocations do.
