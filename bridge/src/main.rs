@@ -262,6 +262,9 @@ impl FrameSource for LiveTake {
     fn ground_truth(&self) -> Option<&[webfusion_core::source::TimedPose]> {
         None
     }
+    fn frames_dropped_by_source(&self) -> u64 {
+        self.live.frames_dropped()
+    }
 }
 
 fn gpu(options: &GpuOptions) -> anyhow::Result<Gpu> {

@@ -64,6 +64,8 @@ struct RawFrame {
     height: i32,
     pixel_format: oni::OniPixelFormat,
     timestamp_us: u64,
+    /// The device's own number for the frame (consecutive unless frames were dropped).
+    device_index: i32,
 }
 
 /// Checks a depth frame (16-bit) and, when the source has colour, its RGB888 partner against
@@ -218,7 +220,7 @@ impl Player {
         let copied = unsafe {
             let f = &*frame;
             let bytes = if f.data.is_null() || f.dataSize <= 0 { Vec::new() } else { std::slice::from_raw_parts(f.data.cast::<u8>(), f.dataSize as usize).to_vec() };
-            let result = RawFrame { bytes, width: f.width, height: f.height, pixel_format: f.videoMode.pixelFormat, timestamp_us: f.timestamp };
+            let result = RawFrame { bytes, width: f.width, height: f.height, pixel_format: f.videoMode.pixelFormat, timestamp_us: f.timestamp, device_index: f.frameIndex };
             oni::oniFrameRelease(frame);
             result
         };
@@ -387,6 +389,10 @@ pub(crate) struct LiveDevice {
     next_index: u64,
     /// Timestamp of the last depth frame handed out (µs).
     last_depth_us: Option<u64>,
+    /// The device's number for the last depth frame handed out.
+    last_device_index: Option<i32>,
+    /// Depth frames the device numbered between those handed out: dropped before we read them.
+    dropped: u64,
 }
 
 impl LiveDevice {
@@ -448,13 +454,17 @@ impl LiveDevice {
                 return Err(oni_error(&label, "cannot start a stream"));
             }
         }
-        Ok(Self { label, name, calibration, streams, next_index: 0, last_depth_us: None })
+        Ok(Self { label, name, calibration, streams, next_index: 0, last_depth_us: None, last_device_index: None, dropped: 0 })
     }
 }
 
 impl LiveSource for LiveDevice {
     fn name(&self) -> String {
         self.name.clone()
+    }
+
+    fn frames_dropped(&self) -> u64 {
+        self.dropped
     }
 
     fn calibration(&self) -> RgbdCalibration {
@@ -475,6 +485,10 @@ impl LiveSource for LiveDevice {
             std::thread::sleep(std::time::Duration::from_millis(2));
         };
         self.last_depth_us = Some(depth.timestamp_us);
+        if let Some(last) = self.last_device_index {
+            self.dropped += u64::try_from(i64::from(depth.device_index) - i64::from(last) - 1).unwrap_or(0);
+        }
+        self.last_device_index = Some(depth.device_index);
         let color = self.streams.color.map(|stream| Player::read_within(&self.label, stream, LIVE_FRAME_TIMEOUT_MS, LIVE_TIMEOUT_CAUSE)).transpose()?;
         let frame = rgbd_frame(&self.label, self.next_index, &self.calibration, depth, color)?;
         self.next_index += 1;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, bail};
 use webfusion_core::camera::TUM_DEPTH_UNITS_PER_METRE;
 use webfusion_core::codec::{ColorCodec, DEFAULT_JPEG_QUALITY, DepthCodec};
-use webfusion_core::recording::{RecordingOptions, RecordingReader, RecordingSummary, RecordingWriter};
+use webfusion_core::recording::{RecordingOptions, RecordingReader, RecordingSummary, RecordingWriter, TakeStats};
 use webfusion_core::source::{FrameSource, open_source};
 use webfusion_core::{PinholeIntrinsics, RgbdCalibration};
 
@@ -187,6 +187,13 @@ fn write_recording(
     (skip_corrupt, skipped): (bool, &mut Vec<usize>),
 ) -> anyhow::Result<Take> {
     let mut writer = RecordingWriter::create(out, source.calibration(), options)?;
+    // Known before the first frame (a TUM or .wfr source): written at once, so it survives a
+    // crash.
+    if let Some(poses) = source.ground_truth() {
+        writer.set_ground_truth(poses)?;
+    }
+    let take_start = std::time::Instant::now();
+    let mut last_written = take_start;
     let total = frames.len();
     let mut stderr = std::io::stderr();
     // One updating line on a terminal; about ten lines in a log.
@@ -214,6 +221,7 @@ fn write_recording(
             write_failed = true;
             break;
         }
+        last_written = std::time::Instant::now();
         if sync_due {
             last_sync = std::time::Instant::now();
             if !interactive {
@@ -231,9 +239,9 @@ fn write_recording(
     if interactive {
         writeln!(stderr).ok();
     }
-    if let Some(poses) = source.ground_truth() {
-        writer.set_ground_truth(poses);
-    }
+    let duration_ns = u64::try_from(last_written.duration_since(take_start).as_nanos()).unwrap_or(u64::MAX).max(1);
+    let frames_dropped_by_source = u32::try_from(source.frames_dropped_by_source()).unwrap_or(u32::MAX);
+    writer.set_take_stats(TakeStats { duration_ns, frames_dropped_by_source });
     let summary = if write_failed { writer.finish_keeping_what_fits()? } else { writer.finish()? };
     Ok(Take { summary, ended })
 }
@@ -277,6 +285,14 @@ fn print_summary(
         summary.color_payload_bytes as f64 / frame_count.max(1) as f64 * 1e-3
     );
     println!("  ground truth: {} poses", summary.ground_truth_pose_count);
+    if let Some(take) = summary.take {
+        println!(
+            "  take:   {:.2} s, {:.1} frames/s written, {} frames dropped by the source",
+            take.duration_ns as f64 * 1e-9,
+            take.frames_per_second(summary.frame_count).unwrap_or(0.0),
+            take.frames_dropped_by_source
+        );
+    }
 }
 
 /// The calibration to impose on the source, from `--intrinsics` and `--depth-scale`.
@@ -415,11 +431,15 @@ pub(crate) fn repair(args: &RepairArgs) -> anyhow::Result<()> {
     let partial = partial_path(&args.out)?;
     let written = (|| -> anyhow::Result<RecordingSummary> {
         let mut writer = RecordingWriter::create(&partial, reader.calibration(), options)?;
+        // Ground truth first: it survives even if this copy is interrupted too.
+        if let Some(poses) = reader.ground_truth() {
+            writer.set_ground_truth(poses)?;
+        }
+        if let Some(take) = reader.take_stats() {
+            writer.set_take_stats(take);
+        }
         for i in 0..reader.frame_count() {
             writer.write_encoded_frame(&reader.read_encoded_frame(i)?)?;
-        }
-        if let Some(poses) = reader.ground_truth() {
-            writer.set_ground_truth(poses);
         }
         Ok(writer.finish()?)
     })();

@@ -70,8 +70,12 @@ fn a_live_camera_records_the_frames_asked_for() {
     args.extend(CALIBRATION);
     let o = webfusion(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("frames/s written") && stdout.contains("frames dropped by the source"), "the take's rate and drops: {stdout}");
     let mut recording = RecordingReader::open(&wfr).expect("opening the live recording");
     assert_eq!(recording.frame_count(), 9, "the frames asked for");
+    let take = recording.take_stats().expect("the footer holds the take's statistics");
+    assert!(take.frames_per_second(9).is_some_and(|fps| fps > 0.0), "{take:?}");
     let stamps: Vec<i64> = (0..9).map(|i| recording.read_frame(i).expect("reading").depth_timestamp_ns).collect();
     assert!(stamps.windows(2).all(|w| w[1] > w[0]), "one frame each, in order: {stamps:?}");
 }

@@ -1,8 +1,10 @@
 // SPDX-License-Identifier: MIT
 //! `webfusion record` loses nothing it reported as synced: killed with SIGKILL after a reported
 //! sync (from a recording, a TUM directory and an OpenNI2 `.oni` of the Dummy device), every
-//! synced frame is recovered bit-identical; SIGTERM ends the take with a finished
-//! file; a file-size limit (`ulimit -f`) ends it with a finished file of what fit and an error.
+//! synced frame is recovered bit-identical, and the source's ground truth with them (it is
+//! written before the first frame); SIGTERM ends the take with a finished file that holds the
+//! take's statistics; a file-size limit (`ulimit -f`) ends it with a finished file of what fit
+//! and an error.
 //! Event-driven: the kills follow the recorder's own "synced N frames" lines, no timing.
 
 use std::io::{BufRead as _, BufReader};
@@ -10,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
 use webfusion_core::recording::{EncodedFrame, RecordingReader};
-use webfusion_core::source::FrameSource as _;
+use webfusion_core::source::{FrameSource as _, TimedPose};
 
 const SAMPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/sample/fr1_rpy.wfr");
 
@@ -54,22 +56,33 @@ fn wait_for_sync(child: &mut Child, nth: usize) -> usize {
     panic!("the recorder ended after {seen} syncs, before sync {nth}");
 }
 
-/// The frames a finished recording of the same source holds (the encoders are deterministic).
-fn reference(dir: &Path) -> Vec<EncodedFrame> {
+/// What a finished recording of the same source holds (the encoders are deterministic): its
+/// frames and its ground truth.
+struct Reference {
+    frames: Vec<EncodedFrame>,
+    ground_truth: Option<Vec<TimedPose>>,
+}
+
+fn reference(dir: &Path) -> Reference {
     reference_from(SAMPLE, dir, &[])
 }
 
-fn reference_from(source: &str, dir: &Path, extra: &[&str]) -> Vec<EncodedFrame> {
+fn reference_from(source: &str, dir: &Path, extra: &[&str]) -> Reference {
     let out = dir.join("reference.wfr");
     let status = record_from(source, &out, extra).wait_with_output().expect("reference run");
     assert!(status.status.success(), "reference recording: {}", String::from_utf8_lossy(&status.stderr));
+    let stdout = String::from_utf8_lossy(&status.stdout);
+    assert!(stdout.contains("frames/s written") && stdout.contains("frames dropped by the source"), "the summary gives the take's rate: {stdout}");
     let mut reader = RecordingReader::open(&out).expect("the reference is finished");
-    (0..reader.frame_count()).map(|i| reader.read_encoded_frame(i).expect("frame")).collect()
+    let take = reader.take_stats().expect("a recorded take has its statistics in the footer");
+    assert!(take.duration_ns > 0 && take.frames_dropped_by_source == 0, "{take:?}");
+    let frames = (0..reader.frame_count()).map(|i| reader.read_encoded_frame(i).expect("frame")).collect();
+    Reference { frames, ground_truth: reader.ground_truth().map(<[_]>::to_vec) }
 }
 
 /// Kills the recorder of `source` after its `nth_sync`-th reported sync, in each trial, and
-/// checks that every synced frame is recovered bit-identical to `want`.
-fn kill_trials(dir: &Path, source: &str, extra: &[&str], want: &[EncodedFrame], syncs: &[usize]) {
+/// checks that every synced frame is recovered bit-identical to `want`, and its ground truth.
+fn kill_trials(dir: &Path, source: &str, extra: &[&str], want: &Reference, syncs: &[usize]) {
     for (trial, &nth_sync) in syncs.iter().enumerate() {
         let out = dir.join(format!("take{trial}.wfr"));
         let mut args = vec!["--sync-interval-ms", "0"];
@@ -82,16 +95,19 @@ fn kill_trials(dir: &Path, source: &str, extra: &[&str], want: &[EncodedFrame], 
         let mut reader = RecordingReader::open_recovering(&partial).expect("the killed take opens");
         let kept = reader.frame_count();
         assert!(kept >= synced, "trial {trial}: {synced} frames reported synced, {kept} recovered ({:?})", reader.recovery());
-        for (i, want) in want.iter().enumerate().take(kept) {
+        for (i, want) in want.frames.iter().enumerate().take(kept) {
             assert_eq!(&reader.read_encoded_frame(i).expect("recovered frame"), want, "trial {trial}: frame {i} bit-identical");
         }
+        assert_eq!(reader.ground_truth(), want.ground_truth.as_deref(), "trial {trial}: the ground truth survives the kill");
     }
 }
 
 #[test]
 fn a_killed_recorder_loses_no_synced_frame() {
     let dir = scratch("kill");
-    kill_trials(&dir, SAMPLE, &[], &reference(&dir), &[1, 9, 37]);
+    let want = reference(&dir);
+    assert!(want.ground_truth.as_ref().is_some_and(|gt| !gt.is_empty()), "the sample has ground truth to lose");
+    kill_trials(&dir, SAMPLE, &[], &want, &[1, 9, 37]);
 }
 
 #[test]
@@ -131,6 +147,8 @@ fn sigterm_ends_the_take_with_a_finished_file() {
     let reader = RecordingReader::open(&out).expect("a finished file");
     // 95 frames, each synced to disk, remained when the signal came.
     assert!(reader.frame_count() >= synced && reader.frame_count() < 100, "{} frames, {synced} synced", reader.frame_count());
+    let take = reader.take_stats().expect("the footer holds the take's statistics");
+    assert!(take.frames_per_second(reader.frame_count()).is_some_and(|fps| fps > 0.0) && take.frames_dropped_by_source == 0, "{take:?}");
 }
 
 #[test]
@@ -146,4 +164,5 @@ fn a_file_size_limit_ends_the_take_with_what_fit() {
     let reader = RecordingReader::open(&out).expect("what fit is a finished file");
     let len = std::fs::metadata(&out).expect("size").len();
     assert!(reader.frame_count() > 5 && len <= 3000 * 1024, "{} frames in {len} bytes", reader.frame_count());
+    assert!(reader.ground_truth().is_some() && reader.take_stats().is_some(), "ground truth and take statistics kept");
 }

@@ -100,7 +100,7 @@ fn recording(color_codec: ColorCodec) -> Vec<u8> {
         writer.write_frame(&frame(i)).expect("frame");
     }
     let pose = Se3 { rotation: DQuat::from_rotation_y(0.1), translation_m: DVec3::new(0.1, 0.2, 0.3) };
-    writer.set_ground_truth(&[TimedPose { timestamp_ns: 1_000_000_000, world_from_camera: pose }]);
+    writer.set_ground_truth(&[TimedPose { timestamp_ns: 1_000_000_000, world_from_camera: pose }]).expect("ground truth");
     writer.finish_into_inner().expect("finish").0.into_inner()
 }
 

@@ -11,7 +11,7 @@
 //! and keeps every complete record whose CRC matches, resynchronising on the record magic past
 //! a damaged one (`webfusion repair` writes a finished copy).
 //!
-//! # Byte layout, version 1
+//! # Byte layout, version 2
 //!
 //! Integers are little-endian, floats IEEE 754 little-endian, CRCs CRC-32/ISO-HDLC (the
 //! zlib/PNG CRC). Reserved bytes are written as zero and rejected if not zero.
@@ -21,7 +21,7 @@
 //!
 //! header, 64 bytes at offset 0
 //!    0   8  magic                 89 57 46 52 0D 0A 1A 0A  ("\x89WFR\r\n\x1a\n")
-//!    8   2  version u16           1
+//!    8   2  version u16           2 (files of version 1 still read)
 //!   10   2  reserved
 //!   12   4  width_px u32          1..=8192
 //!   16   4  height_px u32         1..=8192
@@ -34,7 +34,8 @@
 //!   48  12  reserved
 //!   60   4  CRC of bytes 0..60
 //!
-//! frame record, 36 + D + C bytes; records follow each other from offset 64
+//! frame record, 36 + D + C bytes; records follow each other from offset 64 (or from the end
+//! of a ground-truth block there)
 //!    0   4  magic "WFRF"
 //!    4   4  frame index u32       position in the recording, from 0
 //!    8   8  depth timestamp i64   nanoseconds
@@ -45,25 +46,33 @@
 //!   36   D  depth payload         (depth codec, width × height values)
 //! 36+D   C  colour payload        (colour codec, width × height RGB8)
 //!
-//! ground-truth block, 12 + 64 g bytes, right after the last record (optional)
+//! ground-truth block, 12 + 64 g bytes (optional): right after the header when the writer
+//! knows the trajectory before the first frame (version 2: it then survives a crash), else right
+//! after the last record
 //!    0   4  magic "WFRG"
 //!    4   4  pose count g u32
 //!    8 64g  poses: timestamp i64 ns, tx ty tz f64 metres, qx qy qz qw f64 (world_from_camera)
 //! 8+64g  4  CRC of bytes 0..8+64g
 //!
-//! index, 12 + 8 n bytes, right after the records (and the ground truth)
+//! index, 12 + 8 n bytes, right after the records (and a trailing ground truth)
 //!    0   4  magic "WFRI"
 //!    4   4  frame count n u32
 //!    8  8n  file offset of each frame record, u64, increasing
 //!  8+8n  4  CRC of bytes 0..8+8n
 //!
-//! footer, the last 32 bytes
+//! footer, the last 48 bytes (version 2)
 //!    0   8  index offset u64
 //!    8   8  ground-truth block offset u64, 0 if there is none
 //!   16   4  frame count n u32
-//!   20   4  reserved
-//!   24   4  CRC of bytes 0..24
-//!   28   4  magic "WFRE"
+//!   20   4  frames dropped by the source u32 (a live camera's gaps in its frame numbers)
+//!   24   8  take duration u64, nanoseconds of wall clock from the start of the take to its
+//!           last frame written; 0 when the file is not a timed take (a conversion in memory)
+//!   32   8  reserved
+//!   40   4  CRC of bytes 0..40
+//!   44   4  magic "WFRE"
+//!
+//! footer, the last 32 bytes (version 1, still read): bytes 0..20 as above, 4 reserved bytes,
+//! the CRC of bytes 0..24, the magic
 //! ```
 //!
 //! A reader checks the header, footer, index and ground truth when it opens a file, and a
@@ -85,7 +94,7 @@ use crate::{ColorImage, DepthImage, Error, PinholeIntrinsics, Result, RgbdCalibr
 /// and 7-bit transfers, as in PNG.
 pub const RECORDING_MAGIC: [u8; 8] = *b"\x89WFR\r\n\x1a\n";
 /// Format version this build writes and the newest it reads.
-pub const RECORDING_VERSION: u16 = 1;
+pub const RECORDING_VERSION: u16 = 2;
 /// File name extension of recordings (without the dot).
 pub const RECORDING_EXTENSION: &str = "wfr";
 /// Largest image width or height a recording may declare, in pixels. It bounds what decoding
@@ -94,7 +103,9 @@ pub const MAX_IMAGE_SIDE_PX: u32 = 8192;
 
 const HEADER_LEN: usize = 64;
 const RECORD_HEADER_LEN: usize = 36;
-const FOOTER_LEN: usize = 32;
+const FOOTER_LEN: usize = 48;
+/// Footer length of version 1 files.
+const FOOTER_LEN_V1: usize = 32;
 const BLOCK_HEAD_LEN: usize = 8;
 const CRC_LEN: usize = 4;
 const POSE_LEN: usize = 64;
@@ -136,6 +147,25 @@ pub struct RecordingSummary {
     pub depth_payload_bytes: u64,
     /// Sum of the compressed colour payloads, in bytes.
     pub color_payload_bytes: u64,
+    /// How the take went, when the writer was told ([`RecordingWriter::set_take_stats`]).
+    pub take: Option<TakeStats>,
+}
+
+/// How a take went, stored in the footer: what the recorder saw while writing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TakeStats {
+    /// Wall-clock nanoseconds from the start of the take to its last frame written.
+    pub duration_ns: u64,
+    /// Frames the source produced but never delivered (a live camera's gaps in its frame
+    /// numbers, when the recorder fell behind or the device skipped).
+    pub frames_dropped_by_source: u32,
+}
+
+impl TakeStats {
+    /// Frames written per second of the take; `None` for a zero duration.
+    pub fn frames_per_second(&self, frame_count: usize) -> Option<f64> {
+        (self.duration_ns > 0).then(|| frame_count as f64 / (self.duration_ns as f64 * 1e-9))
+    }
 }
 
 /// Writes a `.wfr` recording frame by frame. Call [`RecordingWriter::finish`]: without it
@@ -152,7 +182,11 @@ pub struct RecordingWriter<W: Write + Seek = BufWriter<File>> {
     base: u64,
     /// Bytes written so far, from the start of the recording.
     position: u64,
+    /// Ground truth to write after the records, when it came after the first frame.
     ground_truth: Option<Vec<TimedPose>>,
+    /// Offset and pose count of the ground-truth block written right after the header.
+    leading_ground_truth: Option<(u64, usize)>,
+    take: Option<TakeStats>,
     depth_payload_bytes: u64,
     color_payload_bytes: u64,
     /// Payload bytes (depth, colour) of each record, to give them back if a record is dropped.
@@ -185,7 +219,8 @@ impl RecordingWriter<BufWriter<File>> {
 
     /// Finishes a recording whose last write failed (a full disk, a file-size limit): cuts the
     /// file back to its last complete record and writes the trailer there; where even that
-    /// does not fit, drops the ground truth, then records from the end, until it does. Returns
+    /// does not fit, drops a trailing ground truth (one written before the first frame stays),
+    /// then records from the end, until it does. Returns
     /// what the finished file holds.
     pub fn finish_keeping_what_fits(mut self) -> Result<RecordingSummary> {
         let io_error = |path: &Path, source| Error::Io { path: path.to_owned(), source };
@@ -237,6 +272,8 @@ impl<W: Write + Seek> RecordingWriter<W> {
             base,
             position: 0,
             ground_truth: None,
+            leading_ground_truth: None,
+            take: None,
             depth_payload_bytes: 0,
             color_payload_bytes: 0,
             record_payloads: Vec::new(),
@@ -311,9 +348,30 @@ impl<W: Write + Seek> RecordingWriter<W> {
         Ok(())
     }
 
-    /// Sets the ground-truth trajectory stored with the recording (replacing any set before).
-    pub fn set_ground_truth(&mut self, poses: &[TimedPose]) {
-        self.ground_truth = Some(poses.to_vec());
+    /// Sets the ground-truth trajectory stored with the recording. Before the first frame it
+    /// is written at once, right after the header, so a take that never finishes still holds it
+    /// (a scan recovers it); later it is kept for the trailer (replacing any set before). A
+    /// trajectory already written at the start cannot be replaced.
+    pub fn set_ground_truth(&mut self, poses: &[TimedPose]) -> Result<()> {
+        self.check_not_failed()?;
+        if self.leading_ground_truth.is_some() {
+            return Err(Error::InvalidConfig("the ground truth was written before the first frame and cannot be replaced".to_owned()));
+        }
+        if !self.record_offsets.is_empty() {
+            self.ground_truth = Some(poses.to_vec());
+            return Ok(());
+        }
+        let block = encode_ground_truth(poses)?;
+        let offset = self.position;
+        self.write_all(&block)?;
+        self.committed = self.position;
+        self.leading_ground_truth = Some((offset, poses.len()));
+        Ok(())
+    }
+
+    /// Sets how the take went (its duration, the frames its source dropped), for the footer.
+    pub fn set_take_stats(&mut self, take: TakeStats) {
+        self.take = Some(take);
     }
 
     /// Frames written so far.
@@ -344,29 +402,15 @@ impl<W: Write + Seek> RecordingWriter<W> {
         // `write_frame` keeps the count below `u32::MAX`.
         let frame_count = u32::try_from(self.record_offsets.len()).unwrap_or(u32::MAX);
 
-        let ground_truth = self.ground_truth.clone();
-        let ground_truth_offset = match &ground_truth {
-            Some(poses) => {
-                let pose_count = u32::try_from(poses.len())
-                    .map_err(|_| Error::InvalidConfig(format!("a recording holds at most {} ground-truth poses", u32::MAX)))?;
-                let mut block = Vec::with_capacity(BLOCK_HEAD_LEN + poses.len() * POSE_LEN + CRC_LEN);
-                block.extend_from_slice(&GROUND_TRUTH_MAGIC);
-                block.extend_from_slice(&pose_count.to_le_bytes());
-                for pose in poses {
-                    let t = pose.world_from_camera.translation_m;
-                    let q = pose.world_from_camera.rotation;
-                    block.extend_from_slice(&pose.timestamp_ns.to_le_bytes());
-                    for value in [t.x, t.y, t.z, q.x, q.y, q.z, q.w] {
-                        block.extend_from_slice(&value.to_le_bytes());
-                    }
-                }
-                let crc = crc32fast::hash(&block);
-                block.extend_from_slice(&crc.to_le_bytes());
+        let (ground_truth_offset, ground_truth_pose_count) = match (&self.leading_ground_truth, self.ground_truth.clone()) {
+            (Some((offset, count)), _) => (*offset, *count),
+            (None, Some(poses)) => {
+                let block = encode_ground_truth(&poses)?;
                 let offset = self.position;
                 self.write_all(&block)?;
-                offset
+                (offset, poses.len())
             }
-            None => 0,
+            (None, None) => (0, 0),
         };
 
         let index_offset = self.position;
@@ -384,9 +428,12 @@ impl<W: Write + Seek> RecordingWriter<W> {
         footer[0..8].copy_from_slice(&index_offset.to_le_bytes());
         footer[8..16].copy_from_slice(&ground_truth_offset.to_le_bytes());
         footer[16..20].copy_from_slice(&frame_count.to_le_bytes());
-        let crc = crc32fast::hash(&footer[..24]);
-        footer[24..28].copy_from_slice(&crc.to_le_bytes());
-        footer[28..32].copy_from_slice(&FOOTER_MAGIC);
+        let take = self.take.unwrap_or(TakeStats { duration_ns: 0, frames_dropped_by_source: 0 });
+        footer[20..24].copy_from_slice(&take.frames_dropped_by_source.to_le_bytes());
+        footer[24..32].copy_from_slice(&take.duration_ns.to_le_bytes());
+        let crc = crc32fast::hash(&footer[..40]);
+        footer[40..44].copy_from_slice(&crc.to_le_bytes());
+        footer[44..48].copy_from_slice(&FOOTER_MAGIC);
         self.write_all(&footer)?;
 
         // Complete the header now that the frame count is known.
@@ -399,10 +446,11 @@ impl<W: Write + Seek> RecordingWriter<W> {
 
         let summary = RecordingSummary {
             frame_count: self.record_offsets.len(),
-            ground_truth_pose_count: ground_truth.as_ref().map_or(0, Vec::len),
+            ground_truth_pose_count,
             total_bytes: self.position,
             depth_payload_bytes: self.depth_payload_bytes,
             color_payload_bytes: self.color_payload_bytes,
+            take: self.take,
         };
         Ok(summary)
     }
@@ -425,6 +473,26 @@ impl<W: Write + Seek> RecordingWriter<W> {
         }
         Ok(())
     }
+}
+
+/// A ground-truth block: magic, pose count, poses, CRC.
+fn encode_ground_truth(poses: &[TimedPose]) -> Result<Vec<u8>> {
+    let pose_count =
+        u32::try_from(poses.len()).map_err(|_| Error::InvalidConfig(format!("a recording holds at most {} ground-truth poses", u32::MAX)))?;
+    let mut block = Vec::with_capacity(BLOCK_HEAD_LEN + poses.len() * POSE_LEN + CRC_LEN);
+    block.extend_from_slice(&GROUND_TRUTH_MAGIC);
+    block.extend_from_slice(&pose_count.to_le_bytes());
+    for pose in poses {
+        let t = pose.world_from_camera.translation_m;
+        let q = pose.world_from_camera.rotation;
+        block.extend_from_slice(&pose.timestamp_ns.to_le_bytes());
+        for value in [t.x, t.y, t.z, q.x, q.y, q.z, q.w] {
+            block.extend_from_slice(&value.to_le_bytes());
+        }
+    }
+    let crc = crc32fast::hash(&block);
+    block.extend_from_slice(&crc.to_le_bytes());
+    Ok(block)
 }
 
 fn validate_options(options: &RecordingOptions) -> Result<()> {
@@ -557,6 +625,7 @@ pub struct RecordingReader {
     color_codec: ColorCodec,
     records: Vec<RecordSpan>,
     ground_truth: Option<Vec<TimedPose>>,
+    take: Option<TakeStats>,
     recovery: Option<RecoveryReport>,
 }
 
@@ -682,8 +751,8 @@ impl RecordingReader {
         let depth_codec = DepthCodec::from_id(header[40]).ok_or_else(|| error(format!("unknown depth codec id {}", header[40])))?;
         let color_codec = ColorCodec::from_id(header[41]).ok_or_else(|| error(format!("unknown colour codec id {}", header[41])))?;
         let header_frame_count = u32_at(&header, 44);
-        let (records, ground_truth, recovery) = match read_indexed(&mut storage, &path, header_frame_count) {
-            Ok((records, ground_truth)) => (records, ground_truth, None),
+        let (records, ground_truth, take, recovery) = match read_indexed(&mut storage, &path, header_frame_count, version) {
+            Ok(indexed) => (indexed.records, indexed.ground_truth, indexed.take, None),
             Err(e) if recover => {
                 let reason = match &e {
                     Error::Recording { message, .. } => message.clone(),
@@ -697,11 +766,17 @@ impl RecordingReader {
                     tail_bytes_dropped: scan.tail_bytes_dropped,
                     ground_truth_recovered: scan.ground_truth.is_some(),
                 };
-                (scan.records, scan.ground_truth, Some(report))
+                (scan.records, scan.ground_truth, None, Some(report))
             }
             Err(e) => return Err(e),
         };
-        Ok(Self { storage, path, calibration, depth_codec, color_codec, records, ground_truth, recovery })
+        Ok(Self { storage, path, calibration, depth_codec, color_codec, records, ground_truth, take, recovery })
+    }
+
+    /// How the take went, from the footer of a finished version-2 file with a timed take;
+    /// `None` for older files, untimed ones and recovered ones (the footer is what was lost).
+    pub fn take_stats(&self) -> Option<TakeStats> {
+        self.take
     }
 
     /// The file (or `<memory>`).
@@ -798,28 +873,39 @@ impl RecordingReader {
     }
 }
 
+/// What the strict path read past the header.
+struct Indexed {
+    records: Vec<RecordSpan>,
+    ground_truth: Option<Vec<TimedPose>>,
+    take: Option<TakeStats>,
+}
+
 /// The strict path past the header: footer, index and ground truth, all checked; the records'
 /// spans from the index.
-fn read_indexed(storage: &mut Storage, path: &Path, header_frame_count: u32) -> Result<(Vec<RecordSpan>, Option<Vec<TimedPose>>)> {
+fn read_indexed(storage: &mut Storage, path: &Path, header_frame_count: u32, version: u16) -> Result<Indexed> {
     let error = |message: String| Error::Recording { path: path.to_owned(), message };
     let file_len = storage.len();
     let read = |storage: &mut Storage, offset: u64, len: usize| -> Result<Vec<u8>> {
     storage.read_at(offset, len).map_err(|source| Error::Io { path: path.to_owned(), source })
     };
-    let min_len = (HEADER_LEN + BLOCK_HEAD_LEN + CRC_LEN + FOOTER_LEN) as u64;
+    let footer_len = if version >= 2 { FOOTER_LEN } else { FOOTER_LEN_V1 };
+    let min_len = (HEADER_LEN + BLOCK_HEAD_LEN + CRC_LEN + footer_len) as u64;
     if file_len < min_len {
         return Err(error(format!("truncated: {file_len} bytes, but a finished recording has at least {min_len}")));
     }
 
     // Footer.
-    let footer = read(storage, file_len - FOOTER_LEN as u64, FOOTER_LEN)?;
-    if footer[28..32] != FOOTER_MAGIC {
+    let footer = read(storage, file_len - footer_len as u64, footer_len)?;
+    if footer[footer_len - 4..] != FOOTER_MAGIC {
         return Err(error("truncated or unfinished: no footer at the end of the file".to_owned()));
     }
-    check_crc(&footer, 24, "footer").map_err(&error)?;
-    if footer[20..24] != [0; 4] {
+    check_crc(&footer, footer_len - 8, "footer").map_err(&error)?;
+    let reserved = if version >= 2 { &footer[32..40] } else { &footer[20..24] };
+    if reserved.iter().any(|&b| b != 0) {
         return Err(error("reserved footer bytes are not zero".to_owned()));
     }
+    let take = (version >= 2 && u64_at(&footer, 24) > 0)
+        .then(|| TakeStats { duration_ns: u64_at(&footer, 24), frames_dropped_by_source: u32_at(&footer, 20) });
     let index_offset = u64_at(&footer, 0);
     let ground_truth_offset = u64_at(&footer, 8);
     let frame_count = u32_at(&footer, 16);
@@ -830,7 +916,7 @@ fn read_indexed(storage: &mut Storage, path: &Path, header_frame_count: u32) -> 
     // Index: exactly between its offset and the footer.
     let index_len = BLOCK_HEAD_LEN as u64 + u64::from(frame_count) * INDEX_ENTRY_LEN as u64 + CRC_LEN as u64;
     let index_end = index_offset.checked_add(index_len);
-    if index_offset < HEADER_LEN as u64 || index_end != Some(file_len - FOOTER_LEN as u64) {
+    if index_offset < HEADER_LEN as u64 || index_end != Some(file_len - footer_len as u64) {
         return Err(error(format!(
             "index of {frame_count} frames at offset {index_offset} does not end at the footer (file is {file_len} bytes)"
         )));
@@ -844,29 +930,38 @@ fn read_indexed(storage: &mut Storage, path: &Path, header_frame_count: u32) -> 
         return Err(error(format!("index holds {} frames but footer says {frame_count}", u32_at(&index, 4))));
     }
 
-    // Ground truth: exactly between its offset and the index.
-    let (records_end, ground_truth) = if ground_truth_offset == 0 {
-        (index_offset, None)
+    // Ground truth: right after the header (version 2), the records after it; or exactly
+    // between its offset and the index.
+    let (records_start, records_end, ground_truth) = if ground_truth_offset == 0 {
+        (HEADER_LEN as u64, index_offset, None)
+    } else if version >= 2 && ground_truth_offset == HEADER_LEN as u64 {
+        let head = read(storage, ground_truth_offset, BLOCK_HEAD_LEN)?;
+        let block_len = (BLOCK_HEAD_LEN + CRC_LEN) as u64 + u64::from(u32_at(&head, 4)) * POSE_LEN as u64;
+        if ground_truth_offset + block_len > index_offset {
+            return Err(error(format!("ground truth of {} poses at offset {ground_truth_offset} runs into the index", u32_at(&head, 4))));
+        }
+        let block = read(storage, ground_truth_offset, to_usize(block_len).map_err(&error)?)?;
+        (ground_truth_offset + block_len, index_offset, Some(decode_ground_truth(&block).map_err(&error)?))
     } else {
         if ground_truth_offset < HEADER_LEN as u64 || ground_truth_offset > index_offset - (BLOCK_HEAD_LEN + CRC_LEN) as u64 {
             return Err(error(format!("ground truth offset {ground_truth_offset} lies outside the records")));
         }
         let block_len = index_offset - ground_truth_offset;
         let block = read(storage, ground_truth_offset, to_usize(block_len).map_err(&error)?)?;
-        (ground_truth_offset, Some(decode_ground_truth(&block).map_err(&error)?))
+        (HEADER_LEN as u64, ground_truth_offset, Some(decode_ground_truth(&block).map_err(&error)?))
     };
 
     let record_offsets: Vec<u64> = (0..frame_count as usize).map(|i| u64_at(&index, BLOCK_HEAD_LEN + i * INDEX_ENTRY_LEN)).collect();
-    let mut expected_min = HEADER_LEN as u64;
+    let mut expected_min = records_start;
     for (i, &offset) in record_offsets.iter().enumerate() {
-        let first_ok = i != 0 || offset == HEADER_LEN as u64;
+        let first_ok = i != 0 || offset == records_start;
         if !first_ok || offset < expected_min || offset.saturating_add(RECORD_HEADER_LEN as u64) > records_end {
             return Err(error(format!("index entry {i} (offset {offset}) is out of order or outside the records")));
         }
         expected_min = offset + RECORD_HEADER_LEN as u64;
     }
-    if record_offsets.is_empty() && records_end != HEADER_LEN as u64 {
-        return Err(error(format!("no frames, but {} bytes between header and index", records_end - HEADER_LEN as u64)));
+    if record_offsets.is_empty() && records_end != records_start {
+        return Err(error(format!("no frames, but {} bytes between header and index", records_end.saturating_sub(records_start))));
     }
 
     let records = record_offsets
@@ -874,7 +969,7 @@ fn read_indexed(storage: &mut Storage, path: &Path, header_frame_count: u32) -> 
     .enumerate()
     .map(|(i, &offset)| RecordSpan { offset, end: record_offsets.get(i + 1).copied().unwrap_or(records_end), stored_index: i as u32 })
     .collect();
-    Ok((records, ground_truth))
+    Ok(Indexed { records, ground_truth, take })
 }
 
 /// What scanning a recording's records found.
@@ -1103,7 +1198,7 @@ mod tests {
             writer.write_frame(frame).expect("writing a frame");
         }
         if let Some(poses) = ground_truth {
-            writer.set_ground_truth(poses);
+            writer.set_ground_truth(poses).expect("ground truth after the frames");
         }
         let (cursor, summary) = writer.finish_into_inner().expect("finishing");
         assert_eq!(summary.frame_count, frames.len(), "summary frame count");
@@ -1204,7 +1299,7 @@ mod tests {
         for i in 0..4 {
             writer.write_frame(&synthetic_frame(i)).expect("writing");
         }
-        writer.set_ground_truth(&sample_ground_truth());
+        writer.set_ground_truth(&sample_ground_truth()).expect("ground truth");
         assert_eq!(writer.frame_count(), 4, "frames so far");
         let summary = writer.finish().expect("finishing");
         assert_eq!(summary.total_bytes, std::fs::metadata(&path).expect("metadata").len(), "size on disk");
@@ -1276,11 +1371,11 @@ mod tests {
         let bytes = small_recording();
 
         let mut newer = bytes.clone();
-        newer[8..10].copy_from_slice(&2_u16.to_le_bytes());
+        newer[8..10].copy_from_slice(&3_u16.to_le_bytes());
         let message = recording_error(RecordingReader::from_bytes(newer.clone()));
-        assert_eq!(message, "recording version 2 is newer than this build supports (1)", "without a fixed CRC");
+        assert_eq!(message, "recording version 3 is newer than this build supports (2)", "without a fixed CRC");
         let message = recording_error(RecordingReader::from_bytes(with_header_crc(newer)));
-        assert_eq!(message, "recording version 2 is newer than this build supports (1)", "with a fixed CRC");
+        assert_eq!(message, "recording version 3 is newer than this build supports (2)", "with a fixed CRC");
 
         let mut reserved = bytes.clone();
         reserved[50] = 1;
@@ -1308,9 +1403,15 @@ mod tests {
         let mut footer_index = bytes.clone();
         let at = footer_index.len() - FOOTER_LEN;
         footer_index[at..at + 8].copy_from_slice(&u64::MAX.to_le_bytes());
-        let crc = crc32fast::hash(&footer_index[at..at + 24]);
-        footer_index[at + 24..at + 28].copy_from_slice(&crc.to_le_bytes());
+        let crc = crc32fast::hash(&footer_index[at..at + 40]);
+        footer_index[at + 40..at + 44].copy_from_slice(&crc.to_le_bytes());
         assert!(recording_error(RecordingReader::from_bytes(footer_index)).contains("does not end at the footer"), "index offset");
+
+        let mut footer_reserved = bytes.clone();
+        footer_reserved[at + 35] = 1;
+        let crc = crc32fast::hash(&footer_reserved[at..at + 40]);
+        footer_reserved[at + 40..at + 44].copy_from_slice(&crc.to_le_bytes());
+        assert!(recording_error(RecordingReader::from_bytes(footer_reserved)).contains("reserved footer bytes"), "footer reserved");
 
         assert!(recording_error(RecordingReader::from_bytes(Vec::new())).contains("truncated"), "empty");
         assert!(recording_error(RecordingReader::from_bytes(RECORDING_MAGIC.to_vec())).contains("truncated"), "magic only");
@@ -1429,9 +1530,59 @@ mod tests {
         for i in 0..3 {
             writer.write_encoded_frame(&reader.read_encoded_frame(i).expect("frame")).expect("write");
         }
-        writer.set_ground_truth(reader.ground_truth().expect("gt"));
+        writer.set_ground_truth(reader.ground_truth().expect("gt")).expect("gt after the frames");
         let (cursor, _) = writer.finish_into_inner().expect("finish");
         assert_eq!(cursor.into_inner(), bytes, "the same bytes as the original");
+    }
+
+    #[test]
+    fn ground_truth_set_before_the_first_frame_survives_a_cut_anywhere_after_it() {
+        let frames: Vec<RgbdFrame> = (0..3).map(synthetic_frame).collect();
+        let poses = sample_ground_truth();
+        let mut writer = RecordingWriter::new(Cursor::new(Vec::new()), small_calibration(), png_options()).expect("writer");
+        writer.set_ground_truth(&poses).expect("written at once");
+        let gt_end = HEADER_LEN + BLOCK_HEAD_LEN + poses.len() * POSE_LEN + CRC_LEN;
+        assert_eq!(writer.bytes_written(), gt_end as u64, "the block follows the header");
+        for frame in &frames {
+            writer.write_frame(frame).expect("frame");
+        }
+        let refused = writer.set_ground_truth(&poses[..2]);
+        assert!(matches!(&refused, Err(Error::InvalidConfig(m)) if m.contains("cannot be replaced")), "{refused:?}");
+        writer.set_take_stats(TakeStats { duration_ns: 1_500_000_000, frames_dropped_by_source: 7 });
+        let (cursor, summary) = writer.finish_into_inner().expect("finish");
+        assert_eq!((summary.ground_truth_pose_count, summary.frame_count), (poses.len(), 3), "{summary:?}");
+        let bytes = cursor.into_inner();
+
+        let mut reader = RecordingReader::from_bytes(bytes.clone()).expect("strict open");
+        assert_eq!(reader.ground_truth(), Some(&poses[..]), "poses exact");
+        assert_eq!(reader.read_frame(2).expect("frame").depth, frames[2].depth, "records after the block");
+        let take = reader.take_stats().expect("a timed take");
+        assert_eq!((take.duration_ns, take.frames_dropped_by_source), (1_500_000_000, 7), "take stats");
+        assert_eq!(take.frames_per_second(3), Some(2.0), "3 frames in 1.5 s");
+        // A take killed at any byte after the block keeps the ground truth; before it, not.
+        for cut in HEADER_LEN..bytes.len() - 1 {
+            let reader = RecordingReader::from_bytes_recovering(bytes[..cut].to_vec()).unwrap_or_else(|e| panic!("cut at {cut}: {e}"));
+            assert_eq!(reader.ground_truth().is_some(), cut >= gt_end, "cut at {cut}");
+            assert!(reader.take_stats().is_none(), "cut at {cut}: the footer with the take stats is gone");
+        }
+        // A zero-frame take with ground truth only.
+        let mut writer = RecordingWriter::new(Cursor::new(Vec::new()), small_calibration(), png_options()).expect("writer");
+        writer.set_ground_truth(&poses).expect("written at once");
+        let (cursor, _) = writer.finish_into_inner().expect("finish");
+        let reader = RecordingReader::from_bytes(cursor.into_inner()).expect("strict open");
+        assert_eq!((reader.frame_count(), reader.ground_truth().map(<[_]>::len)), (0, Some(poses.len())), "empty take");
+        assert!(reader.take_stats().is_none(), "an untimed file");
+    }
+
+    #[test]
+    fn version_1_files_still_read() {
+        let mut reader = RecordingReader::open(SAMPLE_PATH).expect("the bundled sample opens");
+        let header = std::fs::read(SAMPLE_PATH).expect("sample bytes");
+        assert_eq!(u16_at(&header, 8), 1, "the bundled sample is a version 1 file");
+        assert!(reader.recovery().is_none() && reader.take_stats().is_none(), "strict, no take stats");
+        assert_eq!(reader.frame_count(), 100, "frames");
+        assert!(reader.ground_truth().is_some_and(|gt| !gt.is_empty()), "ground truth");
+        reader.read_frame(99).expect("the last frame reads");
     }
 
     #[test]

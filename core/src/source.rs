@@ -25,6 +25,12 @@ pub trait FrameSource: Send {
 
     /// Ground-truth camera poses (`world_from_camera`), if the source has them.
     fn ground_truth(&self) -> Option<&[TimedPose]>;
+
+    /// Frames the device produced but this source never handed out, so far (a live camera's
+    /// gaps in its own frame numbers); files drop nothing.
+    fn frames_dropped_by_source(&self) -> u64 {
+        0
+    }
 }
 
 /// A live camera: an endless stream of frames, read in order, with one calibration.
@@ -41,6 +47,10 @@ pub trait LiveSource: Send {
     /// Blocks until the device delivers its next frame. Frames are numbered from 0 in the
     /// order read; an error means the device stopped (unplugged, timed out).
     fn next_frame(&mut self) -> Result<RgbdFrame>;
+
+    /// Frames the device numbered but this source never handed out, so far: the gaps in the
+    /// device's own frame numbers (the reader fell behind and the driver dropped them).
+    fn frames_dropped(&self) -> u64;
 }
 
 /// Opens `path` as a frame source: a directory is read as a TUM RGB-D sequence, a file
