@@ -83,6 +83,10 @@ pub(crate) struct ServeArgs {
     /// Frames a live-delivery client may have queued before the oldest is dropped.
     #[arg(long, default_value_t = 2)]
     live_queue: usize,
+    /// Skip damaged frames of a recording (each client's status counts them) instead of ending
+    /// the session at the first one.
+    #[arg(long)]
+    skip_corrupt: bool,
     #[command(flatten)]
     calibration: CalibrationArgs,
 }
@@ -97,6 +101,7 @@ struct Shared {
     color: ColorArg,
     jpeg_quality: u8,
     live_queue: usize,
+    skip_corrupt: bool,
     /// The capture of a live camera; `None` for logs.
     live: Option<LiveHub>,
 }
@@ -192,6 +197,7 @@ pub(crate) fn run(args: ServeArgs) -> anyhow::Result<()> {
         color: args.color,
         jpeg_quality: args.jpeg_quality,
         live_queue: args.live_queue,
+        skip_corrupt: args.skip_corrupt,
         live,
     });
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
@@ -487,6 +493,8 @@ struct Playback {
     stepping: bool,
     /// Wall-clock instant and source timestamp that pace real-rate replay; reset on any jump.
     anchor: Option<(Instant, i64)>,
+    /// Damaged frames skipped (`--skip-corrupt`).
+    frames_skipped: u64,
 }
 
 impl Playback {
@@ -501,8 +509,26 @@ impl Playback {
             delivery: self.delivery,
             frames_sent,
             frames_dropped,
+            frames_skipped: self.frames_skipped,
         };
         WsMessage::Binary(Message::Status(status).encode().into())
+    }
+
+    /// Moves past the frame just sent (or skipped): at the end it wraps to frame 0, and
+    /// without looping the playback ends. Whether the client should hear of it.
+    fn advance(&mut self, frame_count: usize) -> bool {
+        self.next_index += 1;
+        if self.next_index < frame_count {
+            return false;
+        }
+        self.next_index = 0;
+        self.anchor = None;
+        if self.looping {
+            return false;
+        }
+        self.state = PlaybackState::Ended;
+        self.stepping = false;
+        true
     }
 }
 
@@ -569,8 +595,12 @@ async fn drive_session(stream: &mut futures_util::stream::SplitStream<WebSocket>
         .encode()
         .into(),
     ));
-    let mut playback = Playback { state: PlaybackState::Paused, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Lossless, stepping: false, anchor: None };
+    let mut playback =
+        Playback { state: PlaybackState::Paused, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Lossless, stepping: false, anchor: None, frames_skipped: 0 };
     let mut sequence = 0_u64;
+    // Damaged frames skipped since the last one sent: a source with nothing readable left
+    // ends the session instead of skipping around a loop forever.
+    let mut skipped_in_a_row = 0_usize;
     let status = |playback: &Playback| playback.status(queue);
     queue.reply(status(&playback));
     // The frame read ahead and the instant it is due.
@@ -579,7 +609,25 @@ async fn drive_session(stream: &mut futures_util::stream::SplitStream<WebSocket>
         let active = playback.state == PlaybackState::Playing || playback.stepping;
         if active && pending.is_none() {
             let index = playback.next_index;
-            let frame = tokio::task::block_in_place(|| source.frame_message(index, sequence, shared.color, shared.jpeg_quality)).map_err(|e| source_failed(&e))?;
+            let frame = match tokio::task::block_in_place(|| source.frame_message(index, sequence, shared.color, shared.jpeg_quality)) {
+                Ok(frame) => frame,
+                Err(e @ webfusion_core::Error::CorruptFrame { .. }) if shared.skip_corrupt => {
+                    eprintln!("serve: skipping a damaged frame: {e}");
+                    playback.frames_skipped += 1;
+                    skipped_in_a_row += 1;
+                    if skipped_in_a_row >= frame_count {
+                        return Err((ErrorCode::SourceFailed, format!("every frame of the source is damaged (last: {e})")));
+                    }
+                    // A step goes on to the next readable frame.
+                    if playback.advance(frame_count) {
+                        queue.reply(status(&playback));
+                    }
+                    continue;
+                }
+                Err(e @ webfusion_core::Error::CorruptFrame { .. }) => return Err((ErrorCode::SourceFailed, format!("{e} (serve --skip-corrupt skips damaged frames)"))),
+                Err(e) => return Err(source_failed(&e)),
+            };
+            skipped_in_a_row = 0;
             let now = Instant::now();
             let due = match playback.anchor {
                 _ if playback.stepping || playback.rate == 0.0 => now,
@@ -609,21 +657,9 @@ async fn drive_session(stream: &mut futures_util::stream::SplitStream<WebSocket>
                     return Ok(());
                 }
                 sequence += 1;
-                playback.next_index += 1;
-                let mut report = false;
-                if playback.stepping {
-                    playback.stepping = false;
-                    report = true;
-                }
-                if playback.next_index >= frame_count {
-                    playback.next_index = 0;
-                    playback.anchor = None;
-                    if !playback.looping {
-                        playback.state = PlaybackState::Ended;
-                        report = true;
-                    }
-                }
-                if report {
+                let stepped = std::mem::take(&mut playback.stepping);
+                let ended = playback.advance(frame_count);
+                if stepped || ended {
                     queue.reply(status(&playback));
                 }
             }
@@ -659,7 +695,7 @@ async fn drive_live_session(stream: &mut futures_util::stream::SplitStream<WebSo
     queue.reply(WsMessage::Binary(
         Message::Hello(Hello { source_name: hub.name.clone(), frame_count: None, calibration: hub.calibration, has_ground_truth: false, delivery: Delivery::Live }).encode().into(),
     ));
-    let mut playback = Playback { state: PlaybackState::Paused, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Live, stepping: false, anchor: None };
+    let mut playback = Playback { state: PlaybackState::Paused, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Live, stepping: false, anchor: None, frames_skipped: 0 };
     // A camera's "next index" is the number of frames it has captured.
     let status = |playback: &mut Playback| {
         playback.next_index = hub.captured.load(Ordering::Relaxed) as usize;
@@ -820,7 +856,7 @@ mod tests {
 
     #[test]
     fn seek_past_the_end_is_refused_and_play_restarts_after_the_end() {
-        let mut playback = Playback { state: PlaybackState::Ended, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Lossless, stepping: false, anchor: None };
+        let mut playback = Playback { state: PlaybackState::Ended, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Lossless, stepping: false, anchor: None, frames_skipped: 0 };
         assert!(apply_control(&mut playback, Control::Seek(10), 10).is_err(), "seek to 10 of 10");
         apply_control(&mut playback, Control::Seek(9), 10).expect("seek to 9");
         assert_eq!((playback.next_index, playback.state), (9, PlaybackState::Paused), "after seek");

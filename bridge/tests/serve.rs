@@ -419,7 +419,7 @@ async fn a_corrupt_frame_closes_its_session_with_the_reason_and_the_server_lives
     match reply {
         Some(Message::Error { code, message }) => {
             assert_eq!(code, ErrorCode::SourceFailed, "{message}");
-            assert!(message.contains("frame 0") && message.contains("CRC"), "{message}");
+            assert!(message.contains("frame 0") && message.contains("CRC") && message.contains("--skip-corrupt"), "{message}");
         }
         other => panic!("expected an error naming the frame, got {other:?}"),
     }
@@ -430,6 +430,40 @@ async fn a_corrupt_frame_closes_its_session_with_the_reason_and_the_server_lives
     send(&mut other, Control::Seek(1)).await;
     send(&mut other, Control::Step).await;
     assert_eq!(next_frame(&mut other).await.index, 1, "frame 1 after the corrupt frame 0");
+    let _ = std::fs::remove_file(&path);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn skip_corrupt_skips_damaged_frames_and_counts_them_in_the_status() {
+    let path = std::env::temp_dir().join(format!("webfusion-serve-skip-{}.wfr", std::process::id()));
+    let mut bytes = std::fs::read(SAMPLE).expect("reading the sample");
+    // A payload byte of frames 0 and 50 (found by their record headers: magic, then index).
+    for index in [0_u32, 50] {
+        let mut head = b"WFRF".to_vec();
+        head.extend_from_slice(&index.to_le_bytes());
+        let at = bytes.windows(8).position(|w| w == head.as_slice()).unwrap_or_else(|| panic!("record {index}"));
+        bytes[at + 36 + 10] ^= 0x5a;
+    }
+    std::fs::write(&path, &bytes).expect("writing the damaged copy");
+    let server = Server::start(&["--source", path.to_str().expect("utf-8"), "--skip-corrupt"]);
+    let mut socket = server.connect().await;
+    hello(&mut socket).await;
+    // A step over the damaged frame 0 delivers frame 1.
+    send(&mut socket, Control::Step).await;
+    assert_eq!(next_frame(&mut socket).await.index, 1, "the step goes on to the next readable frame");
+    send(&mut socket, Control::Rate(0.0)).await;
+    send(&mut socket, Control::Play).await;
+    let (frames, status) = frames_until(&mut socket, PlaybackState::Ended).await;
+    let indices: Vec<u64> = frames.iter().map(|f| f.index).collect();
+    let want: Vec<u64> = (2..100).filter(|&i| i != 50).collect();
+    assert_eq!(indices, want, "every readable frame, in order");
+    assert_eq!(status.frames_skipped, 2, "both damaged frames counted");
+    let mut original = RecordingReader::open(SAMPLE).expect("the sample");
+    for frame in frames.iter().step_by(16) {
+        let encoded = original.read_encoded_frame(frame.index as usize).expect("original frame");
+        assert_eq!((&frame.depth_payload, &frame.color_payload), (&encoded.depth_payload, &encoded.color_payload), "frame {} unchanged", frame.index);
+    }
+    assert!(server.log_contains("skipping a damaged frame").await, "the server says what it skipped");
     let _ = std::fs::remove_file(&path);
 }
 

@@ -9,7 +9,7 @@
 //! |---|---|---|
 //! | 1 `Hello` | server → client | source name, frame count, calibration, ground truth flag, delivery |
 //! | 2 `Frame` | server → client | sequence, index, timestamps, optional ground-truth pose, depth (RVL), colour |
-//! | 3 `Status` | server → client | playback state, next index, rate, loop, delivery, sent/dropped counts |
+//! | 3 `Status` | server → client | playback state, next index, rate, loop, delivery, sent/dropped/skipped counts |
 //! | 4 `Error` | server → client | code and message; the server closes after it |
 //! | 16 `Control` | client → server | play, pause, step, seek, rate, loop, delivery |
 //!
@@ -26,7 +26,7 @@ use crate::{ColorImage, DepthImage, Error, PinholeIntrinsics, Result, RgbdCalibr
 /// First two bytes of every message.
 pub const PROTOCOL_MAGIC: [u8; 2] = *b"WF";
 /// The protocol version this build speaks.
-pub const PROTOCOL_VERSION: u8 = 1;
+pub const PROTOCOL_VERSION: u8 = 2;
 /// Largest message a client may send; control messages are a few bytes.
 pub const MAX_CLIENT_MESSAGE_BYTES: usize = 1024;
 /// Largest message a server may send (a raw 1280x1024 RGB frame plus depth fits easily).
@@ -158,6 +158,8 @@ pub struct Status {
     pub frames_sent: u64,
     /// Frames dropped for this client (live delivery only).
     pub frames_dropped: u64,
+    /// Damaged frames of the source skipped for this client (`serve --skip-corrupt`).
+    pub frames_skipped: u64,
 }
 
 /// Why the server is closing a session.
@@ -269,6 +271,7 @@ impl Message {
                 w.u8(delivery_id(status.delivery));
                 w.u64(status.frames_sent);
                 w.u64(status.frames_dropped);
+                w.u64(status.frames_skipped);
             }
             Message::Error { code, message } => {
                 w.u8(KIND_ERROR);
@@ -385,7 +388,8 @@ impl Message {
                 let delivery = r.delivery()?;
                 let frames_sent = r.u64("frames sent")?;
                 let frames_dropped = r.u64("frames dropped")?;
-                Message::Status(Status { state, next_index, rate, looping, delivery, frames_sent, frames_dropped })
+                let frames_skipped = r.u64("frames skipped")?;
+                Message::Status(Status { state, next_index, rate, looping, delivery, frames_sent, frames_dropped, frames_skipped })
             }
             KIND_ERROR => {
                 let code = match r.u16("error code")? {
@@ -576,7 +580,7 @@ mod tests {
                 color: WireColor::Raw,
                 color_payload: vec![],
             }),
-            Message::Status(Status { state: PlaybackState::Ended, next_index: 100, rate: 1.5, looping: true, delivery: Delivery::Live, frames_sent: 90, frames_dropped: 10 }),
+            Message::Status(Status { state: PlaybackState::Ended, next_index: 100, rate: 1.5, looping: true, delivery: Delivery::Live, frames_sent: 90, frames_dropped: 10, frames_skipped: 3 }),
             Message::Error { code: ErrorCode::MalformedMessage, message: "bad".into() },
             Message::Control(Control::Play),
             Message::Control(Control::Pause),
@@ -613,9 +617,12 @@ mod tests {
     fn other_versions_are_rejected_by_name() {
         let mut bytes = Message::Control(Control::Play).encode();
         bytes[2] = PROTOCOL_VERSION + 1;
-        let err = Message::decode(&bytes).expect_err("version 2 accepted");
-        assert!(matches!(err, Error::ProtocolVersion { got: 2, supported: 1 }), "{err}");
-        assert!(err.to_string().contains("version 2"), "{err}");
+        let err = Message::decode(&bytes).expect_err("version 3 accepted");
+        assert!(matches!(err, Error::ProtocolVersion { got: 3, supported: 2 }), "{err}");
+        assert!(err.to_string().contains("version 3"), "{err}");
+        // A version-1 peer (no skipped count in its status) is refused by name too.
+        bytes[2] = 1;
+        assert!(matches!(Message::decode(&bytes), Err(Error::ProtocolVersion { got: 1, supported: 2 })), "version 1 accepted");
     }
 
     #[test]

@@ -708,6 +708,7 @@ impl App {
             frames_total,
             adapter: self.adapter.clone(),
             frames_dropped: self.dropped_here + self.server.as_ref().map_or(0, |s| s.frames_dropped),
+            frames_skipped: self.server.as_ref().map_or(0, |s| s.frames_skipped),
             reconnects: self.reconnects,
             device_rebuilds: self.device_rebuilds,
             time_to_first_frame_ms: self.first_frame_ms,
@@ -780,6 +781,9 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         v.voxel_size_m * 1000.0,
         v.memory_bytes as f64 / (1 << 20) as f64,
     ));
+    if s.frames_skipped > 0 {
+        lines.push(format!("⚠ the bridge skipped {} damaged frame(s) of the source", s.frames_skipped));
+    }
     if !s.message.is_empty() {
         lines.push(format!("⚠ {}", s.message));
     }

@@ -89,6 +89,8 @@ pub(crate) struct Status {
     pub(crate) adapter: String,
     /// Frames dropped (real-time delivery) here and at the bridge.
     pub(crate) frames_dropped: u64,
+    /// Damaged frames of the source the bridge skipped (`serve --skip-corrupt`).
+    pub(crate) frames_skipped: u64,
     pub(crate) reconnects: u32,
     /// Pipelines rebuilt after the GPU device was lost.
     pub(crate) device_rebuilds: u32,
