@@ -19,7 +19,7 @@ use glam::{DQuat, DVec3};
 use webfusion_core::codec::{ColorCodec, DepthCodec, png, rvl};
 use webfusion_core::io::trajectory::TimedPose;
 use webfusion_core::protocol::{Control, Delivery, FrameMessage, Hello, Message, PlaybackState, Status, WireColor};
-use webfusion_core::recording::{RecordingOptions, RecordingReader, RecordingWriter};
+use webfusion_core::recording::{RecordingOptions, RecordingReader, RecordingWriter, TakeStats};
 use webfusion_core::source::FrameSource as _;
 use webfusion_core::{ColorImage, DepthImage, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
 
@@ -93,14 +93,23 @@ fn frame(i: u64) -> RgbdFrame {
     }
 }
 
-fn recording(color_codec: ColorCodec) -> Vec<u8> {
+/// Three frames and one ground-truth pose, the pose written before the frames (as `record`
+/// does, right after the header) or after them, and the take's statistics in the footer.
+fn recording(color_codec: ColorCodec, ground_truth_first: bool) -> Vec<u8> {
     let options = RecordingOptions { depth_codec: DepthCodec::RvlDeflate, color_codec, ..RecordingOptions::default() };
     let mut writer = RecordingWriter::new(Cursor::new(Vec::new()), calibration(), options).expect("writer");
+    let pose = Se3 { rotation: DQuat::from_rotation_y(0.1), translation_m: DVec3::new(0.1, 0.2, 0.3) };
+    let ground_truth = [TimedPose { timestamp_ns: 1_000_000_000, world_from_camera: pose }];
+    if ground_truth_first {
+        writer.set_ground_truth(&ground_truth).expect("ground truth");
+    }
     for i in 0..3 {
         writer.write_frame(&frame(i)).expect("frame");
     }
-    let pose = Se3 { rotation: DQuat::from_rotation_y(0.1), translation_m: DVec3::new(0.1, 0.2, 0.3) };
-    writer.set_ground_truth(&[TimedPose { timestamp_ns: 1_000_000_000, world_from_camera: pose }]).expect("ground truth");
+    if !ground_truth_first {
+        writer.set_ground_truth(&ground_truth).expect("ground truth");
+    }
+    writer.set_take_stats(TakeStats { duration_ns: 100_000_000, frames_dropped_by_source: 1 });
     writer.finish_into_inner().expect("finish").0.into_inner()
 }
 
@@ -155,7 +164,7 @@ fn main() {
     // A panic is counted and reported; keep the default hook from printing each one twice.
     std::panic::set_hook(Box::new(|_| {}));
     let mut rng = Rng(seed | 1);
-    let recordings = vec![recording(ColorCodec::Png), recording(ColorCodec::Jpeg)];
+    let recordings = vec![recording(ColorCodec::Png, false), recording(ColorCodec::Jpeg, true)];
     let calibration = calibration();
     let read_all = |mut reader: RecordingReader| {
         for i in 0..reader.frame_count() {

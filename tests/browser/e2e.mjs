@@ -21,7 +21,7 @@
 import { spawnSync } from 'node:child_process';
 import { readFileSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { decodePng, launchChromium, options, parseTum, startBridge, waitFor } from './lib.mjs';
+import { decodePng, evaluateWithin, launchChromium, options, parseTum, startBridge, waitFor, within } from './lib.mjs';
 
 const { webfusion, dist, sample, out, map, volume, voxelMm } = options({ out: 'out/e2e', map: 'sparse', volume: 128, 'voxel-mm': 40 });
 // Browser vs native positions, no alignment. The same WGSL runs on two adapters (SwiftShader,
@@ -33,6 +33,16 @@ const { webfusion, dist, sample, out, map, volume, voxelMm } = options({ out: 'o
 const TOLERANCE_RMSE_M = 0.005;
 const TOLERANCE_MAX_M = 0.010;
 const FRAME_TIMEOUT_MS = 120_000;
+// The whole run's limit (it takes 4-6 minutes here): whatever hangs, the run ends with a named
+// failure instead of running into CI's own limit.
+const RUN_TIMEOUT_MS = 30 * 60_000;
+let stage = 'starting';
+const watchdog = setTimeout(() => {
+  console.log(`FAIL e2e run: still running after ${RUN_TIMEOUT_MS / 60_000} minutes, at: ${stage}`);
+  console.log('e2e: gave up');
+  if (bridge) bridge.child.kill('SIGKILL');
+  process.exit(1);
+}, RUN_TIMEOUT_MS);
 
 const results = [];
 function check(name, ok, detail) {
@@ -52,6 +62,7 @@ try {
   console.log(`native reference (${map} map): ${nativeTrajectory.length} frames in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
 
   // 2. The bridge and the page.
+  stage = 'the first page';
   bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0');
   const port = bridge.addr.split(':')[1];
   browser = await launchChromium();
@@ -68,6 +79,7 @@ try {
   const total = first.frames_total;
 
   // 3. Kill the bridge midway; start it again on the same port.
+  stage = 'the reconnect';
   const midway = Math.floor(total / 3);
   await waitFor(page, `frame ${midway}`, (s) => s.frames_done >= midway, FRAME_TIMEOUT_MS * midway);
   bridge.child.kill('SIGKILL');
@@ -78,10 +90,12 @@ try {
   check('reconnect', true, `bridge killed at frame ${dropped.frames_done}; the page reconnected by itself (${resumed.reconnects} reconnect(s)) and fused frame ${resumed.frames_done}`);
 
   // 4. All frames, then compare with the native trajectory.
+  stage = 'every frame';
   const tRun = Date.now();
   const done = await waitFor(page, 'every frame', (s) => s.frames_done >= total && s.state === 'ended', FRAME_TIMEOUT_MS * total);
   console.log(`browser: ${done.frames_done} frames, ${done.fps.toFixed(2)} fps over the last frames; stages (median ms) ${JSON.stringify(done.stages_ms)}; lost ${done.lost_frames}; ATE vs ground truth ${done.ate_rmse_m === null ? 'n/a' : (done.ate_rmse_m * 100).toFixed(2) + ' cm'}; ${((Date.now() - tRun) / 1000).toFixed(0)} s after the reconnect`);
-  const browserTum = await page.evaluate(() => window.webfusion.trajectory_tum());
+  stage = 'comparing trajectories';
+  const browserTum = await evaluateWithin(page, () => window.webfusion.trajectory_tum(), 'the trajectory');
   writeFileSync(join(out, 'browser_trajectory.txt'), browserTum);
   const browserTrajectory = parseTum(browserTum);
   const byTime = new Map(nativeTrajectory.map((p) => [p.t.toFixed(6), p.p]));
@@ -101,6 +115,7 @@ try {
     `${v.kind} map: ${v.blocks_used} of ${v.pool_blocks} blocks used, full ${v.full}, ${(v.memory_bytes / 1048576).toFixed(0)} MiB`);
 
   // 5. The free 3D view shows the model.
+  stage = 'the screenshot and the exports';
   const shot = await page.locator('#view-free').screenshot({ path: join(out, 'free_view.png') });
   const png = decodePng(shot);
   let lit = 0;
@@ -126,13 +141,17 @@ try {
   const tumText = readFileSync(await tumDownload.path(), 'utf8');
   check('exports', header.startsWith('ply\nformat binary_little_endian') && vertices > 1000 && faces > 1000 && ply.length === plyBytes && tumText === browserTum,
     `mesh.ply ${vertices} vertices, ${faces} triangles, ${ply.length} bytes (expected ${plyBytes}); trajectory.txt ${tumText === browserTum ? 'equals' : 'DIFFERS from'} the hook's`);
-  const final = await page.evaluate(() => window.webfusion.status);
+  const final = await evaluateWithin(page, () => window.webfusion.status, 'the final status');
   check('no page errors', consoleErrors.length === 0 && final.message === '', consoleErrors.length ? consoleErrors.join(' | ') : `status message "${final.message}"`);
   console.log(`host per frame: ${JSON.stringify(final.host_per_frame)}; GPU timestamps: ${final.gpu_timestamps}; time to first frame ${final.time_to_first_frame_ms?.toFixed(0)} ms`);
   check('one submission and one late readback per frame', final.host_per_frame.submits === 1 && final.host_per_frame.readbacks === 1 && final.host_per_frame.host_waits <= 1,
     `the last frame's pipeline: ${JSON.stringify(final.host_per_frame)}`);
 
-  // 7. Bad settings in the URL, then a lost device.
+  // 7. Bad settings in the URL, then a lost device, in a browser of their own (a fresh GPU
+  // process, as a new visitor would have).
+  stage = 'the second browser';
+  await within(browser.close(), 30_000);
+  browser = await launchChromium();
   const second = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
   const secondErrors = [];
   second.on('pageerror', (e) => secondErrors.push(String(e)));
@@ -140,22 +159,24 @@ try {
   const fallback = await waitFor(second, 'frames with fallback settings', (s) => s.frames_done >= 3, FRAME_TIMEOUT_MS * 3);
   check('bad URL settings fall back with a message', /voxel_mm=abc ignored/.test(fallback.message) && /rate ignored/.test(fallback.message) && fallback.reconnects === 0 && fallback.volume.voxel_size_m > 0,
     `message "${fallback.message}"; voxel ${(fallback.volume.voxel_size_m * 1000).toFixed(1)} mm; reconnects ${fallback.reconnects}`);
-  await second.evaluate(() => window.webfusion.lose_device());
+  stage = 'the lost device';
+  await evaluateWithin(second, () => window.webfusion.lose_device(), 'losing the device');
   // The loss may show as an error for a moment before the rebuild: poll without failing on it.
   let rebuilt = null;
   for (const deadline = Date.now() + FRAME_TIMEOUT_MS * 4; Date.now() < deadline; await new Promise((r) => setTimeout(r, 250))) {
-    const s = await second.evaluate(() => window.webfusion.status);
+    const s = await evaluateWithin(second, () => window.webfusion.status, 'waiting for the rebuild');
     if (s.device_rebuilds >= 1 && s.frames_done >= fallback.frames_done + 3) { rebuilt = s; break; }
   }
-  if (!rebuilt) throw new Error(`no rebuild after the lost device: ${JSON.stringify(await second.evaluate(() => window.webfusion.status))}`);
+  if (!rebuilt) throw new Error(`no rebuild after the lost device: ${JSON.stringify(await evaluateWithin(second, () => window.webfusion.status, 'the status after no rebuild'))}`);
   check('a lost device is rebuilt and fusing resumes', rebuilt.state !== 'error' && secondErrors.length === 0 && rebuilt.last_index > fallback.last_index,
     `${rebuilt.device_rebuilds} rebuild(s); frames ${fallback.frames_done} -> ${rebuilt.frames_done}, last index ${fallback.last_index} -> ${rebuilt.last_index}; state ${rebuilt.state}${secondErrors.length ? '; page errors: ' + secondErrors.join(' | ') : ''}`);
-  await second.close();
+  await within(second.close(), 30_000);
 } catch (error) {
-  check('e2e run', false, error.stack ?? String(error));
+  check('e2e run', false, `${error.stack ?? String(error)} (at: ${stage})`);
 } finally {
-  if (browser) await browser.close().catch(() => {});
+  if (browser) await within(browser.close().catch(() => {}), 30_000);
   if (bridge) bridge.child.kill('SIGKILL');
+  clearTimeout(watchdog);
 }
 const failed = results.filter((r) => !r.ok).length;
 console.log(`e2e: ${results.length - failed} passed, ${failed} failed`);

@@ -85,10 +85,32 @@ export function decodePng(buffer) {
   return { width, height, channels, pixels };
 }
 
+/** Longest a page may take to answer one evaluation: a hung renderer fails the run by name. */
+export const EVALUATE_TIMEOUT_MS = 60_000;
+
+/**
+ * `page.evaluate(fn)`, failing after `EVALUATE_TIMEOUT_MS` instead of waiting forever (an
+ * evaluation never returns from a renderer whose main thread is stuck, and Playwright has no
+ * timeout of its own for it).
+ */
+export function evaluateWithin(page, fn, what) {
+  let timer;
+  const timeout = new Promise((_, reject) => {
+    timer = setTimeout(() => reject(new Error(`the page did not answer within ${EVALUATE_TIMEOUT_MS / 1000} s (${what}): its renderer is stuck`)), EVALUATE_TIMEOUT_MS);
+  });
+  return Promise.race([page.evaluate(fn), timeout]).finally(() => clearTimeout(timer));
+}
+
+/** Settles `promise` or gives up after `ms` (closing a browser that hangs must not hang the run). */
+export function within(promise, ms) {
+  let timer;
+  return Promise.race([promise, new Promise((resolve) => { timer = setTimeout(resolve, ms); })]).finally(() => clearTimeout(timer));
+}
+
 export async function waitFor(page, what, predicate, timeoutMs) {
   const deadline = Date.now() + timeoutMs;
   for (;;) {
-    const status = await page.evaluate(() => window.webfusion?.status ?? null);
+    const status = await evaluateWithin(page, () => window.webfusion?.status ?? null, `waiting for ${what}`);
     if (status && predicate(status)) return status;
     if (status?.state === 'error') throw new Error(`the page reported an error while waiting for ${what}: ${status.message}`);
     if (Date.now() > deadline) throw new Error(`timed out waiting for ${what}; last status ${JSON.stringify(status)}`);
