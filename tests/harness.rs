@@ -171,6 +171,21 @@ fn bind_in_order(gpu: &Gpu, pipeline: &KernelPipeline, buffers: &[&wgpu::Buffer]
     pipeline.bind_group(&gpu.device, &entries)
 }
 
+/// A buffer of `len` bytes for the `slot`-th binding after the params: a uniform buffer where
+/// the kernel declares a uniform (the camera pose), else a storage buffer.
+fn slot_buffer(gpu: &Gpu, pipeline: &KernelPipeline, slot: usize, label: &str, len: usize) -> wgpu::Buffer {
+    let uniform = pipeline.kernel.bindings.get(slot + 1).is_some_and(|b| b.kind == webfusion_shaders::BindingKind::Uniform);
+    if !uniform {
+        return gpu.storage_buffer::<u8>(label, len);
+    }
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: len.max(1).next_multiple_of(16) as u64,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
 /// One storage binding of [`run_kernel_slots`], in WGSL binding order after the params.
 #[derive(Clone, Copy, Debug)]
 pub enum Slot<'a> {
@@ -193,7 +208,7 @@ pub fn run_kernel_slots<P: bytemuck::Pod>(gpu: &Gpu, pipeline: &KernelPipeline, 
         .enumerate()
         .map(|(i, slot)| match slot {
             Slot::In(bytes) => {
-                let b = gpu.storage_buffer::<u8>(&format!("test.{name}.slot{i}"), bytes.len());
+                let b = slot_buffer(gpu, pipeline, i, &format!("test.{name}.slot{i}"), bytes.len());
                 gpu.write_buffer(&b, bytes);
                 (b, None)
             }
@@ -251,7 +266,7 @@ pub fn run_kernel_in_place<P: bytemuck::Pod>(gpu: &Gpu, pipeline: &KernelPipelin
         .iter()
         .enumerate()
         .map(|(i, bytes)| {
-            let b = gpu.storage_buffer::<u8>(&format!("test.{name}.buffer{i}"), bytes.len());
+            let b = slot_buffer(gpu, pipeline, i, &format!("test.{name}.buffer{i}"), bytes.len());
             gpu.write_buffer(&b, bytes);
             b
         })

@@ -23,6 +23,19 @@ fn every_kernel_has_params_at_binding_zero_a_doc_a_twin_and_a_test() {
 }
 
 #[test]
+fn every_kernel_fits_webgpus_default_storage_binding_limit() {
+    // WebGPU guarantees 8 storage buffers per shader stage; an adapter may offer more, but a
+    // kernel that needs more fails on the devices that do not (the camera pose is a uniform
+    // for this reason). Negative control: the count is not trivially small everywhere.
+    let default = wgpu::Limits::default().max_storage_buffers_per_shader_stage as usize;
+    assert_eq!(default, 8, "WebGPU's default");
+    let counts: Vec<(&str, usize)> = shaders::ALL.iter().map(|k| (k.name, k.bindings.iter().filter(|b| b.kind != shaders::BindingKind::Uniform).count())).collect();
+    let over: Vec<_> = counts.iter().filter(|(_, n)| *n > default).collect();
+    assert!(over.is_empty(), "kernels over {default} storage buffers: {over:?}");
+    assert!(counts.iter().any(|(_, n)| *n == default), "some kernel uses all {default}: the check is not vacuous");
+}
+
+#[test]
 fn the_registry_compiles_one_pipeline_per_kernel_with_its_reflected_bindings() {
     let gpu = webfusion_tests::gpu();
     let pipelines = gpu.kernels.all();

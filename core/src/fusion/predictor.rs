@@ -14,11 +14,10 @@ use crate::preprocess::DepthPreprocessor;
 use crate::tsdf::TsdfStore;
 use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
 
-/// A storage buffer holding one [`CameraPose`], written by the host.
+/// A uniform buffer holding one [`CameraPose`], written by the host (kernels bind their pose
+/// as a uniform).
 pub fn pose_buffer(gpu: &Gpu, label: &str, world_from_camera: Option<&Se3>) -> wgpu::Buffer {
-    let buffer = gpu.storage_buffer::<CameraPose>(label, 1);
-    gpu.write_buffer(&buffer, &[camera_pose(world_from_camera)]);
-    buffer
+    gpu.uniform_buffer(label, &camera_pose(world_from_camera))
 }
 
 /// The [`CameraPose`] of `world_from_camera`, or a disabled one for `None`.

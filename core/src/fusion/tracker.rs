@@ -191,12 +191,13 @@ impl IcpTracker {
     }
 }
 
-/// A buffer for one `TrackState` (storage, copy source and destination).
+/// A buffer for one `TrackState` (storage, copy source and destination; uniform too, for the
+/// kernels that read its `pose`).
 pub fn state_buffer(gpu: &Gpu) -> wgpu::Buffer {
     gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("core.track.state"),
         size: TRACK_STATE_BYTES,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
 }

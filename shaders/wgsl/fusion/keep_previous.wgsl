@@ -18,7 +18,7 @@ struct KeepPreviousParams {
 
 @group(0) @binding(0) var<uniform> params: KeepPreviousParams;
 // The frame's pose; nothing is kept when it is inactive (lost).
-@group(0) @binding(1) var<storage, read> pose: CameraPose;
+@group(0) @binding(1) var<uniform> pose: CameraPose;
 // This frame's intensity at this level.
 @group(0) @binding(2) var<storage, read> intensity: array<f32>;
 // This frame's depth at this level, metres.

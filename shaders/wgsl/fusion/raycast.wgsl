@@ -58,7 +58,7 @@ struct RaycastParams {
 
 @group(0) @binding(0) var<uniform> params: RaycastParams;
 // The pose to render from.
-@group(0) @binding(1) var<storage, read> pose: CameraPose;
+@group(0) @binding(1) var<uniform> pose: CameraPose;
 // Voxel words (TSDF + weight).
 @group(0) @binding(2) var<storage, read> tsdf_volume: array<u32>;
 // Colour words (one placeholder word when colour is off).

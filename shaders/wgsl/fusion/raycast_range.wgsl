@@ -49,7 +49,7 @@ struct RaycastRangeParams {
 
 @group(0) @binding(0) var<uniform> params: RaycastRangeParams;
 // The pose the raycast renders from.
-@group(0) @binding(1) var<storage, read> pose: CameraPose;
+@group(0) @binding(1) var<uniform> pose: CameraPose;
 // One word per brick, non-zero where a surface may lie.
 @group(0) @binding(2) var<storage, read> surface_bricks: array<u32>;
 // Out (cleared to 0 before): per tile, !bits(nearest z) then bits(farthest z).

@@ -20,7 +20,7 @@ struct SurfaceNormalsParams {
 
 @group(0) @binding(0) var<uniform> params: SurfaceNormalsParams;
 // The pose the surface was rendered from (its camera centre orients the normals).
-@group(0) @binding(1) var<storage, read> pose: CameraPose;
+@group(0) @binding(1) var<uniform> pose: CameraPose;
 // Raycast vertices (x, y, z, 1), world frame.
 @group(0) @binding(2) var<storage, read> vertex_in_world: array<vec4<f32>>;
 // Out: unit normals (nx, ny, nz, 0), world frame.

@@ -25,7 +25,7 @@ struct BlockAllocParams {
 
 @group(0) @binding(0) var<uniform> params: BlockAllocParams;
 // The pose the depth is fused at.
-@group(0) @binding(1) var<storage, read> pose: CameraPose;
+@group(0) @binding(1) var<uniform> pose: CameraPose;
 // Depth to fuse, metres (NaN: none).
 @group(0) @binding(2) var<storage, read> depth_m: array<f32>;
 // The hash table: (key, pool index) per slot.

@@ -22,7 +22,7 @@ struct BlockIntegrateParams {
 
 @group(0) @binding(0) var<uniform> params: BlockIntegrateParams;
 // The pose to fuse at (the tracker's, or one the host gives).
-@group(0) @binding(1) var<storage, read> pose: CameraPose;
+@group(0) @binding(1) var<uniform> pose: CameraPose;
 // Depth to fuse, metres (NaN: none).
 @group(0) @binding(2) var<storage, read> depth_m: array<f32>;
 // Colour (r, g, b, 1) in [0, 1].

@@ -25,7 +25,7 @@ struct BlockVisibleParams {
 
 @group(0) @binding(0) var<uniform> params: BlockVisibleParams;
 // The pose the depth is fused at.
-@group(0) @binding(1) var<storage, read> pose: CameraPose;
+@group(0) @binding(1) var<uniform> pose: CameraPose;
 // The key of each pool block in use.
 @group(0) @binding(2) var<storage, read> block_coords: array<u32>;
 // The map's counters (map.wgsl).

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: MIT
-// A camera pose that a kernel renders or fuses at, read from a storage buffer so the pose can
-// come from the GPU tracker (the `pose` at offset 0 of `TrackState`) or from the host (a pose
-// buffer it writes: given poses, a free view, a virtual sensor). Mirrors `CameraPose` in
-// core/src/kernels (generated).
+// A camera pose that a kernel renders or fuses at, bound as a uniform (which leaves the
+// kernels' storage bindings within WebGPU's default 8 per stage) from a buffer that is either
+// the GPU tracker's state (the `pose` at offset 0 of `TrackState`, a storage buffer with uniform
+// usage too) or written by the host (given poses, a free view, a virtual sensor). Mirrors
+// `CameraPose` in core/src/kernels (generated).
 
 struct CameraPose {
     // Camera to world, column-major.
