@@ -265,6 +265,10 @@ async fn run() -> Result<(), String> {
         while let Some(event) = inbox.try_next() {
             app.handle(event).await;
         }
+        // A lost device first: nothing below may touch it (or the canvases configured on it).
+        if app.gpu.check_lost().is_err() {
+            app.rebuild_after_device_loss().await;
+        }
         if let Some((frame, arrived)) = app.pending.take()
             && let Err(message) = app.submit(frame, arrived).await
         {
@@ -276,9 +280,6 @@ async fn run() -> Result<(), String> {
         app.collect_reports();
         if let Err(message) = app.mode.draw_free_view(&app.gpu) {
             app.fail(&message);
-        }
-        if app.gpu.check_lost().is_err() {
-            app.rebuild_after_device_loss().await;
         }
         let errors = app.gpu.take_errors();
         if !errors.is_empty() {
