@@ -40,7 +40,7 @@ fn a_dummy_oni_converts_to_a_recording_frame_for_frame() {
     let mut args = vec!["record", "--source", oni.to_str().expect("utf-8"), "--out", wfr.to_str().expect("utf-8"), "--depth-codec", "rvl"];
     args.extend(CALIBRATION);
     let o = webfusion(&args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{}; stdout {}; stderr {}", o.status, String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
     let mut recording = RecordingReader::open(&wfr).expect("opening the converted recording");
     assert_eq!(recording.frame_count(), recorded, "every recorded frame converted");
     let cal = recording.calibration();
