@@ -29,11 +29,11 @@ impl From<PinholeIntrinsics> for GpuIntrinsics {
 /// A kernel's reflection and its layout entries, as `Kernels::new` compiles it.
 type KernelSpec = (&'static webfusion_shaders::Kernel, fn() -> Vec<wgpu::BindGroupLayoutEntry>);
 
-/// Capabilities whose kernels a frame does not need (mesh extraction): in the browser their
-/// pipelines are created on first use or by [`Kernels::compile_deferred`] (the app calls it
-/// once the first frame is fused), so the GPU process does not compile them before the first
-/// frame's work.
-pub const DEFERRED_CAPABILITIES: &[&str] = &["mesh"];
+/// Capabilities whose kernels not every frame needs (mesh extraction; the sparse map's, which a
+/// dense box never runs): in the browser their pipelines are created on first use or by
+/// [`Kernels::compile_deferred`] (the app calls it once the first frame is fused), so the GPU
+/// process does not compile them before the first frame's work unless that frame uses them.
+pub const DEFERRED_CAPABILITIES: &[&str] = &["mesh", "map"];
 
 /// Compiles the kernels of `specs`, in order: natively all of them, spread over the available
 /// cores (pipeline creation is thread-safe and dominates start-up on software adapters); in
