@@ -20,7 +20,7 @@ use webfusion_core::protocol::{Control, Delivery, FrameMessage, Hello, Message, 
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, VolumePlacement};
 use webfusion_core::{Gpu, GpuOptions, RgbdCalibration};
 
-use crate::fusion_mode::{FREE_VIEW, FusionMode};
+use crate::fusion_mode::{FREE_VIEW, FusionMode, Received};
 use crate::link::{Event, Inbox, Link, Ui, js_text, push_later};
 use crate::status::Status;
 use crate::ui;
@@ -599,7 +599,12 @@ impl App {
             self.reset_run();
         }
         self.milestone("decoded");
-        self.mode.submit(&self.gpu, source.calibration, &frame, message.ground_truth, arrived, decode_ms).await?;
+        // Until the GPU process has compiled the pipelines, drawing into the views' canvases
+        // blocks this thread (seen: 3 s for the first frame on SwiftShader) and the page
+        // freezes; the frames submitted meanwhile are fused, their views skipped.
+        let draw_views = self.gpu_ready.load(std::sync::atomic::Ordering::Relaxed);
+        let received = Received { ground_truth: message.ground_truth, arrived, decode_ms };
+        self.mode.submit(&self.gpu, source.calibration, &frame, received, draw_views).await?;
         self.milestone("submitted");
         if self.playing && self.every_frame && !self.is_live() {
             self.request_next();

@@ -131,6 +131,15 @@ pub(crate) struct FusionMode {
     free_colour: bool,
 }
 
+/// How a frame reached the page: its ground truth (if the source has it), when it arrived and
+/// how long decoding took.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Received {
+    pub(crate) ground_truth: Option<Se3>,
+    pub(crate) arrived: Instant,
+    pub(crate) decode_ms: f64,
+}
+
 /// This mode's part of the page's status.
 #[derive(Clone, Debug, serde::Serialize)]
 pub(crate) struct FusionStatus {
@@ -259,16 +268,19 @@ impl FusionMode {
         self.pipeline.as_ref().map(|p| &p.fusion)
     }
 
-    /// Submits one decoded frame and draws its views, without waiting for the GPU (unless two
-    /// frames are in flight already: then for the oldest's report).
-    pub(crate) async fn submit(&mut self, gpu: &Gpu, calibration: RgbdCalibration, frame: &RgbdFrame, ground_truth: Option<Se3>, arrived: Instant, decode_ms: f64) -> Result<(), String> {
+    /// Submits one decoded frame and, with `draw_views`, draws its views, without waiting for
+    /// the GPU (unless two frames are in flight already: then for the oldest's report).
+    pub(crate) async fn submit(&mut self, gpu: &Gpu, calibration: RgbdCalibration, frame: &RgbdFrame, received: Received, draw_views: bool) -> Result<(), String> {
+        let Received { ground_truth, arrived, decode_ms } = received;
         if self.pipeline.is_none() {
             self.pipeline = Some(Pipeline::new(gpu, calibration, &self.config)?);
         }
         let Some(p) = self.pipeline.as_mut() else { return Ok(()) };
         p.fusion.submit_frame(gpu, frame).await.map_err(|e| format!("frame {}: {e}", frame.index))?;
         let t_views = Instant::now();
-        draw_frame_views(gpu, p, frame)?;
+        if draw_views {
+            draw_frame_views(gpu, p, frame)?;
+        }
         let views_ms = t_views.elapsed().as_secs_f64() * 1e3;
         self.in_flight.push_back(InFlight { index: frame.index, timestamp_ns: frame.depth_timestamp_ns, ground_truth, arrived, decode_ms, views_ms });
         self.last_submitted = Some(frame.index);
