@@ -936,7 +936,7 @@ fn read_indexed(storage: &mut Storage, path: &Path, header_frame_count: u32, ver
         (HEADER_LEN as u64, index_offset, None)
     } else if version >= 2 && ground_truth_offset == HEADER_LEN as u64 {
         let head = read(storage, ground_truth_offset, BLOCK_HEAD_LEN)?;
-        let block_len = (BLOCK_HEAD_LEN + CRC_LEN) as u64 + u64::from(u32_at(&head, 4)) * POSE_LEN as u64;
+        let block_len = ground_truth_block_len(u32_at(&head, 4));
         if ground_truth_offset + block_len > index_offset {
             return Err(error(format!("ground truth of {} poses at offset {ground_truth_offset} runs into the index", u32_at(&head, 4))));
         }
@@ -1046,6 +1046,11 @@ fn complete_record(storage: &mut Storage, at: u64) -> std::io::Result<Option<Rec
     Ok((record_crc(&header, &[&payload]) == u32_at(&header, 32)).then_some(RecordSpan { offset: at, end, stored_index: u32_at(&header, 4) }))
 }
 
+/// Bytes of a ground-truth block of `pose_count` poses: head, poses, CRC.
+fn ground_truth_block_len(pose_count: u32) -> u64 {
+    (BLOCK_HEAD_LEN + CRC_LEN) as u64 + u64::from(pose_count) * POSE_LEN as u64
+}
+
 /// The ground-truth block at `at` and its end, if it is complete and its CRC matches.
 fn complete_ground_truth(storage: &mut Storage, at: u64) -> std::io::Result<Option<(Vec<TimedPose>, u64)>> {
     let len = storage.len();
@@ -1053,7 +1058,7 @@ fn complete_ground_truth(storage: &mut Storage, at: u64) -> std::io::Result<Opti
         return Ok(None);
     }
     let head = storage.read_at(at, BLOCK_HEAD_LEN)?;
-    let block_len = (BLOCK_HEAD_LEN + CRC_LEN) as u64 + u64::from(u32_at(&head, 4)) * POSE_LEN as u64;
+    let block_len = ground_truth_block_len(u32_at(&head, 4));
     if at + block_len > len {
         return Ok(None);
     }
