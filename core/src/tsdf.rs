@@ -58,6 +58,9 @@ pub struct TsdfConfig {
     /// Blocks of 8³ voxels in a sparse map's pool (see [`crate::map::pool_blocks_for_budget`]);
     /// unused by a dense map.
     pub pool_blocks: u32,
+    /// Whether a sparse map swaps blocks far from the camera to host memory once its pool
+    /// fills ([`crate::map::swap`]); unused by a dense map.
+    pub swap: bool,
 }
 
 impl Default for TsdfConfig {
@@ -70,7 +73,7 @@ impl TsdfConfig {
     /// A dense cube of `dim` voxels of `voxel_size_m`, with the default truncation (in voxels),
     /// weight cap and colour on.
     pub fn cube(dim: u32, voxel_size_m: f32) -> Self {
-        Self { dims_voxels: [dim; 3], voxel_size_m, truncation_m: DEFAULT_TRUNCATION_VOXELS * voxel_size_m, max_weight: DEFAULT_MAX_WEIGHT, color: true, placement: VolumePlacement::InFront, kind: MapKind::Dense, pool_blocks: DEFAULT_POOL_BLOCKS }
+        Self { dims_voxels: [dim; 3], voxel_size_m, truncation_m: DEFAULT_TRUNCATION_VOXELS * voxel_size_m, max_weight: DEFAULT_MAX_WEIGHT, color: true, placement: VolumePlacement::InFront, kind: MapKind::Dense, pool_blocks: DEFAULT_POOL_BLOCKS, swap: true }
     }
 
     /// A sparse map of `pool_blocks` blocks of 8³ voxels of `voxel_size_m`, with the default
@@ -101,12 +104,12 @@ impl TsdfConfig {
     }
 
     /// Bytes of GPU memory the store takes (TSDF words, colour words, surface bricks; for a
-    /// sparse map also its hash table, block keys and visible list).
+    /// sparse map also its hash table, block keys, visible list, free list and counters).
     pub fn memory_bytes(&self) -> u64 {
         let words = self.voxel_count() * 4 * if self.color { 2 } else { 1 };
         match self.kind {
             MapKind::Dense => words + self.dims_voxels.iter().map(|&d| u64::from(d.div_ceil(8))).product::<u64>() * 4,
-            MapKind::Sparse => words + u64::from(self.pool_blocks) * 12 + u64::from(crate::map::hash_slots_for_pool(self.pool_blocks)) * 8 + 32,
+            MapKind::Sparse => words + u64::from(self.pool_blocks) * 16 + u64::from(crate::map::hash_slots_for_pool(self.pool_blocks)) * 8 + (crate::cpu::shared::MAP_COUNTERS * 4) as u64,
         }
     }
 

@@ -205,6 +205,8 @@ pub const BLOCK_VOXELS: u32 = 512;
 pub const EMPTY_KEY: u32 = u32::MAX;
 /// Twin of `NO_BLOCK`: the pool index of a key without a block.
 pub const NO_BLOCK: u32 = u32::MAX;
+/// Twin of `SWAPPED_BLOCK`: the pool index of a key whose block was swapped out to the host.
+pub const SWAPPED_BLOCK: u32 = 0xffff_fffe;
 /// Twin of `NO_SLOT`: the voxel slot of a voxel without a block.
 pub const NO_SLOT: u32 = u32::MAX;
 /// Twin of `MAP_MAX_PROBES`.
@@ -221,8 +223,32 @@ pub const MAP_COUNTER_POOL_FULL: usize = 3;
 pub const MAP_COUNTER_OUT_OF_RANGE: usize = 4;
 /// Twin of `MAP_COUNTER_ARGS`.
 pub const MAP_COUNTER_ARGS: usize = 5;
+/// Twin of `MAP_COUNTER_FREE`.
+pub const MAP_COUNTER_FREE: usize = 8;
+/// Twin of `MAP_COUNTER_SWAPPED_OUT`.
+pub const MAP_COUNTER_SWAPPED_OUT: usize = 9;
+/// Twin of `MAP_COUNTER_SWAP_IN_REFUSED`.
+pub const MAP_COUNTER_SWAP_IN_REFUSED: usize = 10;
+/// Twin of `MAP_COUNTER_SWAPPED_HITS`.
+pub const MAP_COUNTER_SWAPPED_HITS: usize = 11;
 /// Twin of `MAP_COUNTERS`.
-pub const MAP_COUNTERS: usize = 8;
+pub const MAP_COUNTERS: usize = 12;
+
+/// Twin of `take_pool_block()` (map_pool.wgsl), invocations one after another: the top of the
+/// free list, else the next bump-allocated block, else `NO_BLOCK`.
+pub fn take_pool_block(map_counters: &mut [u32], free_blocks: &[u32], pool_blocks: u32) -> u32 {
+    let free = map_counters[MAP_COUNTER_FREE];
+    if free >= 1 && free <= pool_blocks {
+        map_counters[MAP_COUNTER_FREE] -= 1;
+        return free_blocks[free as usize - 1];
+    }
+    let block = map_counters[MAP_COUNTER_BLOCKS_USED];
+    if block >= pool_blocks {
+        return NO_BLOCK;
+    }
+    map_counters[MAP_COUNTER_BLOCKS_USED] += 1;
+    block
+}
 
 /// Twin of `block_key()`.
 pub fn block_key(b: [u32; 3]) -> u32 {
@@ -275,10 +301,16 @@ pub fn probe_slot(block_table: &[u32], d: &VolumeDesc, b: [u32; 3]) -> Option<us
     None
 }
 
-/// Twin of `find_block()` (without its memo of the last block, which changes no result).
+/// Twin of `find_slot()` (map_lookup.wgsl): the hash slot holding block `b`'s key.
+pub fn find_slot(block_table: &[u32], d: &VolumeDesc, b: [u32; 3]) -> Option<usize> {
+    probe_slot(block_table, d, b).filter(|&s| block_table[2 * s] == block_key(b))
+}
+
+/// Twin of `find_block()` (without its memo of the last block, which changes no result): the
+/// pool index of block `b`, `NO_BLOCK` when it is absent, has none or is swapped out.
 pub fn find_block(block_table: &[u32], d: &VolumeDesc, b: [u32; 3]) -> u32 {
-    match probe_slot(block_table, d, b) {
-        Some(s) if block_table[2 * s] == block_key(b) => block_table[2 * s + 1],
+    match find_slot(block_table, d, b) {
+        Some(s) if block_table[2 * s + 1] != SWAPPED_BLOCK => block_table[2 * s + 1],
         _ => NO_BLOCK,
     }
 }

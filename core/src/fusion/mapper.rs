@@ -11,10 +11,11 @@ use crate::kernels::block_integrate::{self, BlockIntegrateParams};
 use crate::kernels::block_list_args::{self, BlockListArgsParams};
 use crate::kernels::block_visible::{self, BlockVisibleParams};
 use crate::kernels::tsdf_integrate::{self, TsdfIntegrateParams};
-use crate::map::{Map, SparseMap};
+use crate::map::swap::{MapSwapper, SwapConfig};
+use crate::map::{Map, MapBlock, MapStats, SparseMap};
 use crate::preprocess::DepthPreprocessor;
 use crate::tsdf::{TsdfConfig, TsdfStore};
-use crate::{Gpu, Result};
+use crate::{Gpu, Result, Se3};
 
 /// The integration kernels of one map kind, bound to a preprocessor and a pose buffer.
 #[derive(Debug)]
@@ -28,6 +29,8 @@ enum Integration {
         visible: wgpu::BindGroup,
         args: wgpu::BindGroup,
         integrate: wgpu::BindGroup,
+        /// Swapping to host memory, when the config asks for it.
+        swapper: Option<MapSwapper>,
     },
 }
 
@@ -128,6 +131,7 @@ impl Mapper {
                         block_table: sparse.block_table(),
                         block_coords: sparse.block_coords(),
                         map_counters: counters,
+                        free_blocks: sparse.free_blocks(),
                     }
                     .bind_group(gpu),
                     visible: block_visible::Bindings {
@@ -156,6 +160,10 @@ impl Mapper {
                         map_counters: counters,
                     }
                     .bind_group(gpu),
+                    swapper: config.swap.then(|| {
+                        let swap = SwapConfig::for_camera(&preprocessor.levels[0].intrinsics, max_depth_m, config.truncation_m);
+                        MapSwapper::new(gpu, sparse, pose, swap)
+                    }),
                 };
                 (
                     vec![
@@ -196,17 +204,100 @@ impl Mapper {
         self.map.sparse()
     }
 
+    /// The swapper of a sparse map that swaps.
+    pub fn swapper(&self) -> Option<&MapSwapper> {
+        match &self.integration {
+            Integration::Sparse { swapper, .. } => swapper.as_ref(),
+            Integration::Dense { .. } => None,
+        }
+    }
+
+    fn swapper_mut(&mut self) -> Option<&mut MapSwapper> {
+        match &mut self.integration {
+            Integration::Sparse { swapper, .. } => swapper.as_mut(),
+            Integration::Dense { .. } => None,
+        }
+    }
+
+    /// Plans the next frame's swapping (a sparse map that swaps) from the camera pose the host
+    /// knows best, and uploads what it swaps in. Call before [`Self::encode`].
+    pub fn prepare_frame(&mut self, gpu: &Gpu, world_from_camera: Option<&Se3>) {
+        if let Some(s) = self.swapper_mut() {
+            s.prepare(gpu, world_from_camera);
+        }
+    }
+
+    /// After the frame's submission (see [`MapSwapper::submitted`]).
+    pub fn frame_submitted(&mut self, gpu: &Gpu, submission: &wgpu::SubmissionIndex) {
+        if let Some(s) = self.swapper_mut() {
+            s.submitted(gpu, submission.clone());
+        }
+    }
+
+    /// A frame's map counters as its report read them back, completed with the host's side.
+    pub fn on_report(&mut self, stats: &mut MapStats) {
+        if let Some(s) = self.swapper_mut() {
+            s.on_report(stats);
+        }
+    }
+
+    /// Takes completed swap-out lists into host memory (never waits).
+    pub fn poll(&mut self, gpu: &Gpu) -> Result<()> {
+        match self.swapper_mut() {
+            Some(s) => s.poll(gpu),
+            None => Ok(()),
+        }
+    }
+
+    /// Waits for swap-out lists in flight.
+    pub async fn flush(&mut self, gpu: &Gpu) -> Result<()> {
+        match self.swapper_mut() {
+            Some(s) => s.flush(gpu).await,
+            None => Ok(()),
+        }
+    }
+
+    /// Forgets the model (and the blocks on the host).
+    pub fn reset(&mut self, gpu: &Gpu) {
+        self.map.reset(gpu);
+        if let Some(s) = self.swapper_mut() {
+            s.reset();
+        }
+    }
+
+    /// Every block of a sparse map, on the GPU and on the host, sorted by block key (waits for
+    /// the GPU and for swap-outs in flight); `None` for a dense map.
+    pub async fn download_blocks(&mut self, gpu: &Gpu) -> Result<Option<Vec<MapBlock>>> {
+        self.flush(gpu).await?;
+        let Map::Sparse(sparse) = &self.map else { return Ok(None) };
+        let mut blocks = sparse.download_blocks(gpu).await?;
+        if let Some(s) = self.swapper() {
+            let resident: std::collections::HashSet<[u32; 3]> = blocks.iter().map(|b| b.coords).collect();
+            blocks.extend(s.host_blocks().filter(|b| !resident.contains(&b.coords)));
+            blocks.sort_by_key(|b| crate::cpu::shared::block_key(b.coords));
+        }
+        Ok(Some(blocks))
+    }
+
     /// Records the integration as stage `stage` of a frame (skipped on the GPU when the pose
-    /// is disabled). A sparse map first clears its visible count, then allocates, assigns,
-    /// lists the visible blocks and integrates them.
+    /// is disabled). A sparse map first clears its visible count, then swaps in what
+    /// [`Self::prepare_frame`] planned, allocates, assigns, lists the visible blocks,
+    /// integrates them and swaps out what lies outside the kept region (while the pool is
+    /// above its mark), copying the swap-out list for the host.
     pub fn encode(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
         if let Map::Sparse(sparse) = &self.map {
             let visible_word = (crate::cpu::shared::MAP_COUNTER_VISIBLE * 4) as u64;
             frame
                 .encoder()
                 .clear_buffer(sparse.counters(), visible_word, Some(4));
+            if let Some(s) = self.swapper() {
+                s.encode_clear(frame, sparse.counters());
+            }
         }
         self.record(gpu, &mut frame.stage(stage));
+        if let (Map::Sparse(sparse), Some(s)) = (&self.map, self.swapper()) {
+            s.encode_readback(frame, sparse.counters());
+        }
     }
 
     /// Records the integration into an open compute pass, after [`Self::encode`] cleared a
@@ -225,8 +316,12 @@ impl Mapper {
                 visible,
                 args,
                 integrate,
+                swapper,
             } => {
                 let [w, h] = self.image_size;
+                if let Some(s) = swapper {
+                    s.record_in(gpu, pass);
+                }
                 gpu.kernels.block_alloc.dispatch_in(pass, alloc, [w, h, 1]);
                 gpu.kernels
                     .block_assign
@@ -239,6 +334,9 @@ impl Mapper {
                     .dispatch_in(pass, args, [1, 1, 1]);
                 if let Map::Sparse(sparse) = &self.map {
                     block_integrate::dispatch_indirect_in(gpu, pass, integrate, sparse.counters());
+                }
+                if let Some(s) = swapper {
+                    s.record_out(gpu, pass);
                 }
             }
         }

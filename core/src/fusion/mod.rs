@@ -446,6 +446,11 @@ impl KinectFusion {
         &self.mapper
     }
 
+    /// The mapper, mutably (to download a swapping map's blocks).
+    pub fn mapper_mut(&mut self) -> &mut Mapper {
+        &mut self.mapper
+    }
+
     /// The predictor (the prediction pyramid).
     pub fn predictor(&self) -> &Predictor {
         &self.predictor
@@ -474,7 +479,7 @@ impl KinectFusion {
     /// Forgets the model and the trajectory: the next frame starts a new world frame. Reports
     /// of frames still in flight are dropped.
     pub fn reset(&mut self, gpu: &Gpu) {
-        self.mapper.volume().reset(gpu);
+        self.mapper.reset(gpu);
         self.tracker.reset(gpu);
         self.run += 1;
         self.frames_submitted = 0;
@@ -501,6 +506,8 @@ impl KinectFusion {
             }
         }
         self.preprocessor.upload(gpu, frame)?;
+        self.mapper.poll(gpu)?;
+        self.mapper.prepare_frame(gpu, Some(&self.last_pose));
         let mut fe = FrameEncoder::new(gpu, "core.fusion.frame", self.timer.as_ref());
         self.preprocessor.encode_in(gpu, &mut fe.stage("preprocess"));
         {
@@ -518,6 +525,7 @@ impl KinectFusion {
         }
         let (commands, stages) = fe.finish(Some((slot_buffer, TIMESTAMPS_OFFSET)));
         let submission = gpu.submit([commands]);
+        self.mapper.frame_submitted(gpu, &submission);
         let mut host = gpu.counters.snapshot() - before;
         host.readbacks += 1;
         let tag = FrameTag { index: frame.index, run: self.run, stages, submitted_at: started, encode_ms: ms_since(started), host };
@@ -531,6 +539,7 @@ impl KinectFusion {
 
     /// Reports of frames whose readback completed, oldest first (never waits).
     pub fn poll_reports(&mut self, gpu: &Gpu) -> Result<Vec<FrameReport>> {
+        self.mapper.poll(gpu)?;
         for done in self.readbacks.collect(gpu)? {
             self.finish_report(done.tag, &done.bytes)?;
         }
@@ -542,6 +551,7 @@ impl KinectFusion {
         while let Some(done) = self.readbacks.wait_oldest(gpu).await? {
             self.finish_report(done.tag, &done.bytes)?;
         }
+        self.mapper.flush(gpu).await?;
         Ok(self.reports.drain(..).collect())
     }
 
@@ -568,6 +578,9 @@ impl KinectFusion {
             let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[MAP_COUNTERS_OFFSET as usize..READBACK_BYTES as usize]);
             MapStats::from_words(&words, m.desc().pool_blocks)
         });
+        if let Some(stats) = &mut report.map {
+            self.mapper.on_report(stats);
+        }
         self.last_pose = report.world_from_camera;
         self.reports.push_back(report);
         Ok(())

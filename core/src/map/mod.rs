@@ -20,10 +20,12 @@
 //! past: a key without a block reads as unobserved.
 
 use crate::cpu::shared::{
-    BLOCK_VOXELS, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_HASH_FULL,
-    MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_POOL_FULL, MAP_COUNTER_VISIBLE, MAP_COUNTERS,
-    block_of_key,
+    BLOCK_VOXELS, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_FREE, MAP_COUNTER_HASH_FULL,
+    MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_POOL_FULL, MAP_COUNTER_SWAP_IN_REFUSED,
+    MAP_COUNTER_SWAPPED_HITS, MAP_COUNTER_VISIBLE, MAP_COUNTERS, block_of_key,
 };
+
+pub mod swap;
 use crate::tsdf::{TsdfConfig, TsdfStore, VolumeDesc};
 use crate::{Error, Gpu, Result};
 
@@ -38,8 +40,8 @@ pub const DEFAULT_POOL_BLOCKS: u32 = 32768;
 /// Most pool blocks: the voxel words of one pool are one binding, at most 128 MiB in the browser.
 pub const MAX_POOL_BLOCKS: u32 = 65536;
 /// Bytes one pool block costs with colour: TSDF and colour words, its surface-brick word, its
-/// key, its visible-list slot and two hash slots (the table is kept at most half full).
-pub const BLOCK_BYTES_WITH_COLOR: u64 = BLOCK_VOXELS as u64 * 8 + 4 + 4 + 4 + 2 * 8;
+/// key, its visible-list and free-list slots and eight hash slots ([`hash_slots_for_pool`]).
+pub const BLOCK_BYTES_WITH_COLOR: u64 = BLOCK_VOXELS as u64 * 8 + 4 + 4 + 4 + 4 + 8 * 8;
 
 /// Which kind of map.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -79,15 +81,17 @@ pub fn pool_blocks_for_budget(budget_bytes: u64) -> u32 {
     (budget_bytes / BLOCK_BYTES_WITH_COLOR).clamp(1, u64::from(MAX_POOL_BLOCKS)) as u32
 }
 
-/// Hash slots for a pool: the next power of two at or above twice its blocks (at most half full).
+/// Hash slots for a pool: the next power of two at or above eight times its blocks. The table
+/// holds the keys of swapped-out blocks too ([`swap`]), so it has room for four pools' worth of
+/// blocks while staying at most half full (linear probing's expected probes stay below 2.5).
 pub fn hash_slots_for_pool(pool_blocks: u32) -> u32 {
-    (2 * pool_blocks).next_power_of_two()
+    (8 * pool_blocks).next_power_of_two()
 }
 
-/// What a sparse map's counters say.
+/// What a sparse map's counters say (and, with swapping, its host side).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MapStats {
-    /// Pool blocks in use.
+    /// Pool blocks in use (resident on the GPU).
     pub blocks_used: u32,
     /// Pool blocks in all.
     pub pool_blocks: u32,
@@ -99,18 +103,36 @@ pub struct MapStats {
     pub pool_full: u32,
     /// Surface samples outside the map's box (cumulative).
     pub out_of_range: u32,
+    /// Blocks swapped in that found no pool block (cumulative; they stay on the host).
+    pub swap_in_refused: u32,
+    /// Band samples that met a swapped-out block, so were not fused (cumulative).
+    pub swapped_hits: u32,
+    /// Blocks held in host memory (swapped out), filled in by the swapper.
+    pub blocks_on_host: u32,
+    /// Bytes those blocks take in host memory.
+    pub host_bytes: u64,
+    /// Blocks swapped out to the host so far (each time counted).
+    pub swapped_out_total: u64,
+    /// Blocks swapped back in so far (each time counted).
+    pub swapped_in_total: u64,
 }
 
 impl MapStats {
     /// From the counters' words.
     pub fn from_words(words: &[u32], pool_blocks: u32) -> Self {
         Self {
-            blocks_used: words[MAP_COUNTER_BLOCKS_USED],
+            blocks_used: words[MAP_COUNTER_BLOCKS_USED] - words[MAP_COUNTER_FREE].min(words[MAP_COUNTER_BLOCKS_USED]),
             pool_blocks,
             visible_blocks: words[MAP_COUNTER_VISIBLE],
             hash_full: words[MAP_COUNTER_HASH_FULL],
             pool_full: words[MAP_COUNTER_POOL_FULL],
             out_of_range: words[MAP_COUNTER_OUT_OF_RANGE],
+            swap_in_refused: words[MAP_COUNTER_SWAP_IN_REFUSED],
+            swapped_hits: words[MAP_COUNTER_SWAPPED_HITS],
+            blocks_on_host: 0,
+            host_bytes: 0,
+            swapped_out_total: 0,
+            swapped_in_total: 0,
         }
     }
 
@@ -144,6 +166,7 @@ pub struct SparseMap {
     block_coords: wgpu::Buffer,
     counters: wgpu::Buffer,
     visible_blocks: wgpu::Buffer,
+    free_blocks: wgpu::Buffer,
 }
 
 impl SparseMap {
@@ -167,6 +190,7 @@ impl SparseMap {
             gpu.storage_buffer::<u32>("core.map.block_table", 2 * desc.hash_slots as usize);
         let block_coords = gpu.storage_buffer::<u32>("core.map.block_coords", pool);
         let visible_blocks = gpu.storage_buffer::<u32>("core.map.visible_blocks", pool);
+        let free_blocks = gpu.storage_buffer::<u32>("core.map.free_blocks", pool);
         let counters = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("core.map.counters"),
             size: (MAP_COUNTERS * 4) as u64,
@@ -186,6 +210,7 @@ impl SparseMap {
             block_coords,
             counters,
             visible_blocks,
+            free_blocks,
         };
         map.reset(gpu);
         Ok(map)
@@ -206,16 +231,23 @@ impl SparseMap {
         &self.visible_blocks
     }
 
+    /// The free list: pool blocks swapped out and cleared (`MAP_COUNTER_FREE` of them).
+    pub fn free_blocks(&self) -> &wgpu::Buffer {
+        &self.free_blocks
+    }
+
     /// Reads the counters (waits for the GPU).
     pub async fn stats(&self, gpu: &Gpu) -> Result<MapStats> {
         let words: Vec<u32> = gpu.read_buffer(&self.counters, MAP_COUNTERS).await?;
         Ok(MapStats::from_words(&words, self.desc.pool_blocks))
     }
 
-    /// Downloads every allocated block, sorted by block key (a canonical order, whatever order
-    /// the GPU allocated them in). Waits for the GPU.
+    /// Downloads every block resident on the GPU, sorted by block key (a canonical order,
+    /// whatever order the GPU allocated them in). Waits for the GPU. Blocks swapped out to the
+    /// host are not included ([`crate::fusion::mapper::Mapper::download_blocks`] adds them).
     pub async fn download_blocks(&self, gpu: &Gpu) -> Result<Vec<MapBlock>> {
-        let used = self.stats(gpu).await?.blocks_used as usize;
+        let words: Vec<u32> = gpu.read_buffer(&self.counters, MAP_COUNTERS).await?;
+        let used = words[MAP_COUNTER_BLOCKS_USED] as usize;
         let n = used * BLOCK_VOXELS as usize;
         let keys: Vec<u32> = gpu.read_buffer(&self.block_coords, used).await?;
         let voxels: Vec<u32> = gpu.read_buffer(&self.voxels, n).await?;
@@ -224,7 +256,7 @@ impl SparseMap {
         } else {
             Vec::new()
         };
-        let mut order: Vec<usize> = (0..used).collect();
+        let mut order: Vec<usize> = (0..used).filter(|&i| keys[i] != EMPTY_KEY).collect();
         order.sort_by_key(|&i| keys[i]);
         let words = |all: &[u32], i: usize| {
             if all.is_empty() {
@@ -339,6 +371,7 @@ impl TsdfStore for SparseMap {
             &self.surface_bricks,
             &self.counters,
             &self.visible_blocks,
+            &self.free_blocks,
         ] {
             encoder.clear_buffer(b, 0, None);
         }
@@ -353,6 +386,7 @@ impl TsdfStore for SparseMap {
             &self.block_coords,
             &self.counters,
             &self.visible_blocks,
+            &self.free_blocks,
         ]
         .iter()
         .map(|b| b.size())

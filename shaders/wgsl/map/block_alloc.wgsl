@@ -9,8 +9,9 @@
 //! blocks, so no invocation here ever waits for another. Which slot a key lands in depends on
 //! the order invocations run: the table's contents are compared by key set, not by layout.
 //! Samples outside the sparse box and keys that find no slot within MAP_MAX_PROBES are counted
-//! (MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_HASH_FULL), never written. Nothing is allocated when
-//! the pose is disabled (a lost frame).
+//! (MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_HASH_FULL), never written; a block found swapped out
+//! to the host is counted too (MAP_COUNTER_SWAPPED_HITS: this frame is not fused there).
+//! Nothing is allocated when the pose is disabled (a lost frame).
 #import invalid
 #import camera
 #import camera_pose
@@ -45,6 +46,9 @@ fn insert_block(d: VolumeDesc, b: vec3<u32>) {
     for (var i = 0u; i < MAP_MAX_PROBES; i++) {
         let k = atomicLoad(&block_table[2u * s]);
         if k == key {
+            if atomicLoad(&block_table[2u * s + 1u]) == SWAPPED_BLOCK {
+                atomicAdd(&map_counters[MAP_COUNTER_SWAPPED_HITS], 1u);
+            }
             return;
         }
         if k == EMPTY_KEY {

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
-//! Each invocation tests one allocated block of a sparse map against the camera's view and
+//! Each invocation tests one allocated block of a sparse map (a block on the free list holds
+//! EMPTY_KEY and is skipped) against the camera's view and
 //! appends it to `visible_blocks` (atomicAdd on MAP_COUNTER_VISIBLE; the list has a slot for
 //! every pool block, so it cannot overflow) when integration may change one of its voxels: the
 //! block's box, bounded by its 8 corners in the camera frame, reaches in front of the camera,
@@ -39,10 +40,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if block >= atomicLoad(&map_counters[MAP_COUNTER_BLOCKS_USED]) || pose.enabled == 0u {
         return;
     }
+    let key = block_coords[block];
+    if key == EMPTY_KEY {
+        // On the free list.
+        return;
+    }
     let d = params.volume;
     let k = params.intrinsics;
     let edge_m = f32(1u << BRICK_SHIFT) * d.voxel_size_m;
-    let lo_voxel = vec3<i32>(block_of_key(block_coords[block]) << vec3<u32>(BRICK_SHIFT)) - vec3<i32>(voxel_anchor(d));
+    let lo_voxel = vec3<i32>(block_of_key(key) << vec3<u32>(BRICK_SHIFT)) - vec3<i32>(voxel_anchor(d));
     let lo = vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m) + vec3<f32>(lo_voxel) * d.voxel_size_m;
     var z_near = 1e30;
     var z_far = -1e30;

@@ -15,6 +15,10 @@ const BLOCK_VOXELS: u32 = 512u;
 const EMPTY_KEY: u32 = 0xffffffffu;
 // The pool index of a key that has no block (yet: the pool was full when it was inserted).
 const NO_BLOCK: u32 = 0xffffffffu;
+// The pool index of a key whose block was swapped out to host memory (InfiniTAM's swapping,
+// `block_swap_out`): the key stays in the table, so allocation gives it no fresh block, and it
+// reads as unobserved until `block_swap_in` brings its voxels back.
+const SWAPPED_BLOCK: u32 = 0xfffffffeu;
 // The voxel slot of a voxel whose block is not allocated.
 const NO_SLOT: u32 = 0xffffffffu;
 // Most slots a lookup or an insertion visits: with the table at most half full, linear probing
@@ -23,7 +27,8 @@ const NO_SLOT: u32 = 0xffffffffu;
 const MAP_MAX_PROBES: u32 = 64u;
 
 // Words of the map's counters buffer (`map_counters`), read back by the host each frame.
-// Blocks handed out from the pool (never more than `pool_blocks`).
+// Pool blocks ever handed out by bump allocation (never more than `pool_blocks`): blocks
+// 0..this are in use or on the free list (MAP_COUNTER_FREE of them).
 const MAP_COUNTER_BLOCKS_USED: u32 = 0u;
 // Blocks in this frame's visible list (cleared before each frame's `block_visible`).
 const MAP_COUNTER_VISIBLE: u32 = 1u;
@@ -36,8 +41,19 @@ const MAP_COUNTER_POOL_FULL: u32 = 3u;
 const MAP_COUNTER_OUT_OF_RANGE: u32 = 4u;
 // Words 5..7: the indirect dispatch size of `block_integrate` (written by `block_list_args`).
 const MAP_COUNTER_ARGS: u32 = 5u;
+// Pool blocks on the free list (`free_blocks[0..this]`: blocks swapped out, cleared, ready to
+// be handed out again before the bump allocation grows).
+const MAP_COUNTER_FREE: u32 = 8u;
+// Blocks the last `block_swap_out` wrote to the transfer list (the host clears it before).
+const MAP_COUNTER_SWAPPED_OUT: u32 = 9u;
+// Blocks `block_swap_in` could not bring back for want of pool (cumulative; they stay swapped
+// out, the host keeps their voxels).
+const MAP_COUNTER_SWAP_IN_REFUSED: u32 = 10u;
+// Band blocks a frame needed while they were swapped out, so not fused there (cumulative, once
+// per pixel and block: the host swaps in ahead of the camera, so this should stay 0).
+const MAP_COUNTER_SWAPPED_HITS: u32 = 11u;
 // Words of the counters buffer.
-const MAP_COUNTERS: u32 = 8u;
+const MAP_COUNTERS: u32 = 12u;
 
 fn block_key(b: vec3<u32>) -> u32 {
     return b.x | (b.y << 11u) | (b.z << 22u);

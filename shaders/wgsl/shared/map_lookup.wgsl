@@ -22,21 +22,32 @@ fn find_block(d: VolumeDesc, b: vec3<u32>) -> u32 {
     return cached_block;
 }
 
-// Pool index of the block at `b` (whose key is `key`) by probing the table, or NO_BLOCK.
+// Pool index of the block at `b` (whose key is `key`) by probing the table, or NO_BLOCK (absent,
+// refused a block, or swapped out).
 fn probe_block(d: VolumeDesc, b: vec3<u32>, key: u32) -> u32 {
+    let s = find_slot(d, b, key);
+    if s == NO_SLOT {
+        return NO_BLOCK;
+    }
+    let block = block_table[2u * s + 1u];
+    return select(block, NO_BLOCK, block == SWAPPED_BLOCK);
+}
+
+// The hash slot holding block `b`'s key (`key`), or NO_SLOT when it is not in the table.
+fn find_slot(d: VolumeDesc, b: vec3<u32>, key: u32) -> u32 {
     let mask = d.hash_slots - 1u;
     var s = block_hash(b) & mask;
     for (var i = 0u; i < MAP_MAX_PROBES; i++) {
         let k = block_table[2u * s];
         if k == key {
-            return block_table[2u * s + 1u];
+            return s;
         }
         if k == EMPTY_KEY {
-            return NO_BLOCK;
+            return NO_SLOT;
         }
         s = (s + 1u) & mask;
     }
-    return NO_BLOCK;
+    return NO_SLOT;
 }
 
 // Index of voxel (x, y, z) in `tsdf_volume` (and the colour words), or NO_SLOT where a sparse

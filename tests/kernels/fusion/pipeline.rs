@@ -282,14 +282,14 @@ fn a_pose_driven_mapper_recombines_the_stages() {
     let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_M };
     let config = synthetic_config();
     let poses: Vec<Se3> = (0..4).map(|i| true_pose(0).inverse() * true_pose(i)).collect();
-    let mapper = PoseDrivenMapper::new(&gpu, calibration, config.preprocess, config.tsdf, &Se3::IDENTITY, true).expect("mapper");
+    let mut mapper = PoseDrivenMapper::new(&gpu, calibration, config.preprocess, config.tsdf, &Se3::IDENTITY, true).expect("mapper");
     let desc = mapper.volume().desc();
     let mut voxels = vec![0u32; desc.voxel_count()];
     let mut colors = vec![0u32; desc.voxel_count()];
     let mut bricks = vec![0u32; desc.brick_count()];
     for (i, pose) in poses.iter().enumerate() {
         let f = frame(i);
-        mapper.submit_frame(&gpu, &f, pose).expect("fuse");
+        pollster::block_on(mapper.submit_frame(&gpu, &f, pose)).expect("fuse");
         // The same frame through the CPU twins.
         let chain = webfusion_core::cpu::preprocess::chain::preprocess(&calibration, &config.preprocess, &f);
         let p = webfusion_core::kernels::tsdf_integrate::TsdfIntegrateParams {

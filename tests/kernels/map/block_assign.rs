@@ -6,7 +6,7 @@
 
 use std::collections::BTreeSet;
 
-use webfusion_core::cpu::{self, shared::{MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_POOL_FULL, MAP_COUNTERS, NO_BLOCK}};
+use webfusion_core::cpu::{self, shared::{MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_FREE, MAP_COUNTER_POOL_FULL, MAP_COUNTERS, NO_BLOCK}};
 use webfusion_core::kernels::block_assign::BlockAssignParams;
 use webfusion_core::tsdf::VolumeDesc;
 use webfusion_tests::{Slot, cast, finish, gpu, run_kernel_slots};
@@ -15,8 +15,13 @@ use super::scene::{POOL_BLOCKS, alloc_params, assignments, camera_pose, empty_ta
 
 /// GPU (table, coords, counters) after one assignment.
 fn run(desc: &VolumeDesc, table: &[u32], coords: &[u32], counters: &[u32]) -> (Vec<u32>, Vec<u32>, Vec<u32>) {
+    run_with_free(desc, table, coords, counters, &[0])
+}
+
+/// GPU (table, coords, counters) after one assignment with a free list.
+fn run_with_free(desc: &VolumeDesc, table: &[u32], coords: &[u32], counters: &[u32], free: &[u32]) -> (Vec<u32>, Vec<u32>, Vec<u32>) {
     let gpu = gpu();
-    let slots = [Slot::InOut(bytemuck::cast_slice(table)), Slot::InOut(bytemuck::cast_slice(coords)), Slot::InOut(bytemuck::cast_slice(counters))];
+    let slots = [Slot::InOut(bytemuck::cast_slice(table)), Slot::InOut(bytemuck::cast_slice(coords)), Slot::InOut(bytemuck::cast_slice(counters)), Slot::In(bytemuck::cast_slice(free))];
     let out = run_kernel_slots(&gpu, &gpu.kernels.block_assign, &BlockAssignParams { volume: *desc }, &slots, [desc.hash_slots, 1, 1]);
     finish(&gpu);
     (cast(&out[0]), cast(&out[1]), cast(&out[2]))
@@ -59,7 +64,7 @@ fn every_key_gets_its_own_block() {
     let (g_table, g_coords, g_counters) = run(&desc, &table, &coords, &counters);
     check(&desc, &g_table, &g_coords, n).unwrap_or_else(|e| panic!("GPU: {e}"));
     let (mut c_table, mut c_coords, mut c_counters) = (table.clone(), coords, counters);
-    cpu::block_assign(&BlockAssignParams { volume: desc }, &mut c_table, &mut c_coords, &mut c_counters);
+    cpu::block_assign(&BlockAssignParams { volume: desc }, &mut c_table, &mut c_coords, &mut c_counters, &[]);
     check(&desc, &c_table, &c_coords, n).unwrap_or_else(|e| panic!("CPU: {e}"));
     assert_eq!(g_counters, c_counters, "counters: GPU vs twin");
     assert_eq!(g_counters[MAP_COUNTER_BLOCKS_USED] as usize, n, "one block per key");
@@ -92,6 +97,39 @@ fn a_small_pool_hands_out_exactly_itself_and_counts_the_rest() {
     assert_eq!(g_counters[MAP_COUNTER_BLOCKS_USED], 100, "the counter stops at the pool");
     assert_eq!(g_counters[MAP_COUNTER_POOL_FULL] as usize, n - 100, "every refused key is counted");
     let (mut c_table, mut c_coords, mut c_counters) = (table, coords, counters);
-    cpu::block_assign(&BlockAssignParams { volume: desc }, &mut c_table, &mut c_coords, &mut c_counters);
+    cpu::block_assign(&BlockAssignParams { volume: desc }, &mut c_table, &mut c_coords, &mut c_counters, &[]);
     assert_eq!(g_counters, c_counters, "counters: GPU vs twin");
+}
+
+#[test]
+fn the_free_list_is_used_before_the_pool_grows() {
+    // 100 blocks were handed out before, 30 of them came back to the free list (swapped out):
+    // the frame's keys take those 30 first, each once, then the bump allocation goes on from 100.
+    let desc = sparse_desc(POOL_BLOCKS);
+    let table = allocated(&desc);
+    let n = keys(&table).len();
+    let free: Vec<u32> = (0..30).map(|i| 3 * i + 1).collect();
+    let mut counters = vec![0u32; MAP_COUNTERS];
+    counters[MAP_COUNTER_BLOCKS_USED] = 100;
+    counters[MAP_COUNTER_FREE] = free.len() as u32;
+    let coords = vec![0u32; desc.pool_blocks as usize];
+    let (g_table, g_coords, g_counters) = run_with_free(&desc, &table, &coords, &counters, &free);
+    check(&desc, &g_table, &g_coords, n).unwrap_or_else(|e| panic!("GPU: {e}"));
+    let (mut c_table, mut c_coords, mut c_counters) = (table, coords, counters);
+    cpu::block_assign(&BlockAssignParams { volume: desc }, &mut c_table, &mut c_coords, &mut c_counters, &free);
+    check(&desc, &c_table, &c_coords, n).unwrap_or_else(|e| panic!("CPU: {e}"));
+    assert_eq!(g_counters, c_counters, "counters: GPU vs twin");
+    assert_eq!(g_counters[MAP_COUNTER_FREE], 0, "the free list is used up");
+    assert_eq!(g_counters[MAP_COUNTER_BLOCKS_USED] as usize, 100 + n - free.len(), "the bump allocation covers the rest");
+    let given: BTreeSet<u32> = assignments(&g_table).into_values().collect();
+    let expected: BTreeSet<u32> = free.iter().copied().chain(100..100 + (n - free.len()) as u32).collect();
+    assert_eq!(given, expected, "exactly the free blocks and the next bump blocks are handed out");
+    // Negative control: an assignment that ignored the free list would hand out other blocks.
+    let (ignored_table, _, _) = run(&desc, &allocated(&desc), &vec![0u32; desc.pool_blocks as usize], &{
+        let mut c = vec![0u32; MAP_COUNTERS];
+        c[MAP_COUNTER_BLOCKS_USED] = 100;
+        c
+    });
+    let ignored: BTreeSet<u32> = assignments(&ignored_table).into_values().collect();
+    assert_ne!(ignored, expected, "the set comparison sees a free list that was not used");
 }

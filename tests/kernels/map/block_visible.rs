@@ -2,7 +2,7 @@
 //! `block_visible`: the blocks a real frame allocated, seen from the pose they were fused at,
 //! from a pose turned half away and from behind: the GPU lists exactly the twin's set (in any
 //! order), each once; blocks past the used count are never listed; a turned-away camera sees
-//! fewer; a disabled pose lists nothing.
+//! fewer; a disabled pose lists nothing; blocks on the free list are skipped.
 
 use std::collections::BTreeSet;
 
@@ -69,4 +69,16 @@ fn the_gpu_lists_the_twins_blocks() {
     let (g, _) = run(&p, &camera_pose(&poses()[1]), &coords, &none_used);
     assert!(g.is_empty(), "no used block, nothing listed");
     let _ = MAP_COUNTERS;
+    // Blocks on the free list (swapped out: EMPTY_KEY) are never listed, where they would be
+    // visible if they held their key.
+    let (all, _) = run(&p, &camera_pose(&poses()[1]), &coords, &counters);
+    let freed: BTreeSet<u32> = all.iter().copied().step_by(3).collect();
+    let mut with_free = coords.clone();
+    for &b in &freed {
+        with_free[b as usize] = webfusion_core::cpu::shared::EMPTY_KEY;
+    }
+    let (g, c) = run(&p, &camera_pose(&poses()[1]), &with_free, &counters);
+    let g = as_set(&g).expect("each block once");
+    assert_eq!(g, c, "with free blocks: GPU vs twin");
+    assert!(g.is_disjoint(&freed) && g.len() + freed.len() == all.len(), "exactly the free blocks drop out ({} of {})", freed.len(), all.len());
 }

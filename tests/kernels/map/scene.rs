@@ -69,7 +69,57 @@ pub(crate) fn cpu_map(desc: &VolumeDesc, poses: &[Se3]) -> (Vec<u32>, Vec<u32>, 
     let mut coords = vec![0u32; desc.pool_blocks as usize];
     for pose in poses {
         cpu::block_alloc(&alloc_params(*desc, k), &camera_pose(pose), depth, &mut table, &mut counters);
-        cpu::block_assign(&BlockAssignParams { volume: *desc }, &mut table, &mut coords, &mut counters);
+        cpu::block_assign(&BlockAssignParams { volume: *desc }, &mut table, &mut coords, &mut counters, &[]);
     }
     (table, coords, counters)
+}
+
+/// A filled sparse map as the swap kernels see it, every buffer in binding order.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct PoolState {
+    pub(crate) table: Vec<u32>,
+    pub(crate) coords: Vec<u32>,
+    pub(crate) voxels: Vec<u32>,
+    pub(crate) colors: Vec<u32>,
+    pub(crate) surface: Vec<u32>,
+    pub(crate) counters: Vec<u32>,
+    pub(crate) free: Vec<u32>,
+}
+
+/// What a map holds, by block key: (surface-brick word, voxel words, colour words) of every
+/// key that has a block in the pool.
+pub(crate) type Contents = BTreeMap<u32, (u32, Vec<u32>, Vec<u32>)>;
+
+impl PoolState {
+    /// The real frame's blocks (allocated and assigned at the identity pose), each voxel and
+    /// colour word a distinct pattern of its block's key and index (the swap kernels move words
+    /// without reading them), every other block's surface word set.
+    pub(crate) fn filled(desc: &VolumeDesc) -> Self {
+        let (table, coords, counters) = cpu_map(desc, &poses()[..1]);
+        let n = desc.pool_blocks as usize * 512;
+        let mut voxels = vec![0u32; n];
+        let mut colors = vec![0u32; n];
+        let mut surface = vec![0u32; desc.pool_blocks as usize];
+        for b in 0..counters[0] as usize {
+            let key = coords[b];
+            for v in 0..512 {
+                voxels[b * 512 + v] = key.wrapping_mul(2_654_435_761).wrapping_add(v as u32 * 7919) | 1;
+                colors[b * 512 + v] = key.rotate_left(13) ^ (v as u32) << 3;
+            }
+            surface[b] = key & 1;
+        }
+        Self { table, coords, voxels, colors, surface, counters, free: vec![0; desc.pool_blocks as usize] }
+    }
+
+    /// Blocks in the pool now.
+    pub(crate) fn contents(&self) -> Contents {
+        assignments(&self.table)
+            .into_iter()
+            .filter(|&(_, b)| b != webfusion_core::cpu::shared::SWAPPED_BLOCK)
+            .map(|(key, b)| {
+                let r = b as usize * 512..(b as usize + 1) * 512;
+                (key, (self.surface[b as usize], self.voxels[r.clone()].to_vec(), self.colors[r].to_vec()))
+            })
+            .collect()
+    }
 }

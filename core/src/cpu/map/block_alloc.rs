@@ -2,7 +2,7 @@
 //! CPU reference of `shaders/wgsl/map/block_alloc.wgsl`. Pixels run one after another, so the
 //! table's layout is one of the layouts the GPU may produce; compare tables by key set.
 
-use crate::cpu::shared::{BRICK_SHIFT, MAP_COUNTER_HASH_FULL, MAP_COUNTER_OUT_OF_RANGE, back_project, block_key, is_valid_f32, probe_slot, transform_point, voxel_anchor};
+use crate::cpu::shared::{BRICK_SHIFT, MAP_COUNTER_HASH_FULL, MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_SWAPPED_HITS, SWAPPED_BLOCK, back_project, block_key, is_valid_f32, probe_slot, transform_point, voxel_anchor};
 use crate::kernels::block_alloc::{BlockAllocParams, CameraPose};
 use crate::tsdf::VolumeDesc;
 
@@ -23,6 +23,11 @@ fn wgsl_sign(x: f32) -> f32 {
 /// Twin of `insert_block()` (invocations one after another: a compare-exchange never fails).
 pub fn insert_block(d: &VolumeDesc, b: [u32; 3], block_table: &mut [u32], map_counters: &mut [u32]) {
     match probe_slot(block_table, d, b) {
+        Some(s) if block_table[2 * s] == block_key(b) => {
+            if block_table[2 * s + 1] == SWAPPED_BLOCK {
+                map_counters[MAP_COUNTER_SWAPPED_HITS] += 1;
+            }
+        }
         Some(s) => block_table[2 * s] = block_key(b),
         None => map_counters[MAP_COUNTER_HASH_FULL] += 1,
     }

@@ -2,7 +2,7 @@
 //! CPU reference of `shaders/wgsl/map/block_visible.wgsl`. Blocks are listed in pool order; the
 //! GPU lists them in any order: compare as sets.
 
-use crate::cpu::shared::{BRICK_SHIFT, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_VISIBLE, block_of_key, transform_point, voxel_anchor};
+use crate::cpu::shared::{BRICK_SHIFT, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_VISIBLE, block_of_key, transform_point, voxel_anchor};
 use crate::kernels::block_visible::{BlockVisibleParams, CameraPose};
 
 /// Twin of one invocation: whether pool block `block` (at `key`) may take an update.
@@ -47,7 +47,8 @@ pub fn block_visible(params: &BlockVisibleParams, pose: &CameraPose, block_coord
         return;
     }
     for block in 0..map_counters[MAP_COUNTER_BLOCKS_USED] {
-        if block_is_visible(params, pose, block_coords[block as usize]) {
+        let key = block_coords[block as usize];
+        if key != EMPTY_KEY && block_is_visible(params, pose, key) {
             visible_blocks[map_counters[MAP_COUNTER_VISIBLE] as usize] = block;
             map_counters[MAP_COUNTER_VISIBLE] += 1;
         }

@@ -1,0 +1,83 @@
+// SPDX-License-Identifier: MIT
+//! Swapping end to end: the analytic room fused by the pose-driven mapper from its centre while
+//! the camera turns a full circle and a quarter more, into a pool that holds about half the
+//! room. Blocks behind the camera go to the host and come back when it faces them again, and
+//! the map (every block, on the GPU or the host) is word for word the map a pool large enough
+//! for the room builds without swapping. Without swapping the same small pool runs out and the
+//! map differs (the negative control).
+
+use glam::{DQuat, DVec3};
+use webfusion_core::fusion::pose_driven::PoseDrivenMapper;
+use webfusion_core::map::{MapBlock, MapStats};
+use webfusion_core::preprocess::PreprocessConfig;
+use webfusion_core::tsdf::TsdfConfig;
+use webfusion_core::{ColorImage, DepthImage, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
+use webfusion_tests::{finish, gpu};
+
+use crate::synthetic::{Room, UNITS_PER_M};
+
+/// 160x120 camera with TUM-like focal lengths.
+const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 129.3, fy_px: 129.1, cx_px: 79.6, cy_px: 63.8, width_px: 160, height_px: 120 };
+/// Voxel edge: 2 cm (blocks of 16 cm).
+const VOXEL_M: f32 = 0.02;
+/// Frames: 10° of yaw each, 450° in all.
+const FRAMES: usize = 46;
+
+/// Frame `i`'s pose: at the room's centre, turned 10° per frame about the vertical (y) axis.
+fn pose(i: usize) -> Se3 {
+    Se3::new(DQuat::from_rotation_y((10.0 * i as f64).to_radians()), DVec3::new(0.0, -0.1, 1.1))
+}
+
+fn frame(i: usize) -> RgbdFrame {
+    let units = Room::render_depth_units(&K, &pose(i));
+    let color: Vec<u8> = (0..K.pixel_count()).flat_map(|p| [(p % 251) as u8, (i * 5) as u8, 90]).collect();
+    RgbdFrame {
+        index: i as u64,
+        depth_timestamp_ns: i as i64 * 33_333_333,
+        color_timestamp_ns: i as i64 * 33_333_333,
+        depth: DepthImage::new(K.width_px, K.height_px, units).expect("depth size"),
+        color: ColorImage::new(K.width_px, K.height_px, color).expect("colour size"),
+    }
+}
+
+/// Fuses every frame into a sparse map of `pool_blocks`: (all blocks, the stats after each frame).
+fn fuse(pool_blocks: u32, swap: bool) -> (Vec<MapBlock>, Vec<MapStats>) {
+    let gpu = gpu();
+    let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_M };
+    let tsdf = TsdfConfig { swap, ..TsdfConfig::sparse(VOXEL_M, pool_blocks) };
+    let mut mapper = PoseDrivenMapper::new(&gpu, calibration, PreprocessConfig::default(), tsdf, &pose(0), false).expect("mapper");
+    let mut stats = Vec::new();
+    for i in 0..FRAMES {
+        pollster::block_on(mapper.submit_frame(&gpu, &frame(i), &pose(i))).expect("fuse");
+        // Collect this frame's counters before the next one, so every frame is in the record.
+        pollster::block_on(mapper.flush(&gpu)).expect("flush");
+        stats.push(mapper.map_stats().expect("a sparse map reports"));
+    }
+    let blocks = pollster::block_on(mapper.download_blocks(&gpu)).expect("download").expect("sparse");
+    finish(&gpu);
+    (blocks, stats)
+}
+
+#[test]
+fn a_swapping_pool_builds_the_map_a_large_pool_builds() {
+    let (reference, ref_stats) = fuse(16384, false);
+    let total = reference.len() as u32;
+    let last = ref_stats.last().expect("frames");
+    assert!(!last.exhausted() && last.blocks_used == total, "the large pool holds the room ({total} blocks)");
+    let pool = total / 2;
+    let (swapped, stats) = fuse(pool, true);
+    let end = stats.last().expect("frames");
+    let peak_host = stats.iter().map(|s| s.blocks_on_host).max().unwrap_or(0);
+    eprintln!("room: {total} blocks; pool {pool}: {} swapped out, {} swapped in, peak {peak_host} on the host, {} resident at the end, peak resident {}", end.swapped_out_total, end.swapped_in_total, end.blocks_used, stats.iter().map(|s| s.blocks_used).max().unwrap_or(0));
+    assert!(end.swapped_out_total > u64::from(total / 4), "blocks were swapped out ({})", end.swapped_out_total);
+    assert!(end.swapped_in_total > 0, "blocks came back when the camera faced them again");
+    assert_eq!((end.pool_full, end.hash_full, end.swap_in_refused, end.swapped_hits), (0, 0, 0, 0), "no exhaustion, and every block the camera saw was resident");
+    assert!(stats.iter().all(|s| s.blocks_used <= pool), "resident blocks stay within the pool");
+    assert_eq!(swapped.len(), reference.len(), "the same blocks");
+    let differing = swapped.iter().zip(&reference).filter(|(a, b)| a != b).count();
+    assert_eq!(differing, 0, "{differing} blocks differ from the large pool's");
+    // Negative control: the same pool without swapping runs out, and the comparison sees it.
+    let (unswapped, unswapped_stats) = fuse(pool, false);
+    assert!(unswapped_stats.last().expect("frames").pool_full > 0, "without swapping the pool runs out");
+    assert_ne!(unswapped, reference, "and its map differs from the large pool's");
+}
