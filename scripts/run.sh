@@ -23,13 +23,14 @@ echo "== building the web app (trunk) =="
 trunk build index.html --release
 
 echo "== native KinectFusion on the bundled sample (trajectory, mesh, ATE against the sample's ground truth, per-stage times) =="
-# fr1/rpy turns 90 degrees in place: put the camera at the centre of a 5.1 m volume.
-cargo run --release -q -p webfusion-bridge -- reconstruct data/sample/fr1_rpy.wfr --out out/sample --centred --voxel-size 0.02
+# The default sparse map grows wherever fr1/rpy turns; 2 cm voxels, as the page below uses.
+cargo run --release -q -p webfusion-bridge -- reconstruct data/sample/fr1_rpy.wfr --out out/sample --voxel-size 0.02
 
 if [ "$serve" = 1 ]; then
   echo
   echo "== bridge: web app and frames of ${source} on one port (Ctrl-C stops) =="
-  # The page connects to this bridge by itself; the query sets up the volume for fr1/rpy.
-  echo "webfusion web app: http://127.0.0.1:${port}/?voxel_mm=20&centred=1&autoplay=1  (WebGPU browser needed)"
+  # The page connects to this bridge by itself; the query sets 2 cm voxels (the default map:
+  # sparse blocks) and starts playing.
+  echo "webfusion web app: http://127.0.0.1:${port}/?voxel_mm=20&autoplay=1  (WebGPU browser needed)"
   exec cargo run --release -q -p webfusion-bridge -- serve --source "$source" --bind "127.0.0.1:${port}" --web-dir dist
 fi

@@ -114,9 +114,9 @@ struct BenchArgs {
     /// by one on the next frame (0: preprocessing only).
     #[arg(long, default_value_t = 10)]
     fusion_frames: usize,
-    /// The map the pipeline fuses into: `dense` (the default cube) or `sparse` (voxel blocks
-    /// of the same voxel size, the default pool).
-    #[arg(long, default_value = "dense")]
+    /// The map the pipeline fuses into: `sparse` (the default: voxel blocks, the default pool)
+    /// or `dense` (the default cube, of the same voxel size).
+    #[arg(long, default_value = "sparse")]
     map_kind: webfusion_core::map::MapKind,
     #[command(flatten)]
     calibration: CalibrationArgs,

@@ -30,16 +30,20 @@ pub(crate) struct ReconstructArgs {
     /// Voxels per axis of the cubic volume (`--map-kind dense`).
     #[arg(long, default_value_t = webfusion_core::tsdf::DEFAULT_VOLUME_DIM_VOXELS)]
     volume: u32,
-    /// The map: `dense` (a cube of `--volume`³ voxels placed by the first camera) or `sparse`
-    /// (voxel blocks allocated wherever surfaces are seen, centred on the first camera).
-    #[arg(long, default_value = "dense")]
+    /// The map: `sparse` (voxel blocks allocated wherever surfaces are seen, centred on the
+    /// first camera, swapped to host memory when the pool fills) or `dense` (a cube of
+    /// `--volume`³ voxels placed by the first camera).
+    #[arg(long, default_value = "sparse")]
     map_kind: webfusion_core::map::MapKind,
+    /// Do not swap a sparse map's blocks to host memory: a full pool refuses new blocks.
+    #[arg(long)]
+    no_swap: bool,
     /// GPU memory for a sparse map's voxel pool and colour, MiB (at most 65536 blocks of 8³;
     /// default: 32768 blocks, 129 MiB).
     #[arg(long)]
     map_budget_mib: Option<u64>,
-    /// Put the first camera at the volume's centre instead of in front of it (for a camera
-    /// that turns in place).
+    /// Put the first camera at a dense cube's centre instead of in front of it (for a camera
+    /// that turns in place; a sparse map is always centred on it).
     #[arg(long)]
     centred: bool,
     /// Truncation distance μ, metres (default: 4 voxels).
@@ -88,7 +92,7 @@ impl ReconstructArgs {
     fn config(&self) -> anyhow::Result<FusionConfig> {
         let mut config = FusionConfig::default();
         let voxel = self.voxel_size.unwrap_or(webfusion_core::tsdf::DEFAULT_VOLUME_SIZE_M / self.volume as f32);
-        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, kind: self.map_kind, pool_blocks: self.map_budget_mib.map_or(webfusion_core::map::DEFAULT_POOL_BLOCKS, |mib| webfusion_core::map::pool_blocks_for_budget(mib << 20)), ..TsdfConfig::cube(self.volume, voxel) };
+        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, kind: self.map_kind, pool_blocks: self.map_budget_mib.map_or(webfusion_core::map::DEFAULT_POOL_BLOCKS, |mib| webfusion_core::map::pool_blocks_for_budget(mib << 20)), swap: !self.no_swap, ..TsdfConfig::cube(self.volume, voxel) };
         config.icp.iterations_per_level = self.icp_iterations.clone();
         config.icp.dist_thresh_m = self.icp_dist;
         config.icp.angle_thresh_rad = self.icp_angle_deg.to_radians();
@@ -182,6 +186,9 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     if let Some(stats) = map_stats {
         let used_mib = (u64::from(stats.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR) as f64 / 1048576.0;
         println!("sparse map: {} of {} blocks used ({used_mib:.1} MiB of {:.1} MiB)", stats.blocks_used, stats.pool_blocks, fusion.volume().memory_bytes() as f64 / 1048576.0);
+        if stats.swapped_out_total > 0 {
+            println!("swapping: {} blocks on the host ({:.1} MiB of host memory); {} swapped out, {} swapped in; {} band samples met a block still on the host", stats.blocks_on_host, stats.host_bytes as f64 / 1048576.0, stats.swapped_out_total, stats.swapped_in_total, stats.swapped_hits);
+        }
         if stats.exhausted() {
             eprintln!("warning: the map ran out of room ({} insertions without a hash slot, {} blocks refused by the full pool): surfaces there were not fused; raise --map-budget-mib or the voxel size", stats.hash_full, stats.pool_full);
         }
@@ -189,7 +196,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     if !args.no_mesh {
-        write_mesh(&gpu, &fusion, &args.out.join("mesh.ply"), &mut times)?;
+        write_mesh(&gpu, &mut fusion, &args.out.join("mesh.ply"), &mut times)?;
     }
     println!(
         "{n_frames} frames of {} on {}; {} lost; {:.2} frames/s over {:.1} s{}",
@@ -246,7 +253,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             "voxel_size_m": fusion.config().tsdf.voxel_size_m,
             "truncation_m": fusion.config().tsdf.truncation_m,
             "memory_bytes": fusion.volume().memory_bytes(),
-            "sparse": map_stats.map(|m| serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "used_bytes": u64::from(m.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR, "hash_full": m.hash_full, "pool_full": m.pool_full, "out_of_range": m.out_of_range })),
+            "sparse": map_stats.map(|m| serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "used_bytes": u64::from(m.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR, "hash_full": m.hash_full, "pool_full": m.pool_full, "out_of_range": m.out_of_range, "blocks_on_host": m.blocks_on_host, "host_bytes": m.host_bytes, "swapped_out_total": m.swapped_out_total, "swapped_in_total": m.swapped_in_total, "swapped_hits": m.swapped_hits, "swap_in_refused": m.swap_in_refused })),
         },
         "stages_ms": times.to_json(),
     });
@@ -256,10 +263,10 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     Ok(())
 }
 
-/// Extracts the mesh on the GPU and writes it as binary PLY and glTF binary (`.glb` beside).
-fn write_mesh(gpu: &webfusion_core::Gpu, fusion: &KinectFusion, path: &Path, times: &mut StageTimes) -> anyhow::Result<()> {
+/// Extracts the mesh (of every block: a swapping map's on the host too) and writes it as binary PLY and glTF binary (`.glb` beside).
+fn write_mesh(gpu: &webfusion_core::Gpu, fusion: &mut KinectFusion, path: &Path, times: &mut StageTimes) -> anyhow::Result<()> {
     let sw = crate::timing::Stopwatch::start();
-    let mesh = pollster::block_on(webfusion_core::mesh::extract_mesh(gpu, fusion.volume())).context("extracting the mesh")?;
+    let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(gpu)).context("extracting the mesh")?;
     times.record("mesh extraction", sw.ms());
     let write = |path: &Path, glb: bool| -> anyhow::Result<()> {
         let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;

@@ -64,8 +64,10 @@ pub struct TsdfConfig {
 }
 
 impl Default for TsdfConfig {
+    /// The default map: sparse voxel blocks (the default pool, swapping when it fills) of the
+    /// dense default cube's voxel size (3 m / 256 = 11.7 mm).
     fn default() -> Self {
-        Self::cube(DEFAULT_VOLUME_DIM_VOXELS, DEFAULT_VOLUME_SIZE_M / DEFAULT_VOLUME_DIM_VOXELS as f32)
+        Self::sparse(DEFAULT_VOLUME_SIZE_M / DEFAULT_VOLUME_DIM_VOXELS as f32, DEFAULT_POOL_BLOCKS)
     }
 }
 

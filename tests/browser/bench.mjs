@@ -16,7 +16,7 @@ import { join } from 'node:path';
 import { gzipSync } from 'node:zlib';
 import { launchChromium, options, startBridge, waitFor } from './lib.mjs';
 
-const { webfusion, dist, sample, out, map, volume, voxelMm } = options({ out: 'out/bench-web', map: 'dense', volume: 256, 'voxel-mm': 20 });
+const { webfusion, dist, sample, out, map, volume, voxelMm } = options({ out: 'out/bench-web', map: 'sparse', volume: 256, 'voxel-mm': 20 });
 const repeatArg = process.argv.indexOf('--repeat');
 const repeat = repeatArg > 0 ? Number(process.argv[repeatArg + 1]) : 1;
 if (!(Number.isInteger(repeat) && repeat >= 1)) throw new Error(`--repeat needs a whole number >= 1, got ${process.argv[repeatArg + 1]}`);

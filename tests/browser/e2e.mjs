@@ -16,8 +16,8 @@
 // usage: node tests/browser/e2e.mjs [--webfusion target/release/webfusion] [--dist dist]
 //          [--sample data/sample/fr1_rpy.wfr] [--out out/e2e] [--map sparse|dense] [--volume 128]
 //          [--voxel-mm 40]
-// The main page fuses into --map (default sparse: the voxel-block map); the second page keeps
-// the app's default map.
+// The main page fuses into --map (default sparse: the voxel-block map, the app's default); the
+// second page fuses into the dense box, so both kinds run in the browser.
 import { spawnSync } from 'node:child_process';
 import { readFileSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
@@ -155,7 +155,7 @@ try {
   const second = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
   const secondErrors = [];
   second.on('pageerror', (e) => secondErrors.push(String(e)));
-  await second.goto(`http://${bridge.addr}/?volume=${volume}&voxel_mm=abc&rate=NaN&centred=1&autoplay=1`);
+  await second.goto(`http://${bridge.addr}/?map=dense&volume=${volume}&voxel_mm=abc&rate=NaN&centred=1&autoplay=1`);
   const fallback = await waitFor(second, 'frames with fallback settings', (s) => s.frames_done >= 3, FRAME_TIMEOUT_MS * 3);
   check('bad URL settings fall back with a message', /voxel_mm=abc ignored/.test(fallback.message) && /rate ignored/.test(fallback.message) && fallback.reconnects === 0 && fallback.volume.voxel_size_m > 0,
     `message "${fallback.message}"; voxel ${(fallback.volume.voxel_size_m * 1000).toFixed(1)} mm; reconnects ${fallback.reconnects}`);

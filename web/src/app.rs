@@ -681,9 +681,10 @@ impl App {
         }
     }
 
-    async fn export_mesh(&self, glb: bool) -> Result<(), String> {
-        let Some(fusion) = self.mode.fusion() else { return Err("nothing fused yet".to_owned()) };
-        let mesh = webfusion_core::mesh::extract_mesh(&self.gpu, fusion.volume()).await.map_err(|e| e.to_string())?;
+    async fn export_mesh(&mut self, glb: bool) -> Result<(), String> {
+        let Some(fusion) = self.mode.fusion_mut() else { return Err("nothing fused yet".to_owned()) };
+        // Every block: a swapping map's on the host (wasm memory) too.
+        let mesh = fusion.mapper_mut().extract_mesh(&self.gpu).await.map_err(|e| e.to_string())?;
         let mut bytes = Vec::new();
         if glb { webfusion_core::mesh::write_glb(&mesh, &mut bytes) } else { webfusion_core::mesh::write_ply(&mesh, &mut bytes) }.map_err(|e| e.to_string())?;
         let (name, mime) = if glb { ("mesh.glb", "model/gltf-binary") } else { ("mesh.ply", "application/octet-stream") };
@@ -777,7 +778,8 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         None => "ATE: the source has no ground truth".to_owned(),
     };
     let v = &f.volume;
-    let map = if v.pool_blocks > 0 { format!("sparse map, {} of {} blocks of 8³ used{}", v.blocks_used, v.pool_blocks, if v.full { " (FULL: new surfaces are not fused; raise the voxel size)" } else { "" }) } else { format!("volume {}³", v.dims_voxels[0]) };
+    let on_host = if v.blocks_on_host > 0 { format!(", {} swapped out to memory ({:.0} MiB)", v.blocks_on_host, v.host_bytes as f64 / 1048576.0) } else { String::new() };
+    let map = if v.pool_blocks > 0 { format!("sparse map, {} of {} blocks of 8³ on the GPU{on_host}{}", v.blocks_used, v.pool_blocks, if v.full { " (FULL: new surfaces are not fused; raise the voxel size)" } else { "" }) } else { format!("volume {}³", v.dims_voxels[0]) };
     lines.push(format!(
         "{ate} · latency {} · in flight {} · dropped {} · reconnects {} · {map} × {:.1} mm = {:.0} MiB",
         f.latency_ms.map_or_else(|| "-".to_owned(), |ms| format!("{ms:.0} ms")),

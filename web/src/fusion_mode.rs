@@ -263,9 +263,10 @@ impl FusionMode {
         self.last_reported
     }
 
-    /// The pipeline's volume (for the mesh export), if built.
-    pub(crate) fn fusion(&self) -> Option<&KinectFusion> {
-        self.pipeline.as_ref().map(|p| &p.fusion)
+    /// The pipeline (for the mesh export), if built; mutably, as a swapping map's mesh gathers
+    /// its blocks from the host.
+    pub(crate) fn fusion_mut(&mut self) -> Option<&mut KinectFusion> {
+        self.pipeline.as_mut().map(|p| &mut p.fusion)
     }
 
     /// Submits one decoded frame and, with `draw_views`, draws its views, without waiting for
@@ -441,6 +442,8 @@ impl FusionMode {
                 dims_voxels: t.box_dims_voxels(),
                 pool_blocks: if t.kind == MapKind::Sparse { t.pool_blocks } else { 0 },
                 blocks_used: self.map.map_or(0, |m| m.blocks_used),
+                blocks_on_host: self.map.map_or(0, |m| m.blocks_on_host),
+                host_bytes: self.map.map_or(0, |m| m.host_bytes),
                 full: self.map.is_some_and(|m| m.exhausted()),
                 voxel_size_m: t.voxel_size_m,
                 truncation_m: t.truncation_m,

@@ -59,6 +59,10 @@ pub(crate) struct VolumeStatus {
     pub(crate) pool_blocks: u32,
     /// Of those, blocks in use (as of the last report).
     pub(crate) blocks_used: u32,
+    /// Blocks swapped out to host (wasm) memory.
+    pub(crate) blocks_on_host: u32,
+    /// Bytes they take there.
+    pub(crate) host_bytes: u64,
     /// A sparse map ran out of pool blocks or hash slots: surfaces seen since were not fused.
     pub(crate) full: bool,
     pub(crate) voxel_size_m: f32,

@@ -279,6 +279,21 @@ impl Mapper {
         Ok(Some(blocks))
     }
 
+    /// The map's mesh: of every block, on the GPU and (a swapping map's) on the host. Waits for
+    /// the GPU.
+    pub async fn extract_mesh(&mut self, gpu: &Gpu) -> Result<crate::mesh::Mesh> {
+        self.flush(gpu).await?;
+        let on_host = self.swapper().map_or(0, MapSwapper::blocks_on_host);
+        match &self.map {
+            Map::Sparse(sparse) if on_host > 0 => {
+                let (config, origin) = (*sparse.config(), sparse.origin_in_world());
+                let blocks = self.download_blocks(gpu).await?.unwrap_or_default();
+                crate::map::mesh_of_blocks(gpu, &config, origin, &blocks).await
+            }
+            map => crate::mesh::extract_mesh(gpu, map).await,
+        }
+    }
+
     /// Records the integration as stage `stage` of a frame (skipped on the GPU when the pose
     /// is disabled). A sparse map first clears its visible count, then swaps in what
     /// [`Self::prepare_frame`] planned, allocates, assigns, lists the visible blocks,

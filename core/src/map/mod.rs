@@ -47,9 +47,10 @@ pub const BLOCK_BYTES_WITH_COLOR: u64 = BLOCK_VOXELS as u64 * 8 + 4 + 4 + 4 + 4 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum MapKind {
     /// Every voxel of a box.
-    #[default]
     Dense,
-    /// Voxel blocks allocated where surfaces are (voxel-block hashing).
+    /// Voxel blocks allocated where surfaces are (voxel-block hashing): the default, so the
+    /// world grows wherever the camera looks.
+    #[default]
     Sparse,
 }
 
@@ -158,6 +159,7 @@ pub struct MapBlock {
 #[derive(Debug)]
 pub struct SparseMap {
     config: TsdfConfig,
+    origin_in_world: [f32; 3],
     desc: VolumeDesc,
     voxels: wgpu::Buffer,
     colors: wgpu::Buffer,
@@ -202,6 +204,7 @@ impl SparseMap {
         });
         let map = Self {
             config,
+            origin_in_world,
             desc,
             voxels,
             colors,
@@ -276,14 +279,30 @@ impl SparseMap {
     }
 }
 
-impl SparseMap {
-    /// Replaces the map's contents with `blocks` (as [`Self::download_blocks`] gives them; any
-    /// order): block `i` goes to pool block `i`, its key into the hash table by the probing the
-    /// kernels use. More blocks than the pool, a block outside the box or a full probe sequence
-    /// is an error and leaves the map empty.
-    pub fn upload_blocks(&self, gpu: &Gpu, blocks: &[MapBlock]) -> Result<()> {
-        self.reset(gpu);
-        let d = self.desc;
+/// A sparse map's buffers as the host builds them from a list of blocks: block `i` in pool
+/// block `i`, its key in the hash table by the kernels' probing.
+#[derive(Clone, Debug)]
+pub struct PoolImage {
+    /// The map's description (its pool and hash table sized for the blocks given).
+    pub desc: VolumeDesc,
+    /// (key, pool index) per hash slot.
+    pub table: Vec<u32>,
+    /// Key per pool block.
+    pub keys: Vec<u32>,
+    /// Voxel words per pool block.
+    pub voxels: Vec<u32>,
+    /// Colour words per pool block (empty without colour).
+    pub colors: Vec<u32>,
+    /// Surface-brick word per pool block.
+    pub surface: Vec<u32>,
+}
+
+impl PoolImage {
+    /// Lays `blocks` (any order) out in a pool described by `desc`. More blocks than the pool,
+    /// a block outside the box, a block given twice, wrong word counts or a full probe sequence
+    /// is an error naming it.
+    pub fn from_blocks(desc: VolumeDesc, color: bool, blocks: &[MapBlock]) -> Result<Self> {
+        let d = desc;
         let bad = |why: String| Err(Error::InvalidConfig(format!("uploading {} map blocks: {why}", blocks.len())));
         if blocks.len() > d.pool_blocks as usize {
             return bad(format!("the pool holds {} blocks", d.pool_blocks));
@@ -293,13 +312,13 @@ impl SparseMap {
         let mut keys = vec![EMPTY_KEY; d.pool_blocks as usize];
         let voxel_words = BLOCK_VOXELS as usize;
         let mut voxels = vec![0u32; blocks.len() * voxel_words];
-        let mut colors = vec![0u32; if self.config.color { blocks.len() * voxel_words } else { 0 }];
+        let mut colors = vec![0u32; if color { blocks.len() * voxel_words } else { 0 }];
         let mut surface = vec![0u32; blocks.len()];
         for (i, block) in blocks.iter().enumerate() {
             if (0..3).any(|a| block.coords[a] >= n_box[a]) {
                 return bad(format!("block {:?} lies outside the box of {n_box:?} blocks", block.coords));
             }
-            if block.voxels.len() != voxel_words || (self.config.color && block.colors.len() != voxel_words) {
+            if block.voxels.len() != voxel_words || (color && block.colors.len() != voxel_words) {
                 return bad(format!("block {:?} has {} voxel and {} colour words, not {voxel_words}", block.coords, block.voxels.len(), block.colors.len()));
             }
             let key = crate::cpu::shared::block_key(block.coords);
@@ -313,24 +332,57 @@ impl SparseMap {
             table[2 * s + 1] = i as u32;
             keys[i] = key;
             voxels[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.voxels);
-            if self.config.color {
+            if color {
                 colors[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.colors);
             }
             let far = crate::cpu::shared::FAR_TSDF;
             surface[i] = u32::from(block.voxels.iter().any(|&w| crate::cpu::shared::voxel_weight(w) > 0 && crate::cpu::shared::voxel_tsdf(w) < far));
         }
-        gpu.write_buffer(&self.block_table, &table);
-        gpu.write_buffer(&self.block_coords, &keys);
-        gpu.write_buffer(&self.voxels, &voxels);
+        Ok(Self { desc, table, keys, voxels, colors, surface })
+    }
+}
+
+impl SparseMap {
+    /// Replaces the map's contents with `blocks` (as [`Self::download_blocks`] gives them; any
+    /// order): block `i` goes to pool block `i`, its key into the hash table by the probing the
+    /// kernels use. More blocks than the pool, a block outside the box or a full probe sequence
+    /// is an error and leaves the map empty.
+    pub fn upload_blocks(&self, gpu: &Gpu, blocks: &[MapBlock]) -> Result<()> {
+        self.reset(gpu);
+        let image = PoolImage::from_blocks(self.desc, self.config.color, blocks)?;
+        gpu.write_buffer(&self.block_table, &image.table);
+        gpu.write_buffer(&self.block_coords, &image.keys);
+        gpu.write_buffer(&self.voxels, &image.voxels);
         if self.config.color {
-            gpu.write_buffer(&self.colors, &colors);
+            gpu.write_buffer(&self.colors, &image.colors);
         }
-        gpu.write_buffer(&self.surface_bricks, &surface);
+        gpu.write_buffer(&self.surface_bricks, &image.surface);
         let mut counters = [0u32; MAP_COUNTERS];
         counters[MAP_COUNTER_BLOCKS_USED] = blocks.len() as u32;
         gpu.write_buffer(&self.counters, &counters);
         Ok(())
     }
+
+    /// Where the box's voxel (0, 0, 0) corner lies in the world (what [`Self::new`] was given).
+    pub fn origin_in_world(&self) -> [f32; 3] {
+        self.origin_in_world
+    }
+}
+
+/// The mesh of a sparse map given as blocks (a swapping map's, gathered from the GPU and the
+/// host): on the GPU in a temporary map holding just these blocks when it fits one binding,
+/// else by the CPU references of the same kernels.
+pub async fn mesh_of_blocks(gpu: &Gpu, config: &TsdfConfig, origin_in_world: [f32; 3], blocks: &[MapBlock]) -> Result<crate::mesh::Mesh> {
+    let n = u32::try_from(blocks.len()).unwrap_or(u32::MAX).max(1);
+    let config = TsdfConfig { pool_blocks: n, swap: false, kind: MapKind::Sparse, ..*config };
+    if n <= MAX_POOL_BLOCKS && config.validate(gpu.limits.max_storage_buffer_binding_size).is_ok() {
+        let map = SparseMap::new(gpu, config, origin_in_world)?;
+        map.upload_blocks(gpu, blocks)?;
+        return crate::mesh::extract_mesh(gpu, &map).await;
+    }
+    let image = PoolImage::from_blocks(config.desc(origin_in_world), config.color, blocks)?;
+    let soup = crate::mesh::extract_map_triangles_cpu(&image.voxels, config.color.then_some(image.colors.as_slice()), &image.table, &image.keys, &image.desc)?;
+    Ok(crate::mesh::Mesh::from_triangle_soup(&soup))
 }
 
 impl TsdfStore for SparseMap {
