@@ -10,6 +10,7 @@ mod openni;
 mod reconstruct;
 mod record;
 mod serve;
+mod synth;
 mod timing;
 
 use std::path::PathBuf;
@@ -68,6 +69,9 @@ enum Command {
     Serve(serve::ServeArgs),
     /// Trajectory error of an estimate against ground truth (TUM files): ATE and RPE as evo computes them.
     Eval(eval::EvalArgs),
+    /// Render the synthetic furnished room along a loop into a `.wfr` recording with exact
+    /// ground truth (room-sized runs of the map).
+    SynthRoom(synth::SynthRoomArgs),
 }
 
 #[derive(clap::Args)]
@@ -132,6 +136,7 @@ fn main() -> anyhow::Result<()> {
         Command::Record(args) => record::run(&args),
         Command::Repair(args) => record::repair(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::SynthRoom(args) => synth::run(&args),
         Command::Serve(args) => serve::run(args),
         #[cfg(feature = "openni2")]
         Command::Devices => {

@@ -24,6 +24,7 @@ pub mod pose;
 pub mod preprocess;
 pub mod protocol;
 pub mod recording;
+pub mod sim;
 pub mod source;
 pub mod tsdf;
 pub mod view;

@@ -118,6 +118,9 @@ impl TsdfConfig {
     /// Rejects settings the kernels cannot honour.
     pub fn validate(&self, max_binding_bytes: u64) -> Result<()> {
         let bad = |why: String| Err(Error::InvalidConfig(format!("TSDF volume: {why}")));
+        if !(self.voxel_size_m > 0.0 && self.voxel_size_m.is_finite()) {
+            return bad(format!("voxel size {} m must be positive", self.voxel_size_m));
+        }
         if self.kind == MapKind::Sparse && !(1..=MAX_POOL_BLOCKS).contains(&self.pool_blocks) {
             return bad(format!("a sparse map's pool of {} blocks must hold 1..={MAX_POOL_BLOCKS}", self.pool_blocks));
         }
@@ -126,9 +129,6 @@ impl TsdfConfig {
         }
         if self.kind == MapKind::Dense && self.dims_voxels.iter().any(|&d| !(2..=2048).contains(&d)) {
             return bad(format!("dimensions {:?} must be 2..=2048 voxels per axis", self.dims_voxels));
-        }
-        if !(self.voxel_size_m > 0.0 && self.voxel_size_m.is_finite()) {
-            return bad(format!("voxel size {} m must be positive", self.voxel_size_m));
         }
         if !(self.truncation_m >= self.voxel_size_m && self.truncation_m.is_finite()) {
             return bad(format!("truncation {} m must be at least one voxel ({} m)", self.truncation_m, self.voxel_size_m));

@@ -130,6 +130,13 @@ impl PoseDrivenMapper {
         self.mapper.download_blocks(gpu).await
     }
 
+    /// The map's mesh, of every block (a swapping map's on the host too); waits for the frames
+    /// in flight.
+    pub async fn extract_mesh(&mut self, gpu: &Gpu) -> Result<crate::mesh::Mesh> {
+        self.flush(gpu).await?;
+        self.mapper.extract_mesh(gpu).await
+    }
+
     fn take_stats(mapper: &mut Mapper, last: &mut Option<MapStats>, bytes: &[u8]) {
         let Some(map) = mapper.sparse() else { return };
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(bytes);
