@@ -80,3 +80,40 @@ async fn preprocessing_on_webgpu_matches_cpu_reference() {
     assert!(errors.is_empty(), "WebGPU reported errors: {errors:?}");
     console_log!("webgpu vs cpu: depth {d:e} m, normals {nd:e}, coarse depth {cd:e} m");
 }
+
+/// Swapping on WebGPU: the synthetic room fused at its path's poses into half the pool it
+/// needs moves blocks to wasm memory and back, and ends with exactly the map (every block, word
+/// for word) that a pool large enough for the room builds, as it does natively.
+#[wasm_bindgen_test]
+async fn a_swapping_map_on_webgpu_equals_the_large_pools_map() {
+    use webfusion_core::fusion::pose_driven::PoseDrivenMapper;
+    use webfusion_core::sim::room::SyntheticRoom;
+    use webfusion_core::tsdf::TsdfConfig;
+    let gpu = Gpu::new(&GpuOptions::default()).await.expect("a WebGPU adapter");
+    let k = webfusion_core::PinholeIntrinsics { fx_px: 65.6, fy_px: 65.6, cx_px: 39.5, cy_px: 29.5, width_px: 80, height_px: 60 };
+    let calibration = RgbdCalibration { intrinsics: k, depth_units_per_metre: 5000.0 };
+    let room = SyntheticRoom::new(6.0, 3.0, 6.0);
+    let path = room.path(72);
+    let frames: Vec<RgbdFrame> = (0..path.len()).map(|i| room.frame(&k, &path, i)).collect();
+    let fuse = async |pool_blocks: u32| {
+        let mut mapper = PoseDrivenMapper::new(&gpu, calibration, PreprocessConfig::default(), TsdfConfig::sparse(0.04, pool_blocks), &path[0], false).expect("mapper");
+        for (frame, pose) in frames.iter().zip(&path) {
+            mapper.submit_frame(&gpu, frame, pose).await.expect("fuse");
+            // Let the page's event loop deliver this frame's readbacks (the app polls them on a
+            // timer between frames; this loop would otherwise never yield).
+            mapper.flush(&gpu).await.expect("flush");
+        }
+        mapper.flush(&gpu).await.expect("flush");
+        let stats = mapper.map_stats().expect("a sparse map reports");
+        (mapper.download_blocks(&gpu).await.expect("download").expect("sparse"), stats)
+    };
+    let (reference, _) = fuse(8192).await;
+    let pool = reference.len() as u32 / 2;
+    let (swapped, stats) = fuse(pool).await;
+    web_sys::console::log_1(&format!("room: {} blocks, pool {pool}: {} swapped out, {} in, {} on the host", reference.len(), stats.swapped_out_total, stats.swapped_in_total, stats.blocks_on_host).into());
+    assert!(stats.swapped_out_total > 0 && stats.swapped_in_total > 0, "blocks went to wasm memory and came back");
+    assert_eq!((stats.pool_full, stats.hash_full, stats.swapped_hits), (0, 0, 0), "no exhaustion, no block missed");
+    assert_eq!(swapped.len(), reference.len(), "the same blocks");
+    assert!(swapped == reference, "every block equals the large pool's");
+    assert!(gpu.take_errors().is_empty(), "no WebGPU errors");
+}
