@@ -29,8 +29,9 @@ enum Integration {
         visible: wgpu::BindGroup,
         args: wgpu::BindGroup,
         integrate: wgpu::BindGroup,
-        /// Swapping to host memory, when the config asks for it.
-        swapper: Option<MapSwapper>,
+        /// Swapping to host memory, when the config asks for it (boxed: it is large, and the
+        /// dense variant holds one bind group).
+        swapper: Option<Box<MapSwapper>>,
     },
 }
 
@@ -162,7 +163,7 @@ impl Mapper {
                     .bind_group(gpu),
                     swapper: config.swap.then(|| {
                         let swap = SwapConfig::for_camera(&preprocessor.levels[0].intrinsics, max_depth_m, config.truncation_m);
-                        MapSwapper::new(gpu, sparse, pose, swap)
+                        Box::new(MapSwapper::new(gpu, sparse, pose, swap))
                     }),
                 };
                 (
@@ -207,14 +208,14 @@ impl Mapper {
     /// The swapper of a sparse map that swaps.
     pub fn swapper(&self) -> Option<&MapSwapper> {
         match &self.integration {
-            Integration::Sparse { swapper, .. } => swapper.as_ref(),
+            Integration::Sparse { swapper, .. } => swapper.as_deref(),
             Integration::Dense { .. } => None,
         }
     }
 
     fn swapper_mut(&mut self) -> Option<&mut MapSwapper> {
         match &mut self.integration {
-            Integration::Sparse { swapper, .. } => swapper.as_mut(),
+            Integration::Sparse { swapper, .. } => swapper.as_deref_mut(),
             Integration::Dense { .. } => None,
         }
     }
@@ -283,7 +284,7 @@ impl Mapper {
     /// the GPU.
     pub async fn extract_mesh(&mut self, gpu: &Gpu) -> Result<crate::mesh::Mesh> {
         self.flush(gpu).await?;
-        let on_host = self.swapper().map_or(0, MapSwapper::blocks_on_host);
+        let on_host = self.swapper().map_or(0, |s| s.blocks_on_host());
         match &self.map {
             Map::Sparse(sparse) if on_host > 0 => {
                 let (config, origin) = (*sparse.config(), sparse.origin_in_world());
