@@ -55,7 +55,9 @@ pub struct SwapConfig {
 impl SwapConfig {
     /// Regions for a camera with intrinsics `k` whose depth stops at `max_depth_m`, fusing with
     /// truncation `truncation_m`. The camera sees a cone of half-angle θ (the image's half
-    /// diagonal) up to `max_depth_m` + μ. The fetch region widens it by 15° and 0.5 m and always
+    /// diagonal) up to `max_depth_m` / cos θ + μ from its centre (depth is measured along the
+    /// axis: a corner ray's samples lie farther away). The fetch region widens it by 15° and
+    /// 0.5 m and always
     /// holds the 1 m around the camera: a hand-held or robot camera at 30 Hz moves a few cm and
     /// turns a few degrees per frame, so blocks come back many frames before they are seen, from
     /// a pose a frame or two old and at most `blocks_per_frame` a frame. The kept region widens it
@@ -63,7 +65,7 @@ impl SwapConfig {
     pub fn for_camera(k: &PinholeIntrinsics, max_depth_m: f32, truncation_m: f32) -> Self {
         let half_diagonal_px = (0.5 * k.width_px as f32).hypot(0.5 * k.height_px as f32);
         let theta = (half_diagonal_px / k.fx_px.min(k.fy_px)).atan();
-        let reach = max_depth_m + truncation_m;
+        let reach = max_depth_m / theta.cos() + truncation_m;
         let cos = |extra_deg: f32| (theta + extra_deg.to_radians()).min(std::f32::consts::PI).cos();
         Self {
             blocks_per_frame: DEFAULT_BLOCKS_PER_FRAME,
@@ -412,5 +414,49 @@ impl MapSwapper {
     /// The blocks on the host, in any order.
     pub fn host_blocks(&self) -> impl Iterator<Item = MapBlock> + '_ {
         self.store.iter().map(|(&key, b)| MapBlock { coords: block_of_key(key), voxels: b.voxels.to_vec(), colors: b.colors.as_ref().map_or_else(Vec::new, |c| c.to_vec()) })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// TUM's default Kinect calibration.
+    const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 525.0, fy_px: 525.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 };
+
+    #[test]
+    fn every_sample_the_camera_fuses_lies_in_the_fetch_region_and_that_in_the_kept_one() {
+        let (max_depth_m, mu) = (5.0f32, 0.047f32);
+        let c = SwapConfig::for_camera(&K, max_depth_m, mu);
+        let axis = [0.0, 0.0, 1.0];
+        let mut checked = 0;
+        for (x, y) in [(0.0, 0.0), (639.0, 479.0), (0.0, 479.0), (319.5, 239.5), (639.0, 240.0), (100.0, 30.0)] {
+            for z in [0.3f32, 1.0, 2.5, 4.0, max_depth_m] {
+                let ray = [(x - K.cx_px) / K.fx_px, (y - K.cy_px) / K.fy_px, 1.0f32];
+                let norm = (ray[0] * ray[0] + ray[1] * ray[1] + 1.0).sqrt();
+                // The far end of the sample's truncation band, along its ray.
+                let far = (z * norm + mu) / norm;
+                let p = ray.map(|r| r * far);
+                assert!(c.fetch.contains(p, axis, 0.0), "pixel ({x}, {y}) at {z} m lies outside the fetch region");
+                assert!(c.keep.contains(p, axis, 0.0), "pixel ({x}, {y}) at {z} m lies outside the kept region");
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 30);
+        // The fetch region lies inside the kept one: points on a grid around the camera.
+        for i in -20..=20 {
+            for j in -20..=20 {
+                for k in -20..=20 {
+                    let p = [i as f32 * 0.4, j as f32 * 0.4, k as f32 * 0.4];
+                    assert!(!c.fetch.contains(p, axis, 0.0) || c.keep.contains(p, axis, 0.0), "{p:?} is fetched but not kept");
+                }
+            }
+        }
+        // Negative control: with the depth taken as a distance (the old reach), a corner ray's
+        // far samples fall outside the fetch region.
+        let theta = (400.0f32 / 525.0).atan();
+        let corner_far = [(0.0 - K.cx_px) / K.fx_px, (0.0 - K.cy_px) / K.fy_px, 1.0].map(|r| r * max_depth_m);
+        let short = ViewRegion { range_m: max_depth_m + mu + 0.5, ..c.fetch };
+        assert!(!short.contains(corner_far, axis, 0.0) && c.fetch.contains(corner_far, axis, 0.0), "the corner at {} rad needs the radial reach", theta);
     }
 }
