@@ -6,9 +6,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, TrackingState};
-use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
+use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, PoseTimeline, TimedPose, read_tum_trajectory, write_tum_trajectory};
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, TsdfStore as _, VolumePlacement};
-use webfusion_core::GpuOptions;
+use webfusion_core::{GpuOptions, Se3};
 
 use crate::calib::CalibrationArgs;
 use crate::timing::StageTimes;
@@ -84,6 +84,16 @@ pub(crate) struct ReconstructArgs {
     /// first.
     #[arg(long)]
     skip_corrupt: bool,
+    /// Fuse at these camera-to-world poses (a TUM trajectory file) instead of tracking: each
+    /// frame takes the pose at its depth timestamp, interpolated between the two nearest given
+    /// poses when the nearest is within 20 ms; frames without one are skipped and counted. The
+    /// map and the outputs are in the poses' frame.
+    #[arg(long)]
+    poses: Option<PathBuf>,
+    /// With `--poses`: use them only as each frame's initial guess for tracking, and report how
+    /// far tracking moved each one (`refine.txt`, stats.json).
+    #[arg(long, requires = "poses")]
+    refine: bool,
     #[command(flatten)]
     calibration: CalibrationArgs,
 }
@@ -106,13 +116,27 @@ impl ReconstructArgs {
     }
 }
 
+/// The given poses of `--poses`, read and checked.
+fn given_poses(args: &ReconstructArgs) -> anyhow::Result<Option<PoseTimeline>> {
+    let Some(path) = &args.poses else { return Ok(None) };
+    let poses = read_tum_trajectory(path).with_context(|| format!("reading the given poses {}", path.display()))?;
+    Ok(Some(PoseTimeline::new(poses).with_context(|| format!("the given poses {}", path.display()))?))
+}
+
 pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Result<()> {
     let config = args.config()?;
+    let given = given_poses(args)?;
     let mut source = crate::open(&args.source, &args.calibration)?;
     let range = crate::frame_range(args.frames.as_deref(), source.frame_count())?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating output directory {}", args.out.display()))?;
     let gpu = crate::gpu(options)?;
+    if let (Some(given), false) = (&given, args.refine) {
+        return run_pose_driven(&gpu, args, &config, source.as_mut(), range, given);
+    }
     let mut fusion = KinectFusion::new(&gpu, source.calibration(), config)?;
+    // --refine: how far tracking moved each frame's given pose (kept with its timestamp).
+    let mut refined: Vec<(u64, f64, f64)> = Vec::new();
+    let mut without_pose = Vec::new();
     let mut times = StageTimes::default();
     let mut trajectory = Vec::with_capacity(range.len());
     let mut lost = Vec::new();
@@ -127,7 +151,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let started = std::time::Instant::now();
     // Frames stream through the GPU: the next frame is read and submitted while the GPU still
     // works on the previous one, and each report arrives a frame or so late.
-    let mut on_report = |report: FrameReport, times: &mut StageTimes, trajectory: &mut Vec<TimedPose>, timestamps: &mut std::collections::HashMap<u64, i64>| {
+    let mut on_report = |report: FrameReport, times: &mut StageTimes, trajectory: &mut Vec<TimedPose>, timestamps: &mut std::collections::HashMap<u64, (i64, Option<Se3>)>| {
         let now = std::time::Instant::now();
         if let Some(prev) = last_done.replace(now) {
             times.record("frame", (now - prev).as_secs_f64() * 1e3);
@@ -155,11 +179,16 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         host.host_waits += report.host.host_waits;
         host.readbacks += report.host.readbacks;
         map_stats = report.map.or(map_stats);
+
         if let TrackingState::Lost(reason) = report.state {
             eprintln!("\nframe {}: tracking lost ({reason:?}); keeping the last good pose", report.index);
             lost.push(report.index);
         }
-        let timestamp_ns = timestamps.remove(&report.index).unwrap_or_default();
+        let (timestamp_ns, guess) = timestamps.remove(&report.index).unwrap_or_default();
+        if let Some(guess) = guess {
+            let moved = guess.inverse() * report.world_from_camera;
+            refined.push((report.index, moved.translation_m.length(), moved.rotation_angle_rad().to_degrees()));
+        }
         trajectory.push(TimedPose { timestamp_ns, world_from_camera: report.world_from_camera });
         let inliers = report.icp.last().map_or(0, |s| s.inliers);
         eprint!("\rframe {}/{} [{}], ICP inliers {inliers}   ", trajectory.len(), n_frames, report.state.name());
@@ -169,7 +198,16 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         let sw = crate::timing::Stopwatch::start();
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         times.record("read", sw.ms());
-        timestamps.insert(frame.index, frame.depth_timestamp_ns);
+        let mut guess: Option<Se3> = None;
+        if let Some(given) = &given {
+            let Some(pose) = given.pose_at(frame.depth_timestamp_ns, MAX_POSE_GAP_NS) else {
+                without_pose.push(index);
+                continue;
+            };
+            fusion.set_initial_guess(&gpu, &pose);
+            guess = Some(pose);
+        }
+        timestamps.insert(frame.index, (frame.depth_timestamp_ns, guess));
         pollster::block_on(fusion.submit_frame(&gpu, &frame)).with_context(|| format!("processing frame {index}"))?;
         for report in fusion.poll_reports(&gpu)? {
             on_report(report, &mut times, &mut trajectory, &mut timestamps);
@@ -195,8 +233,12 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     }
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
+    let given_json = given.as_ref().map(|_| given_report(args, &without_pose, Some(&refined))).transpose()?;
     if !args.no_mesh {
-        write_mesh(&gpu, &mut fusion, &args.out.join("mesh.ply"), &mut times)?;
+        let sw = crate::timing::Stopwatch::start();
+        let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(&gpu)).context("extracting the mesh")?;
+        times.record("mesh extraction", sw.ms());
+        write_mesh(&mesh, &args.out.join("mesh.ply"))?;
     }
     println!(
         "{n_frames} frames of {} on {}; {} lost; {:.2} frames/s over {:.1} s{}",
@@ -256,6 +298,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             "sparse": map_stats.map(|m| serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "used_bytes": u64::from(m.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR, "hash_full": m.hash_full, "pool_full": m.pool_full, "out_of_range": m.out_of_range, "blocks_on_host": m.blocks_on_host, "host_bytes": m.host_bytes, "swapped_out_total": m.swapped_out_total, "swapped_in_total": m.swapped_in_total, "swapped_hits": m.swapped_hits, "swap_in_refused": m.swap_in_refused })),
         },
         "stages_ms": times.to_json(),
+        "given_poses": given_json,
     });
     let stats_path = args.out.join("stats.json");
     std::fs::write(&stats_path, serde_json::to_string_pretty(&stats)?).with_context(|| format!("writing {}", stats_path.display()))?;
@@ -263,20 +306,126 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     Ok(())
 }
 
-/// Extracts the mesh (of every block: a swapping map's on the host too) and writes it as binary PLY and glTF binary (`.glb` beside).
-fn write_mesh(gpu: &webfusion_core::Gpu, fusion: &mut KinectFusion, path: &Path, times: &mut StageTimes) -> anyhow::Result<()> {
-    let sw = crate::timing::Stopwatch::start();
-    let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(gpu)).context("extracting the mesh")?;
-    times.record("mesh extraction", sw.ms());
+/// Writes the mesh (of every block: a swapping map's on the host too) as binary PLY and glTF
+/// binary (`.glb` beside).
+fn write_mesh(mesh: &webfusion_core::mesh::Mesh, path: &Path) -> anyhow::Result<()> {
     let write = |path: &Path, glb: bool| -> anyhow::Result<()> {
         let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
         let mut out = std::io::BufWriter::new(file);
-        if glb { webfusion_core::mesh::write_glb(&mesh, &mut out) } else { webfusion_core::mesh::write_ply(&mesh, &mut out) }
+        if glb { webfusion_core::mesh::write_glb(mesh, &mut out) } else { webfusion_core::mesh::write_ply(mesh, &mut out) }
             .and_then(|()| std::io::Write::flush(&mut out))
             .with_context(|| format!("writing {}", path.display()))
     };
     write(path, false)?;
     write(&path.with_extension("glb"), true)?;
     println!("mesh: {} vertices, {} triangles -> {} (+ .glb)", mesh.positions_m.len(), mesh.triangles.len(), path.display());
+    Ok(())
+}
+
+/// `--poses`' part of stats.json: the file, the frames without a pose and, with `--refine`, how
+/// far tracking moved the given poses (also written to `refine.txt` and summarised on stdout).
+fn given_report(args: &ReconstructArgs, without_pose: &[usize], refined: Option<&[(u64, f64, f64)]>) -> anyhow::Result<serde_json::Value> {
+    if !without_pose.is_empty() {
+        println!("{} frames had no given pose within {} ms and were skipped", without_pose.len(), MAX_POSE_GAP_NS / 1_000_000);
+    }
+    let refine = match refined {
+        Some(refined) if !refined.is_empty() => {
+            let path = args.out.join("refine.txt");
+            let mut text = String::from("# frame moved_m moved_deg: how far tracking moved each given pose\n");
+            for (index, m, deg) in refined {
+                text += &format!("{index} {m:.6} {deg:.5}\n");
+            }
+            std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+            let stat = |values: Vec<f64>| {
+                let mut v = values;
+                v.sort_by(f64::total_cmp);
+                (v[v.len() / 2], v[v.len() - 1])
+            };
+            let (median_m, max_m) = stat(refined.iter().map(|r| r.1).collect());
+            let (median_deg, max_deg) = stat(refined.iter().map(|r| r.2).collect());
+            println!("refine: tracking moved the given poses by {:.1} mm / {:.2}° (median), {:.1} mm / {:.2}° (max) -> {}", median_m * 1e3, median_deg, max_m * 1e3, max_deg, path.display());
+            serde_json::json!({ "frames": refined.len(), "median_moved_m": median_m, "max_moved_m": max_m, "median_moved_deg": median_deg, "max_moved_deg": max_deg })
+        }
+        _ => serde_json::Value::Null,
+    };
+    Ok(serde_json::json!({ "file": args.poses.as_ref().map(|p| p.display().to_string()), "frames_without_pose": without_pose, "refine": refine }))
+}
+
+/// `reconstruct --poses` without `--refine`: fuses every frame at its given pose (no tracking),
+/// then writes the poses used, the mesh and the statistics as the tracked run does.
+fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &FusionConfig, source: &mut dyn webfusion_core::source::FrameSource, range: std::ops::Range<usize>, given: &PoseTimeline) -> anyhow::Result<()> {
+    use webfusion_core::fusion::pose_driven::PoseDrivenMapper;
+    let n_frames = range.len();
+    let mut times = StageTimes::default();
+    let mut trajectory = Vec::with_capacity(n_frames);
+    let (mut without_pose, mut skipped) = (Vec::new(), Vec::new());
+    let mut mapper: Option<PoseDrivenMapper> = None;
+    let started = std::time::Instant::now();
+    let mut last = started;
+    for index in range {
+        let sw = crate::timing::Stopwatch::start();
+        let Some(frame) = crate::read_or_skip(source, index, args.skip_corrupt, &mut skipped)? else { continue };
+        times.record("read", sw.ms());
+        let Some(pose) = given.pose_at(frame.depth_timestamp_ns, MAX_POSE_GAP_NS) else {
+            without_pose.push(index);
+            continue;
+        };
+        // The map is placed around the first fused frame's camera, in the poses' frame.
+        let m = match &mut mapper {
+            Some(m) => m,
+            None => mapper.insert(PoseDrivenMapper::new(gpu, source.calibration(), config.preprocess, config.tsdf, &pose, false)?),
+        };
+        pollster::block_on(m.submit_frame(gpu, &frame, &pose)).with_context(|| format!("fusing frame {index}"))?;
+        trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: pose });
+        let now = std::time::Instant::now();
+        times.record("frame", (now - last).as_secs_f64() * 1e3);
+        last = now;
+        eprint!("\rframe {}/{n_frames} fused at its given pose   ", trajectory.len());
+    }
+    eprintln!();
+    let Some(mut mapper) = mapper else {
+        anyhow::bail!("no frame of {} has a given pose within {} ms in {}", source.name(), MAX_POSE_GAP_NS / 1_000_000, args.poses.as_ref().map_or(String::new(), |p| p.display().to_string()));
+    };
+    pollster::block_on(mapper.flush(gpu))?;
+    let wall_s = started.elapsed().as_secs_f64();
+    let errors = gpu.take_errors();
+    anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
+    let map_stats = mapper.map_stats();
+    if let Some(stats) = map_stats {
+        println!("sparse map: {} of {} blocks on the GPU, {} on the host ({:.1} MiB); {} swapped out, {} in", stats.blocks_used, stats.pool_blocks, stats.blocks_on_host, stats.host_bytes as f64 / 1048576.0, stats.swapped_out_total, stats.swapped_in_total);
+        if stats.exhausted() {
+            eprintln!("warning: the map ran out of room ({} insertions without a hash slot, {} blocks refused by the full pool)", stats.hash_full, stats.pool_full);
+        }
+    }
+    let trajectory_path = args.out.join("trajectory.txt");
+    write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
+    let given_json = given_report(args, &without_pose, None)?;
+    if !args.no_mesh {
+        let sw = crate::timing::Stopwatch::start();
+        let mesh = pollster::block_on(mapper.extract_mesh(gpu)).context("extracting the mesh")?;
+        times.record("mesh extraction", sw.ms());
+        write_mesh(&mesh, &args.out.join("mesh.ply"))?;
+    }
+    println!("{} of {n_frames} frames of {} fused at given poses on {}; {:.2} frames/s over {:.1} s{}", trajectory.len(), source.name(), gpu.adapter_summary(), trajectory.len() as f64 / wall_s, wall_s, crate::skipped_note(&skipped));
+    times.print();
+    let stats = serde_json::json!({
+        "frames": n_frames,
+        "fused_frames": trajectory.len(),
+        "skipped_corrupt_frames": skipped,
+        "adapter": gpu.adapter_summary(),
+        "wall_s": wall_s,
+        "given_poses": given_json,
+        "volume": {
+            "kind": config.tsdf.kind.name(),
+            "voxel_size_m": config.tsdf.voxel_size_m,
+            "truncation_m": config.tsdf.truncation_m,
+            "memory_bytes": mapper.volume().memory_bytes(),
+            "sparse": map_stats.map(|m| serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "hash_full": m.hash_full, "pool_full": m.pool_full, "blocks_on_host": m.blocks_on_host, "host_bytes": m.host_bytes, "swapped_out_total": m.swapped_out_total, "swapped_in_total": m.swapped_in_total, "swapped_hits": m.swapped_hits })),
+        },
+        "stages_ms": times.to_json(),
+    });
+    let stats_path = args.out.join("stats.json");
+    std::fs::write(&stats_path, serde_json::to_string_pretty(&stats)?).with_context(|| format!("writing {}", stats_path.display()))?;
+    println!("wrote {}, {}", trajectory_path.display(), stats_path.display());
     Ok(())
 }

@@ -95,9 +95,87 @@ pub fn write_tum_trajectory(path: &Path, poses: &[TimedPose]) -> Result<()> {
     std::fs::write(path, format_tum_trajectory(poses)).map_err(|source| Error::Io { path: path.to_owned(), source })
 }
 
+/// Largest distance in time between a frame and the nearest given pose for the frame to get a
+/// pose: 20 ms, the TUM benchmark's association limit (`associate.py`).
+pub const MAX_POSE_GAP_NS: i64 = 20_000_000;
+
+/// Given poses, sorted by time, to look up a frame's pose by its timestamp (mapping from known
+/// poses: `reconstruct --poses`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseTimeline {
+    poses: Vec<TimedPose>,
+}
+
+impl PoseTimeline {
+    /// The poses in time order. An empty list, or two poses with the same timestamp (which
+    /// would make the lookup ambiguous), is an [`Error::InvalidConfig`] naming it.
+    pub fn new(mut poses: Vec<TimedPose>) -> Result<Self> {
+        if poses.is_empty() {
+            return Err(Error::InvalidConfig("the given trajectory holds no pose".into()));
+        }
+        poses.sort_by_key(|p| p.timestamp_ns);
+        if let Some(w) = poses.windows(2).find(|w| w[0].timestamp_ns == w[1].timestamp_ns) {
+            return Err(Error::InvalidConfig(format!("the given trajectory has two poses at {}", format_timestamp_s(w[0].timestamp_ns))));
+        }
+        Ok(Self { poses })
+    }
+
+    /// The poses, in time order.
+    pub fn poses(&self) -> &[TimedPose] {
+        &self.poses
+    }
+
+    /// The pose at `t_ns`: interpolated between the two poses around it (linearly in
+    /// translation, spherically in rotation), or the first or last pose at the ends, provided
+    /// the nearest pose lies within `max_gap_ns`; `None` otherwise (the frame has no pose).
+    pub fn pose_at(&self, t_ns: i64, max_gap_ns: i64) -> Option<Se3> {
+        let after = self.poses.partition_point(|p| p.timestamp_ns < t_ns);
+        let before = after.checked_sub(1).map(|i| &self.poses[i]);
+        let next = self.poses.get(after);
+        let nearest_gap = [before.map(|p| t_ns - p.timestamp_ns), next.map(|p| p.timestamp_ns - t_ns)].into_iter().flatten().min()?;
+        if nearest_gap > max_gap_ns {
+            return None;
+        }
+        Some(match (before, next) {
+            (_, Some(b)) if b.timestamp_ns == t_ns => b.world_from_camera,
+            (Some(a), Some(b)) => {
+                let s = (t_ns - a.timestamp_ns) as f64 / (b.timestamp_ns - a.timestamp_ns) as f64;
+                let (pa, pb) = (a.world_from_camera, b.world_from_camera);
+                Se3 { rotation: pa.rotation.slerp(pb.rotation, s).normalize(), translation_m: pa.translation_m.lerp(pb.translation_m, s) }
+            }
+            (Some(a), None) => a.world_from_camera,
+            (None, Some(b)) => b.world_from_camera,
+            (None, None) => return None,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_timeline_interpolates_between_poses_and_refuses_frames_without_one() {
+        let p = |t_ms: i64, x: f64, yaw_deg: f64| TimedPose { timestamp_ns: t_ms * 1_000_000, world_from_camera: Se3::new(DQuat::from_rotation_z(yaw_deg.to_radians()), DVec3::new(x, 0.0, 0.0)) };
+        // Out of order on purpose: the timeline sorts.
+        let timeline = PoseTimeline::new(vec![p(100, 1.0, 10.0), p(0, 0.0, 0.0), p(1000, 5.0, 0.0)]).expect("timeline");
+        // 15 % of the way from 0 to 100 ms: x 0.15, yaw 1.5°, exactly.
+        let q = timeline.pose_at(15_000_000, MAX_POSE_GAP_NS).expect("a pose");
+        assert!((q.translation_m.x - 0.15).abs() < 1e-12 && (q.rotation_angle_rad().to_degrees() - 1.5).abs() < 1e-9, "{q:?}");
+        // On a pose: that pose.
+        assert_eq!(timeline.pose_at(100_000_000, 0), Some(p(100, 1.0, 10.0).world_from_camera));
+        // 50 ms from both neighbours: no pose within 20 ms.
+        assert_eq!(timeline.pose_at(50_000_000, MAX_POSE_GAP_NS), None);
+        // 15 ms after the last pose: the last pose; 25 ms before the first: none.
+        assert_eq!(timeline.pose_at(1_015_000_000, MAX_POSE_GAP_NS), Some(p(1000, 5.0, 0.0).world_from_camera));
+        assert_eq!(timeline.pose_at(-25_000_000, MAX_POSE_GAP_NS), None);
+        // 10 ms after a pose whose next one is 900 ms away: interpolated along that long gap.
+        let r = timeline.pose_at(110_000_000, MAX_POSE_GAP_NS).expect("a pose");
+        assert!((r.translation_m.x - (1.0 + 4.0 * 10.0 / 900.0)).abs() < 1e-12);
+        // Bad timelines are refused by name.
+        assert!(PoseTimeline::new(Vec::new()).is_err());
+        assert!(PoseTimeline::new(vec![p(5, 0.0, 0.0), p(5, 1.0, 0.0)]).is_err_and(|e| e.to_string().contains("two poses")));
+    }
     use crate::io::test_util::{ScratchDir, shared_tum_fr1_rpy_dir};
 
     fn sample_poses() -> Vec<TimedPose> {

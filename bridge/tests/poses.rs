@@ -1,0 +1,106 @@
+// SPDX-License-Identifier: MIT
+//! `reconstruct --poses`: mapping from known poses (seed 000's robot workflow). The bundled
+//! sample, written out as a TUM directory with its motion-capture ground truth, is fused at
+//! those poses: `trajectory.txt` holds exactly the pose each frame got (the ground truth
+//! interpolated at its depth timestamp), frames whose nearest pose is more than 20 ms away are
+//! skipped and listed, `--refine` reports how far tracking moved every given pose, and a
+//! malformed pose file is a clean error naming its line.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, PoseTimeline, TimedPose, format_tum_trajectory, read_tum_trajectory};
+use webfusion_core::recording::RecordingReader;
+use webfusion_core::source::FrameSource as _;
+
+const SAMPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/sample/fr1_rpy.wfr");
+const FRAMES: usize = 12;
+
+fn webfusion(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_webfusion")).args(args).env("XDG_RUNTIME_DIR", std::env::temp_dir()).output().expect("run webfusion")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("webfusion-poses-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+/// The sample's first frames as a TUM directory; (directory, ground truth, depth timestamps).
+fn tum_sample(dir: &Path) -> (PathBuf, Vec<TimedPose>, Vec<i64>) {
+    let tum = dir.join("rgbd_dataset_freiburg1_rpy");
+    let mut sample = RecordingReader::open(SAMPLE).expect("the sample");
+    webfusion_core::io::tum::write_tum_dataset(&tum, &mut sample, 0..FRAMES).expect("the sample as a TUM directory");
+    let gt = sample.ground_truth().expect("the sample has ground truth").to_vec();
+    let stamps = (0..FRAMES).map(|i| sample.read_frame(i).expect("frame").depth_timestamp_ns).collect();
+    (tum, gt, stamps)
+}
+
+fn run(args: &[&str]) -> (Output, serde_json::Value) {
+    let o = webfusion(args);
+    assert!(o.status.success(), "reconstruct failed: {}", String::from_utf8_lossy(&o.stderr));
+    let out = Path::new(args[args.iter().position(|a| *a == "--out").expect("--out") + 1]);
+    let stats = serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).expect("stats.json")).expect("json");
+    (o, stats)
+}
+
+#[test]
+fn frames_are_fused_at_the_given_poses_and_frames_without_one_are_skipped() {
+    let dir = scratch("given");
+    let (tum, gt, stamps) = tum_sample(&dir);
+    // The poses with a hole: none between the 4th and the 8th frame's timestamps.
+    let holed: Vec<TimedPose> = gt.iter().copied().filter(|p| !(stamps[4] - 5_000_000..stamps[8] + 5_000_000).contains(&p.timestamp_ns)).collect();
+    let poses = dir.join("poses.txt");
+    std::fs::write(&poses, format_tum_trajectory(&holed)).expect("poses file");
+    let out = dir.join("out");
+    let (o, stats) = run(&["reconstruct", tum.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--poses", poses.to_str().expect("utf-8"), "--voxel-size", "0.04", "--no-mesh"]);
+    // What each frame must get: the timeline's pose at its depth timestamp, or nothing.
+    let timeline = PoseTimeline::new(holed).expect("timeline");
+    let expected: Vec<(i64, Option<webfusion_core::Se3>)> = stamps.iter().map(|&t| (t, timeline.pose_at(t, MAX_POSE_GAP_NS))).collect();
+    let skipped: Vec<usize> = expected.iter().enumerate().filter(|(_, (_, p))| p.is_none()).map(|(i, _)| i).collect();
+    assert!(!skipped.is_empty() && skipped.len() < FRAMES / 2, "the hole leaves some frames without a pose ({skipped:?})");
+    assert_eq!(stats["given_poses"]["frames_without_pose"], serde_json::json!(skipped), "the frames without a pose are listed");
+    assert_eq!(stats["fused_frames"], serde_json::json!(FRAMES - skipped.len()));
+    let used = read_tum_trajectory(&out.join("trajectory.txt")).expect("trajectory.txt");
+    let want: Vec<(i64, webfusion_core::Se3)> = expected.into_iter().filter_map(|(t, p)| p.map(|p| (t, p))).collect();
+    assert_eq!(used.len(), want.len(), "one pose per fused frame");
+    for (u, (t, p)) in used.iter().zip(&want) {
+        let d = p.inverse() * u.world_from_camera;
+        assert!(u.timestamp_ns == *t && d.translation_m.length() < 1e-9 && d.rotation_angle_rad() < 1e-9, "frame at {t}: {u:?} is not the given pose {p:?}");
+    }
+    assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{} frames had no given pose", skipped.len())), "the skipped frames are counted on stdout");
+    assert!(stats["volume"]["sparse"]["blocks_used"].as_u64().unwrap_or(0) > 100, "the map holds the frames: {}", stats["volume"]);
+}
+
+#[test]
+fn refine_tracks_from_the_given_poses_and_reports_how_far_it_moved_them() {
+    let dir = scratch("refine");
+    let (tum, _, _) = tum_sample(&dir);
+    let out = dir.join("out");
+    let gt = tum.join("groundtruth.txt");
+    let (_, stats) = run(&["reconstruct", tum.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--poses", gt.to_str().expect("utf-8"), "--refine", "--voxel-size", "0.04", "--no-mesh"]);
+    let refine = &stats["given_poses"]["refine"];
+    assert_eq!(refine["frames"], serde_json::json!(FRAMES), "every frame's move is reported: {refine}");
+    let max_m = refine["max_moved_m"].as_f64().expect("a number");
+    assert!(max_m.is_finite() && max_m < 0.2, "tracking stays near the motion-capture poses ({max_m} m)");
+    let lines = std::fs::read_to_string(out.join("refine.txt")).expect("refine.txt").lines().filter(|l| !l.starts_with('#')).count();
+    assert_eq!(lines, FRAMES, "refine.txt has a line per frame");
+}
+
+#[test]
+fn a_malformed_pose_file_is_a_clean_error_naming_its_line() {
+    let dir = scratch("malformed");
+    let (tum, _, _) = tum_sample(&dir);
+    let poses = dir.join("poses.txt");
+    std::fs::write(&poses, "# t tx ty tz qx qy qz qw\n1305031229.0 1 2 3 0 0 0 1\n1305031229.1 1 2 3 0 0 1\n").expect("poses file");
+    let o = webfusion(&["reconstruct", tum.to_str().expect("utf-8"), "--out", dir.join("out").to_str().expect("utf-8"), "--poses", poses.to_str().expect("utf-8")]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && !err.contains("panicked"), "a clean failure: {err}");
+    assert!(err.contains("poses.txt:3:") && err.contains("8 fields"), "the error names the file and line: {err}");
+    // Poses that cover none of the frames: an error saying so, not an empty map.
+    std::fs::write(&poses, "1.0 0 0 0 0 0 0 1\n").expect("poses file");
+    let o = webfusion(&["reconstruct", tum.to_str().expect("utf-8"), "--out", dir.join("out2").to_str().expect("utf-8"), "--poses", poses.to_str().expect("utf-8")]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("no frame") && !err.contains("panicked"), "{err}");
+}
