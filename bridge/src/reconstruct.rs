@@ -8,6 +8,9 @@ use anyhow::Context as _;
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, TrackingState};
 use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, PoseTimeline, TimedPose, read_tum_trajectory, write_tum_trajectory};
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, TsdfStore as _, VolumePlacement};
+use webfusion_core::fusion::mapper::Mapper;
+use webfusion_core::map::MapKind;
+use webfusion_core::map::file::{MapFile, MapFileHeader, MapFrame, read_map_file, read_map_file_recovering, write_map_file};
 use webfusion_core::{GpuOptions, Se3};
 
 use crate::calib::CalibrationArgs;
@@ -94,6 +97,15 @@ pub(crate) struct ReconstructArgs {
     /// far tracking moved each one (`refine.txt`, stats.json).
     #[arg(long, requires = "poses")]
     refine: bool,
+    /// Save the fused map (`.wfm`: every block, on the GPU and swapped out, in the map's frame,
+    /// with a CRC per block; see ARCHITECTURE.md).
+    #[arg(long)]
+    save_map: Option<PathBuf>,
+    /// Continue fusing into a saved map, at `--poses` (its own settings replace --map-kind,
+    /// --voxel-size, --volume and --truncation). A damaged map file is an error unless
+    /// --skip-corrupt (then its intact blocks are loaded, with a warning).
+    #[arg(long, requires = "poses")]
+    load_map: Option<PathBuf>,
     #[command(flatten)]
     calibration: CalibrationArgs,
 }
@@ -123,17 +135,84 @@ fn given_poses(args: &ReconstructArgs) -> anyhow::Result<Option<PoseTimeline>> {
     Ok(Some(PoseTimeline::new(poses).with_context(|| format!("the given poses {}", path.display()))?))
 }
 
+/// `--load-map`'s file, read (strictly, or keeping its intact blocks with --skip-corrupt).
+fn loaded_map(args: &ReconstructArgs) -> anyhow::Result<Option<MapFile>> {
+    let Some(path) = &args.load_map else { return Ok(None) };
+    let file = if args.skip_corrupt { read_map_file_recovering(path)? } else { read_map_file(path)? };
+    if let Some(damage) = &file.damage {
+        eprintln!("warning: {}: {damage}; loading its {} intact blocks", path.display(), file.blocks.len());
+    }
+    println!("loaded map {}: {} blocks, {} map of {:.1} mm voxels", path.display(), file.blocks.len(), file.header.kind.name(), file.header.voxel_size_m * 1e3);
+    Ok(Some(file))
+}
+
+/// The map settings of a loaded map, in place of the command line's.
+fn apply_map_settings(config: &mut FusionConfig, header: &MapFileHeader) -> anyhow::Result<()> {
+    let t = &mut config.tsdf;
+    t.kind = header.kind;
+    t.voxel_size_m = header.voxel_size_m;
+    t.truncation_m = header.truncation_m;
+    t.max_weight = header.max_weight;
+    t.color = header.color;
+    if header.kind == MapKind::Dense {
+        t.dims_voxels = header.dims_voxels;
+    }
+    config.validate()?;
+    Ok(())
+}
+
+/// `--save-map`: every block of the mapper's map, with its settings and how it was made.
+fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfig, args: &ReconstructArgs, source_name: &str, fused_frames: usize) -> anyhow::Result<()> {
+    let Some(path) = &args.save_map else { return Ok(()) };
+    let blocks = pollster::block_on(mapper.download_blocks(gpu)).context("downloading the map")?;
+    let t = &config.tsdf;
+    let creation = serde_json::json!({
+        "webfusion": env!("CARGO_PKG_VERSION"),
+        "source": source_name,
+        "fused_frames": fused_frames,
+        "poses": args.poses.as_ref().map(|p| p.display().to_string()),
+        "refine": args.refine,
+        "loaded_from": args.load_map.as_ref().map(|p| p.display().to_string()),
+    });
+    let header = MapFileHeader {
+        kind: t.kind,
+        color: t.color,
+        voxel_size_m: t.voxel_size_m,
+        truncation_m: t.truncation_m,
+        max_weight: t.max_weight,
+        dims_voxels: t.box_dims_voxels(),
+        origin_in_world: mapper.origin_in_world(),
+        frame: if args.poses.is_some() { MapFrame::GivenPoses } else { MapFrame::FirstCamera },
+        creation: creation.to_string(),
+    };
+    write_map_file(path, &header, &blocks).with_context(|| format!("saving the map to {}", path.display()))?;
+    println!("map: {} blocks -> {} ({:.1} MiB)", blocks.len(), path.display(), std::fs::metadata(path).map_or(0, |m| m.len()) as f64 / 1048576.0);
+    Ok(())
+}
+
 pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Result<()> {
-    let config = args.config()?;
+    let mut config = args.config()?;
     let given = given_poses(args)?;
+    let loaded = loaded_map(args)?;
+    if let Some(file) = &loaded {
+        apply_map_settings(&mut config, &file.header)?;
+    }
     let mut source = crate::open(&args.source, &args.calibration)?;
     let range = crate::frame_range(args.frames.as_deref(), source.frame_count())?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating output directory {}", args.out.display()))?;
     let gpu = crate::gpu(options)?;
     if let (Some(given), false) = (&given, args.refine) {
-        return run_pose_driven(&gpu, args, &config, source.as_mut(), range, given);
+        return run_pose_driven(&gpu, args, &config, source.as_mut(), range, given, loaded);
     }
-    let mut fusion = KinectFusion::new(&gpu, source.calibration(), config)?;
+    let mut fusion = match &loaded {
+        Some(file) => {
+            let mut fusion = KinectFusion::new_at(&gpu, source.calibration(), config.clone(), file.header.origin_in_world)?;
+            let near = given.as_ref().map(|g| g.poses()[0].world_from_camera);
+            fusion.mapper_mut().upload_blocks(&gpu, file.blocks.clone(), near.as_ref())?;
+            fusion
+        }
+        None => KinectFusion::new(&gpu, source.calibration(), config.clone())?,
+    };
     // --refine: how far tracking moved each frame's given pose (kept with its timestamp).
     let mut refined: Vec<(u64, f64, f64)> = Vec::new();
     let mut without_pose = Vec::new();
@@ -234,6 +313,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     let given_json = given.as_ref().map(|_| given_report(args, &without_pose, Some(&refined))).transpose()?;
+    save_map(&gpu, fusion.mapper_mut(), &config, args, &source.name(), trajectory.len())?;
     if !args.no_mesh {
         let sw = crate::timing::Stopwatch::start();
         let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(&gpu)).context("extracting the mesh")?;
@@ -353,7 +433,7 @@ fn given_report(args: &ReconstructArgs, without_pose: &[usize], refined: Option<
 
 /// `reconstruct --poses` without `--refine`: fuses every frame at its given pose (no tracking),
 /// then writes the poses used, the mesh and the statistics as the tracked run does.
-fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &FusionConfig, source: &mut dyn webfusion_core::source::FrameSource, range: std::ops::Range<usize>, given: &PoseTimeline) -> anyhow::Result<()> {
+fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &FusionConfig, source: &mut dyn webfusion_core::source::FrameSource, range: std::ops::Range<usize>, given: &PoseTimeline, loaded: Option<MapFile>) -> anyhow::Result<()> {
     use webfusion_core::fusion::pose_driven::PoseDrivenMapper;
     let n_frames = range.len();
     let mut times = StageTimes::default();
@@ -370,10 +450,18 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
             without_pose.push(index);
             continue;
         };
-        // The map is placed around the first fused frame's camera, in the poses' frame.
+        // The map is placed around the first fused frame's camera, in the poses' frame (a
+        // loaded map where it was).
         let m = match &mut mapper {
             Some(m) => m,
-            None => mapper.insert(PoseDrivenMapper::new(gpu, source.calibration(), config.preprocess, config.tsdf, &pose, false)?),
+            None => match &loaded {
+                Some(file) => {
+                    let mut m = PoseDrivenMapper::new_at(gpu, source.calibration(), config.preprocess, config.tsdf, file.header.origin_in_world, false)?;
+                    m.mapper_mut().upload_blocks(gpu, file.blocks.clone(), Some(&pose))?;
+                    mapper.insert(m)
+                }
+                None => mapper.insert(PoseDrivenMapper::new(gpu, source.calibration(), config.preprocess, config.tsdf, &pose, false)?),
+            },
         };
         pollster::block_on(m.submit_frame(gpu, &frame, &pose)).with_context(|| format!("fusing frame {index}"))?;
         trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: pose });
@@ -400,6 +488,8 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     let given_json = given_report(args, &without_pose, None)?;
+    pollster::block_on(mapper.flush(gpu))?;
+    save_map(gpu, mapper.mapper_mut(), config, args, &source.name(), trajectory.len())?;
     if !args.no_mesh {
         let sw = crate::timing::Stopwatch::start();
         let mesh = pollster::block_on(mapper.extract_mesh(gpu)).context("extracting the mesh")?;

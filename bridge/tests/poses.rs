@@ -104,3 +104,60 @@ fn a_malformed_pose_file_is_a_clean_error_naming_its_line() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("no frame") && !err.contains("panicked"), "{err}");
 }
+
+/// The blocks of a map file (everything after the header and creation parameters), and its
+/// header without the creation-parameters length and CRC.
+fn map_body(path: &Path) -> (Vec<u8>, Vec<u8>) {
+    let b = std::fs::read(path).expect("map file");
+    let meta = u32::from_le_bytes(b[68..72].try_into().expect("4 bytes")) as usize;
+    (b[96 + meta + 4..].to_vec(), b[..64].to_vec())
+}
+
+#[test]
+fn a_saved_map_continued_at_later_poses_equals_one_run_for_both_kinds() {
+    let dir = scratch("save-load");
+    let (tum, _, _) = tum_sample(&dir);
+    let gt = tum.join("groundtruth.txt");
+    let (tum, gt) = (tum.to_str().expect("utf-8"), gt.to_str().expect("utf-8"));
+    for kind in ["sparse", "dense"] {
+        let path = |name: &str| dir.join(format!("{kind}-{name}")).to_str().expect("utf-8").to_owned();
+        let (a, a_map, b, b_map, c, c_map) = (path("a"), path("a.wfm"), path("b"), path("b.wfm"), path("c"), path("c.wfm"));
+        let settings = ["--map-kind", kind, "--voxel-size", "0.04", "--volume", "96", "--no-mesh", "--poses", gt];
+        let (first_range, second_range) = (format!("0..{}", FRAMES / 2), format!("{}..{FRAMES}", FRAMES / 2));
+        let mut first = vec!["reconstruct", tum, "--out", a.as_str(), "--frames", first_range.as_str(), "--save-map", a_map.as_str()];
+        first.extend(settings);
+        run(&first);
+        let (o, _) = run(&["reconstruct", tum, "--out", b.as_str(), "--frames", second_range.as_str(), "--load-map", a_map.as_str(), "--save-map", b_map.as_str(), "--no-mesh", "--poses", gt]);
+        assert!(String::from_utf8_lossy(&o.stdout).contains("loaded map"), "the map was loaded");
+        let mut whole = vec!["reconstruct", tum, "--out", c.as_str(), "--save-map", c_map.as_str()];
+        whole.extend(settings);
+        run(&whole);
+        let (continued, h1) = map_body(Path::new(&path("b.wfm")));
+        let (one_run, h2) = map_body(Path::new(&path("c.wfm")));
+        assert_eq!(h1, h2, "{kind}: the same map settings and placement");
+        assert!(continued.len() > 10_000, "{kind}: the map holds blocks");
+        assert!(continued == one_run, "{kind}: the continued map equals the one-run map block for block");
+        // Negative control: the first half alone differs.
+        assert!(map_body(Path::new(&path("a.wfm"))).0 != one_run, "{kind}: half the frames make another map");
+    }
+    // A damaged map file: loading it is an error naming the damage; --skip-corrupt loads what
+    // is intact, with a warning.
+    let damaged = dir.join("damaged.wfm");
+    let mut bytes = std::fs::read(dir.join("sparse-a.wfm")).expect("map");
+    let at = bytes.len() - 5000;
+    bytes[at] ^= 0x40;
+    std::fs::write(&damaged, &bytes).expect("write");
+    let d_out = dir.join("d");
+    let args = ["reconstruct", tum, "--out", d_out.to_str().expect("utf-8"), "--frames", "0..2", "--no-mesh", "--poses", gt, "--load-map", damaged.to_str().expect("utf-8")];
+    let o = webfusion(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("damaged.wfm") && err.contains("damaged block") && !err.contains("panicked"), "{err}");
+    let mut skipping = args.to_vec();
+    skipping.push("--skip-corrupt");
+    let o = webfusion(&skipping);
+    assert!(o.status.success() && String::from_utf8_lossy(&o.stderr).contains("1 damaged block record"), "{}", String::from_utf8_lossy(&o.stderr));
+    // Not a map at all.
+    let o = webfusion(&["reconstruct", tum, "--out", dir.join("e").to_str().expect("utf-8"), "--poses", gt, "--load-map", gt]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("not a webfusion map file") && !err.contains("panicked"), "{err}");
+}

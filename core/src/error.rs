@@ -124,6 +124,14 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// A map file is corrupt, truncated, foreign or of an unsupported version.
+    #[error("map file {}: {message}", path.display())]
+    MapFile {
+        /// The map file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// A compressed depth or colour payload is malformed.
     #[error("cannot decode {codec} payload: {message}")]
     Codec {

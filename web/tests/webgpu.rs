@@ -105,7 +105,7 @@ async fn a_swapping_map_on_webgpu_equals_the_large_pools_map() {
         }
         mapper.flush(&gpu).await.expect("flush");
         let stats = mapper.map_stats().expect("a sparse map reports");
-        (mapper.download_blocks(&gpu).await.expect("download").expect("sparse"), stats)
+        (mapper.download_blocks(&gpu).await.expect("download"), stats)
     };
     let (reference, _) = fuse(8192).await;
     let pool = reference.len() as u32 / 2;

@@ -200,6 +200,18 @@ impl Mapper {
         &self.map
     }
 
+    /// Where the map's box has its voxel (0, 0, 0) corner in the world (what a saved map
+    /// records to be placed again).
+    pub fn origin_in_world(&self) -> [f32; 3] {
+        match &self.map {
+            Map::Dense(dense) => {
+                let d = dense.desc();
+                [d.origin_x_m, d.origin_y_m, d.origin_z_m]
+            }
+            Map::Sparse(sparse) => sparse.origin_in_world(),
+        }
+    }
+
     /// The sparse map, when the map is one.
     pub fn sparse(&self) -> Option<&SparseMap> {
         self.map.sparse()
@@ -266,18 +278,61 @@ impl Mapper {
         }
     }
 
-    /// Every block of a sparse map, on the GPU and on the host, sorted by block key (waits for
-    /// the GPU and for swap-outs in flight); `None` for a dense map.
-    pub async fn download_blocks(&mut self, gpu: &Gpu) -> Result<Option<Vec<MapBlock>>> {
+    /// Every block of the map, sorted by block key: a sparse map's on the GPU and on the host,
+    /// a dense box's observed 8³ tiles. Waits for the GPU and for swap-outs in flight.
+    pub async fn download_blocks(&mut self, gpu: &Gpu) -> Result<Vec<MapBlock>> {
         self.flush(gpu).await?;
-        let Map::Sparse(sparse) = &self.map else { return Ok(None) };
+        let sparse = match &self.map {
+            Map::Dense(dense) => return crate::map::dense_blocks(gpu, dense).await,
+            Map::Sparse(sparse) => sparse,
+        };
         let mut blocks = sparse.download_blocks(gpu).await?;
         if let Some(s) = self.swapper() {
             let resident: std::collections::HashSet<[u32; 3]> = blocks.iter().map(|b| b.coords).collect();
             blocks.extend(s.host_blocks().filter(|b| !resident.contains(&b.coords)));
             blocks.sort_by_key(|b| crate::cpu::shared::block_key(b.coords));
         }
-        Ok(Some(blocks))
+        Ok(blocks)
+    }
+
+    /// Replaces the map's contents with `blocks` (a saved map). A sparse map keeps on the GPU
+    /// the blocks nearest `near` (a camera pose; the blocks' order without one) up to the
+    /// swapping mark of its pool and gives the rest to the host (swapped back in as the camera
+    /// comes near); without swapping, more blocks than the pool is an error.
+    pub fn upload_blocks(&mut self, gpu: &Gpu, mut blocks: Vec<MapBlock>, near: Option<&Se3>) -> Result<()> {
+        let (sparse, swapper) = match (&self.map, &mut self.integration) {
+            (Map::Dense(dense), _) => return crate::map::upload_dense_blocks(gpu, dense, &blocks),
+            (Map::Sparse(sparse), Integration::Sparse { swapper, .. }) => (sparse, swapper),
+            (Map::Sparse(_), Integration::Dense { .. }) => unreachable!("a sparse map has sparse integration"),
+        };
+        let d = sparse.desc();
+        let room = match swapper {
+            Some(s) => ((s.config().evict_above * d.pool_blocks as f32) as usize).max(1),
+            None => d.pool_blocks as usize,
+        };
+        if let Some(pose) = near {
+            let c = pose.translation_m.as_vec3().to_array();
+            let dist = |b: &MapBlock| {
+                let (centre, _) = crate::cpu::map::block_swap_out::block_centre(&d, b.coords);
+                (0..3).map(|i| (centre[i] - c[i]).powi(2)).sum::<f32>()
+            };
+            blocks.sort_by(|a, b| dist(a).total_cmp(&dist(b)));
+        }
+        let rest = if blocks.len() > room { blocks.split_off(room) } else { Vec::new() };
+        match swapper {
+            Some(s) => {
+                s.reset();
+                let keys: Vec<[u32; 3]> = rest.iter().map(|b| b.coords).collect();
+                sparse.upload_blocks_swapped(gpu, &blocks, &keys)?;
+                s.store_blocks(rest);
+            }
+            None if !rest.is_empty() => {
+                sparse.reset(gpu);
+                return Err(crate::Error::InvalidConfig(format!("the map holds {} blocks, more than the pool of {} (allow swapping, or a larger budget)", blocks.len() + rest.len(), d.pool_blocks)));
+            }
+            None => sparse.upload_blocks(gpu, &blocks)?,
+        }
+        Ok(())
     }
 
     /// The map's mesh: of every block, on the GPU and (a swapping map's) on the host. Waits for
@@ -288,7 +343,7 @@ impl Mapper {
         match &self.map {
             Map::Sparse(sparse) if on_host > 0 => {
                 let (config, origin) = (*sparse.config(), sparse.origin_in_world());
-                let blocks = self.download_blocks(gpu).await?.unwrap_or_default();
+                let blocks = self.download_blocks(gpu).await?;
                 crate::map::mesh_of_blocks(gpu, &config, origin, &blocks).await
             }
             map => crate::mesh::extract_mesh(gpu, map).await,

@@ -401,12 +401,18 @@ impl KinectFusion {
     /// Allocates the pipeline for `calibration`'s camera. The first frame's camera defines the
     /// world frame, and the volume is placed relative to it by the config's placement.
     pub fn new(gpu: &Gpu, calibration: RgbdCalibration, config: FusionConfig) -> Result<Self> {
+        let origin = config.tsdf.origin_for_first_camera(&Se3::IDENTITY);
+        Self::new_at(gpu, calibration, config, origin)
+    }
+
+    /// [`Self::new`] with the map's box corner at `origin` in the world (a loaded map's; the
+    /// first frame then needs an initial guess in that world, [`Self::set_initial_guess`]).
+    pub fn new_at(gpu: &Gpu, calibration: RgbdCalibration, config: FusionConfig, origin: [f32; 3]) -> Result<Self> {
         config.validate()?;
         let preprocessor = DepthPreprocessor::new(gpu, calibration, config.preprocess)?;
         // The tracker's state buffer is the pose source of the mapper and predictor: they are
         // built around it, then the tracker around the predictor's maps.
         let state = tracker::state_buffer(gpu);
-        let origin = config.tsdf.origin_for_first_camera(&Se3::IDENTITY);
         let mapper = Mapper::new(gpu, config.tsdf, origin, &preprocessor, &state)?;
         let depth_range = (config.preprocess.min_depth_m, config.preprocess.max_depth_m);
         let predictor = Predictor::new(gpu, mapper.volume(), preprocessor.levels[0].intrinsics, config.icp.iterations_per_level.len(), &state, Some(DepthHint::from_preprocessor(&preprocessor)), depth_range);

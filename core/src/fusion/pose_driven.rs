@@ -42,10 +42,15 @@ impl PoseDrivenMapper {
     /// `first_world_from_camera`. With `predict`, each frame also raycasts the model from its
     /// pose (the views of the browser app).
     pub fn new(gpu: &Gpu, calibration: RgbdCalibration, preprocess: PreprocessConfig, tsdf: TsdfConfig, first_world_from_camera: &Se3, predict: bool) -> Result<Self> {
+        Self::new_at(gpu, calibration, preprocess, tsdf, tsdf.origin_for_first_camera(first_world_from_camera), predict)
+    }
+
+    /// [`Self::new`] with the map's box corner at `origin_in_world` (a loaded map's).
+    pub fn new_at(gpu: &Gpu, calibration: RgbdCalibration, preprocess: PreprocessConfig, tsdf: TsdfConfig, origin_in_world: [f32; 3], predict: bool) -> Result<Self> {
         preprocess.validate()?;
         let preprocessor = DepthPreprocessor::new(gpu, calibration, preprocess)?;
         let pose = pose_buffer(gpu, "core.pose_driven.pose", None);
-        let mapper = Mapper::new(gpu, tsdf, tsdf.origin_for_first_camera(first_world_from_camera), &preprocessor, &pose)?;
+        let mapper = Mapper::new(gpu, tsdf, origin_in_world, &preprocessor, &pose)?;
         let predictor = predict.then(|| Predictor::new(gpu, mapper.volume(), calibration.intrinsics, 1, &pose, Some(DepthHint::from_preprocessor(&preprocessor)), (preprocess.min_depth_m, preprocess.max_depth_m)));
         let readbacks = mapper.sparse().map(|_| ReadbackRing::new(gpu, "core.pose_driven.map_counters", (crate::cpu::shared::MAP_COUNTERS * 4) as u64, MAX_FRAMES_IN_FLIGHT));
         Ok(Self { preprocessor, pose, mapper, predictor, readbacks, last_stats: None })
@@ -64,6 +69,11 @@ impl PoseDrivenMapper {
     /// The mapper stage (for a sparse map's blocks on the host).
     pub fn mapper(&self) -> &Mapper {
         &self.mapper
+    }
+
+    /// The mapper stage, mutably (to load a saved map into it).
+    pub fn mapper_mut(&mut self) -> &mut Mapper {
+        &mut self.mapper
     }
 
     /// A sparse map's counters as the last collected frame left them (with swapping's host
@@ -123,9 +133,9 @@ impl PoseDrivenMapper {
         self.mapper.flush(gpu).await
     }
 
-    /// Every block of a sparse map, on the GPU and on the host, sorted by key (waits for the
-    /// frames in flight); `None` for a dense map.
-    pub async fn download_blocks(&mut self, gpu: &Gpu) -> Result<Option<Vec<MapBlock>>> {
+    /// Every block of the map (see [`Mapper::download_blocks`]), sorted by key; waits for the
+    /// frames in flight.
+    pub async fn download_blocks(&mut self, gpu: &Gpu) -> Result<Vec<MapBlock>> {
         self.flush(gpu).await?;
         self.mapper.download_blocks(gpu).await
     }

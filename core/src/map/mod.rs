@@ -25,6 +25,7 @@ use crate::cpu::shared::{
     MAP_COUNTER_SWAPPED_HITS, MAP_COUNTER_VISIBLE, MAP_COUNTERS, block_of_key,
 };
 
+pub mod file;
 pub mod swap;
 use crate::tsdf::{TsdfConfig, TsdfStore, VolumeDesc};
 use crate::{Error, Gpu, Result};
@@ -302,6 +303,13 @@ impl PoolImage {
     /// a block outside the box, a block given twice, wrong word counts or a full probe sequence
     /// is an error naming it.
     pub fn from_blocks(desc: VolumeDesc, color: bool, blocks: &[MapBlock]) -> Result<Self> {
+        Self::with_swapped(desc, color, blocks, &[])
+    }
+
+    /// [`Self::from_blocks`], with the keys of blocks held on the host (`swapped`, block
+    /// coordinates) in the table as swapped out, so allocation leaves them alone and swapping
+    /// brings them back.
+    pub fn with_swapped(desc: VolumeDesc, color: bool, blocks: &[MapBlock], swapped: &[[u32; 3]]) -> Result<Self> {
         let d = desc;
         let bad = |why: String| Err(Error::InvalidConfig(format!("uploading {} map blocks: {why}", blocks.len())));
         if blocks.len() > d.pool_blocks as usize {
@@ -335,8 +343,21 @@ impl PoolImage {
             if color {
                 colors[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.colors);
             }
-            let far = crate::cpu::shared::FAR_TSDF;
-            surface[i] = u32::from(block.voxels.iter().any(|&w| crate::cpu::shared::voxel_weight(w) > 0 && crate::cpu::shared::voxel_tsdf(w) < far));
+            surface[i] = surface_word(&block.voxels);
+        }
+        for &coords in swapped {
+            if (0..3).any(|a| coords[a] >= n_box[a]) {
+                return bad(format!("block {coords:?} lies outside the box of {n_box:?} blocks"));
+            }
+            let key = crate::cpu::shared::block_key(coords);
+            let Some(s) = crate::cpu::shared::probe_slot(&table, &d, coords) else {
+                return bad(format!("no hash slot within {} probes of block {coords:?}", crate::cpu::shared::MAP_MAX_PROBES));
+            };
+            if table[2 * s] == key {
+                return bad(format!("block {coords:?} is given twice"));
+            }
+            table[2 * s] = key;
+            table[2 * s + 1] = crate::cpu::shared::SWAPPED_BLOCK;
         }
         Ok(Self { desc, table, keys, voxels, colors, surface })
     }
@@ -348,8 +369,14 @@ impl SparseMap {
     /// kernels use. More blocks than the pool, a block outside the box or a full probe sequence
     /// is an error and leaves the map empty.
     pub fn upload_blocks(&self, gpu: &Gpu, blocks: &[MapBlock]) -> Result<()> {
+        self.upload_blocks_swapped(gpu, blocks, &[])
+    }
+
+    /// [`Self::upload_blocks`], with the keys of blocks the host holds (`swapped`) marked as
+    /// swapped out in the table.
+    pub fn upload_blocks_swapped(&self, gpu: &Gpu, blocks: &[MapBlock], swapped: &[[u32; 3]]) -> Result<()> {
         self.reset(gpu);
-        let image = PoolImage::from_blocks(self.desc, self.config.color, blocks)?;
+        let image = PoolImage::with_swapped(self.desc, self.config.color, blocks, swapped)?;
         gpu.write_buffer(&self.block_table, &image.table);
         gpu.write_buffer(&self.block_coords, &image.keys);
         gpu.write_buffer(&self.voxels, &image.voxels);
@@ -367,6 +394,86 @@ impl SparseMap {
     pub fn origin_in_world(&self) -> [f32; 3] {
         self.origin_in_world
     }
+}
+
+/// The surface-brick word of a block's voxels: 1 when a voxel holds an observed TSDF below
+/// FAR_TSDF (a surface or its band may lie in it).
+pub fn surface_word(voxels: &[u32]) -> u32 {
+    let far = crate::cpu::shared::FAR_TSDF;
+    u32::from(voxels.iter().any(|&w| crate::cpu::shared::voxel_weight(w) > 0 && crate::cpu::shared::voxel_tsdf(w) < far))
+}
+
+/// A dense box's observed 8³ tiles as blocks, in key order (voxels past the box's edge read 0).
+/// Waits for the GPU.
+pub async fn dense_blocks(gpu: &Gpu, dense: &DenseTsdfVolume) -> Result<Vec<MapBlock>> {
+    let d = dense.desc();
+    let n = d.voxel_count();
+    let voxels: Vec<u32> = gpu.read_buffer(dense.voxels(), n).await?;
+    let colors: Vec<u32> = if dense.has_color() { gpu.read_buffer(dense.colors(), n).await? } else { Vec::new() };
+    let dims = [d.dim_x, d.dim_y, d.dim_z];
+    let tiles = dims.map(|v| v.div_ceil(8));
+    let mut blocks = Vec::new();
+    for bz in 0..tiles[2] {
+        for by in 0..tiles[1] {
+            for bx in 0..tiles[0] {
+                let mut block = MapBlock { coords: [bx, by, bz], voxels: vec![0; BLOCK_VOXELS as usize], colors: if colors.is_empty() { Vec::new() } else { vec![0; BLOCK_VOXELS as usize] } };
+                let mut observed = false;
+                for v in 0..BLOCK_VOXELS {
+                    let (x, y, z) = (bx * 8 + (v & 7), by * 8 + ((v >> 3) & 7), bz * 8 + (v >> 6));
+                    if x < dims[0] && y < dims[1] && z < dims[2] {
+                        let i = ((z * dims[1] + y) * dims[0] + x) as usize;
+                        block.voxels[v as usize] = voxels[i];
+                        observed |= voxels[i] >> 16 > 0;
+                        if !colors.is_empty() {
+                            block.colors[v as usize] = colors[i];
+                        }
+                    }
+                }
+                if observed {
+                    blocks.push(block);
+                }
+            }
+        }
+    }
+    Ok(blocks)
+}
+
+/// Replaces a dense box's contents with `blocks` (8³ tiles; voxels past the box's edge are
+/// ignored, tiles not given are unobserved). A tile outside the box or with the wrong word
+/// counts is an error and leaves the box empty.
+pub fn upload_dense_blocks(gpu: &Gpu, dense: &DenseTsdfVolume, blocks: &[MapBlock]) -> Result<()> {
+    dense.reset(gpu);
+    let d = dense.desc();
+    let dims = [d.dim_x, d.dim_y, d.dim_z];
+    let tiles = dims.map(|v| v.div_ceil(8));
+    let n = d.voxel_count();
+    let mut voxels = vec![0u32; n];
+    let mut colors = vec![0u32; if dense.has_color() { n } else { 0 }];
+    let mut bricks = vec![0u32; d.brick_count()];
+    for b in blocks {
+        if (0..3).any(|a| b.coords[a] >= tiles[a]) || b.voxels.len() != BLOCK_VOXELS as usize || (dense.has_color() && b.colors.len() != BLOCK_VOXELS as usize) {
+            dense.reset(gpu);
+            return Err(Error::InvalidConfig(format!("uploading {} blocks into a {dims:?} box: block {:?} lies outside it or has the wrong word counts", blocks.len(), b.coords)));
+        }
+        for v in 0..BLOCK_VOXELS {
+            let (x, y, z) = (b.coords[0] * 8 + (v & 7), b.coords[1] * 8 + ((v >> 3) & 7), b.coords[2] * 8 + (v >> 6));
+            if x < dims[0] && y < dims[1] && z < dims[2] {
+                let i = ((z * dims[1] + y) * dims[0] + x) as usize;
+                voxels[i] = b.voxels[v as usize];
+                if dense.has_color() {
+                    colors[i] = b.colors[v as usize];
+                }
+            }
+        }
+        // The box's surface bricks are its 8³ tiles, x fastest.
+        bricks[((b.coords[2] * tiles[1] + b.coords[1]) * tiles[0] + b.coords[0]) as usize] = surface_word(&b.voxels);
+    }
+    gpu.write_buffer(dense.voxels(), &voxels);
+    if dense.has_color() {
+        gpu.write_buffer(dense.colors(), &colors);
+    }
+    gpu.write_buffer(dense.surface_bricks(), &bricks);
+    Ok(())
 }
 
 /// The mesh of a sparse map given as blocks (a swapping map's, gathered from the GPU and the

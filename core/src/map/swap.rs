@@ -411,6 +411,18 @@ impl MapSwapper {
         }
     }
 
+    /// Puts `blocks` into the host's store (a loaded map's blocks beyond the GPU's share: their
+    /// keys are in the table as swapped out).
+    pub fn store_blocks(&mut self, blocks: Vec<MapBlock>) {
+        for b in blocks {
+            let block = HostBlock { surface: crate::map::surface_word(&b.voxels), voxels: b.voxels.into(), colors: self.color.then(|| b.colors.into()) };
+            self.store_bytes += block.bytes();
+            if let Some(old) = self.store.insert(crate::cpu::shared::block_key(b.coords), block) {
+                self.store_bytes -= old.bytes();
+            }
+        }
+    }
+
     /// The blocks on the host, in any order.
     pub fn host_blocks(&self) -> impl Iterator<Item = MapBlock> + '_ {
         self.store.iter().map(|(&key, b)| MapBlock { coords: block_of_key(key), voxels: b.voxels.to_vec(), colors: b.colors.as_ref().map_or_else(Vec::new, |c| c.to_vec()) })

@@ -53,7 +53,7 @@ fn fuse(pool_blocks: u32, swap: bool) -> (Vec<MapBlock>, Vec<MapStats>) {
         pollster::block_on(mapper.flush(&gpu)).expect("flush");
         stats.push(mapper.map_stats().expect("a sparse map reports"));
     }
-    let blocks = pollster::block_on(mapper.download_blocks(&gpu)).expect("download").expect("sparse");
+    let blocks = pollster::block_on(mapper.download_blocks(&gpu)).expect("download");
     finish(&gpu);
     (blocks, stats)
 }
