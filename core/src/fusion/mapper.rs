@@ -296,9 +296,10 @@ impl Mapper {
     }
 
     /// Replaces the map's contents with `blocks` (a saved map). A sparse map keeps on the GPU
-    /// the blocks nearest `near` (a camera pose; the blocks' order without one) up to the
-    /// swapping mark of its pool and gives the rest to the host (swapped back in as the camera
-    /// comes near); without swapping, more blocks than the pool is an error.
+    /// the blocks a camera at `near` may see first (its fetch region), then the nearest, up to
+    /// the swapping mark of its pool (the blocks' order without a pose), and gives the rest to
+    /// the host (swapped back in as the camera comes near); without swapping, more blocks than
+    /// the pool is an error.
     pub fn upload_blocks(&mut self, gpu: &Gpu, mut blocks: Vec<MapBlock>, near: Option<&Se3>) -> Result<()> {
         let (sparse, swapper) = match (&self.map, &mut self.integration) {
             (Map::Dense(dense), _) => return crate::map::upload_dense_blocks(gpu, dense, &blocks),
@@ -311,12 +312,20 @@ impl Mapper {
             None => d.pool_blocks as usize,
         };
         if let Some(pose) = near {
+            // Blocks the camera may see first (the swapper's fetch region), then by distance.
             let c = pose.translation_m.as_vec3().to_array();
-            let dist = |b: &MapBlock| {
-                let (centre, _) = crate::cpu::map::block_swap_out::block_centre(&d, b.coords);
-                (0..3).map(|i| (centre[i] - c[i]).powi(2)).sum::<f32>()
+            let axis = (pose.rotation * glam::DVec3::Z).as_vec3().to_array();
+            let fetch = swapper.as_ref().map(|s| s.config().fetch);
+            let priority = |b: &MapBlock| {
+                let (centre, radius_m) = crate::cpu::map::block_swap_out::block_centre(&d, b.coords);
+                let v: [f32; 3] = std::array::from_fn(|i| centre[i] - c[i]);
+                let outside = fetch.is_some_and(|f| !f.contains(v, axis, radius_m));
+                (outside, v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
             };
-            blocks.sort_by(|a, b| dist(a).total_cmp(&dist(b)));
+            blocks.sort_by(|a, b| {
+                let (pa, pb) = (priority(a), priority(b));
+                pa.0.cmp(&pb.0).then(pa.1.total_cmp(&pb.1))
+            });
         }
         let rest = if blocks.len() > room { blocks.split_off(room) } else { Vec::new() };
         match swapper {
@@ -325,6 +334,7 @@ impl Mapper {
                 let keys: Vec<[u32; 3]> = rest.iter().map(|b| b.coords).collect();
                 sparse.upload_blocks_swapped(gpu, &blocks, &keys)?;
                 s.store_blocks(rest);
+                s.assume_resident(blocks.len() as u32);
             }
             None if !rest.is_empty() => {
                 sparse.reset(gpu);

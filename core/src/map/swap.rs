@@ -411,6 +411,12 @@ impl MapSwapper {
         }
     }
 
+    /// Takes `resident` blocks as in use on the GPU until the first report says otherwise (a
+    /// loaded map: its first frame may already swap in).
+    pub fn assume_resident(&mut self, resident: u32) {
+        self.last = Some(MapStats { blocks_used: resident, pool_blocks: self.desc.pool_blocks, ..MapStats::default() });
+    }
+
     /// Puts `blocks` into the host's store (a loaded map's blocks beyond the GPU's share: their
     /// keys are in the table as swapped out).
     pub fn store_blocks(&mut self, blocks: Vec<MapBlock>) {

@@ -76,6 +76,25 @@ fn a_swapping_pool_builds_the_map_a_large_pool_builds() {
     assert_eq!(swapped.len(), reference.len(), "the same blocks");
     let differing = swapped.iter().zip(&reference).filter(|(a, b)| a != b).count();
     assert_eq!(differing, 0, "{differing} blocks differ from the large pool's");
+    // A saved map larger than a pool loads with the nearest blocks on the GPU and the rest on
+    // the host (their keys swapped out), and downloads exactly as saved.
+    {
+        let gpu = gpu();
+        let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_M };
+        let mut loaded = PoseDrivenMapper::new(&gpu, calibration, PreprocessConfig::default(), TsdfConfig::sparse(VOXEL_M, pool), &pose(0), false).expect("mapper");
+        loaded.mapper_mut().upload_blocks(&gpu, reference.clone(), Some(&pose(0))).expect("upload");
+        let on_host = loaded.mapper().swapper().expect("swapping").blocks_on_host();
+        assert!(on_host > 0 && on_host < reference.len(), "part of the map waits on the host ({on_host} of {})", reference.len());
+        assert_eq!(pollster::block_on(loaded.download_blocks(&gpu)).expect("download"), reference, "the loaded map downloads as saved");
+        // Fusing the first frames again brings blocks back in from the host, none missed.
+        for i in 0..6 {
+            pollster::block_on(loaded.submit_frame(&gpu, &frame(i), &pose(i))).expect("fuse");
+            pollster::block_on(loaded.flush(&gpu)).expect("flush");
+        }
+        let s = loaded.map_stats().expect("stats");
+        assert_eq!((s.pool_full, s.swapped_hits), (0, 0), "the loaded map fuses without exhaustion or misses");
+        finish(&gpu);
+    }
     // Negative control: the same pool without swapping runs out, and the comparison sees it.
     let (unswapped, unswapped_stats) = fuse(pool, false);
     assert!(unswapped_stats.last().expect("frames").pool_full > 0, "without swapping the pool runs out");
