@@ -91,11 +91,21 @@ pub(crate) struct ReconstructArgs {
     /// frame takes the pose at its depth timestamp, interpolated between the two nearest given
     /// poses when the nearest is within 20 ms; frames without one are skipped and counted. The
     /// map and the outputs are in the poses' frame.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "robot_poses")]
     poses: Option<PathBuf>,
+    /// Like `--poses`, with seed 000's robot poses: x y z (cm) α β γ (rad; world X right, Y
+    /// forward, Z up; T = Trans·Rz(α)·Ry(β)·Rx(γ)) per line, or the planar form (see
+    /// `--robot-pose-form`); one per frame in frame order, or each with a leading timestamp
+    /// (seconds, then associated as `--poses` is).
+    #[arg(long)]
+    robot_poses: Option<PathBuf>,
+    /// The form of `--robot-poses`: `6dof` (x y z α β γ) or `planar` (x y θ pan tilt: a base
+    /// heading and a pan-tilt head at a fixed height).
+    #[arg(long, default_value = "6dof")]
+    robot_pose_form: webfusion_core::io::robot_poses::RobotPoseForm,
     /// With `--poses`: use them only as each frame's initial guess for tracking, and report how
     /// far tracking moved each one (`refine.txt`, stats.json).
-    #[arg(long, requires = "poses")]
+    #[arg(long)]
     refine: bool,
     /// Save the fused map (`.wfm`: every block, on the GPU and swapped out, in the map's frame,
     /// with a CRC per block; see ARCHITECTURE.md).
@@ -104,7 +114,7 @@ pub(crate) struct ReconstructArgs {
     /// Continue fusing into a saved map, at `--poses` (its own settings replace --map-kind,
     /// --voxel-size, --volume and --truncation). A damaged map file is an error unless
     /// --skip-corrupt (then its intact blocks are loaded, with a warning).
-    #[arg(long, requires = "poses")]
+    #[arg(long)]
     load_map: Option<PathBuf>,
     #[command(flatten)]
     calibration: CalibrationArgs,
@@ -128,11 +138,52 @@ impl ReconstructArgs {
     }
 }
 
-/// The given poses of `--poses`, read and checked.
-fn given_poses(args: &ReconstructArgs) -> anyhow::Result<Option<PoseTimeline>> {
-    let Some(path) = &args.poses else { return Ok(None) };
-    let poses = read_tum_trajectory(path).with_context(|| format!("reading the given poses {}", path.display()))?;
-    Ok(Some(PoseTimeline::new(poses).with_context(|| format!("the given poses {}", path.display()))?))
+/// Poses given on the command line: by time (TUM `--poses`, or `--robot-poses` with
+/// timestamps) or one per frame in frame order (`--robot-poses` without).
+enum GivenPoses {
+    Timeline(PoseTimeline),
+    FrameOrder(Vec<Se3>),
+}
+
+impl GivenPoses {
+    /// The pose of the `position`-th frame of the run (at depth time `t_ns`).
+    fn pose_for(&self, position: usize, t_ns: i64) -> Option<Se3> {
+        match self {
+            Self::Timeline(t) => t.pose_at(t_ns, MAX_POSE_GAP_NS),
+            Self::FrameOrder(poses) => poses.get(position).copied(),
+        }
+    }
+
+    /// The first given pose.
+    fn first(&self) -> Option<Se3> {
+        match self {
+            Self::Timeline(t) => t.poses().first().map(|p| p.world_from_camera),
+            Self::FrameOrder(poses) => poses.first().copied(),
+        }
+    }
+}
+
+impl ReconstructArgs {
+    /// The file of `--poses` or `--robot-poses`.
+    fn pose_file(&self) -> Option<&PathBuf> {
+        self.poses.as_ref().or(self.robot_poses.as_ref())
+    }
+}
+
+/// The given poses of `--poses` or `--robot-poses`, read and checked.
+fn given_poses(args: &ReconstructArgs) -> anyhow::Result<Option<GivenPoses>> {
+    anyhow::ensure!(args.pose_file().is_some() || !(args.refine || args.load_map.is_some()), "--refine and --load-map need --poses or --robot-poses (relocalising into a map needs feature odometry, not built yet)");
+    if let Some(path) = &args.poses {
+        let poses = read_tum_trajectory(path).with_context(|| format!("reading the given poses {}", path.display()))?;
+        return Ok(Some(GivenPoses::Timeline(PoseTimeline::new(poses).with_context(|| format!("the given poses {}", path.display()))?)));
+    }
+    let Some(path) = &args.robot_poses else { return Ok(None) };
+    let poses = webfusion_core::io::robot_poses::read_robot_poses(path, args.robot_pose_form).with_context(|| format!("reading the robot poses {}", path.display()))?;
+    if poses.iter().all(|p| p.timestamp_ns.is_some()) {
+        let timed = poses.iter().map(|p| TimedPose { timestamp_ns: p.timestamp_ns.unwrap_or_default(), world_from_camera: p.world_from_camera }).collect();
+        return Ok(Some(GivenPoses::Timeline(PoseTimeline::new(timed).with_context(|| format!("the robot poses {}", path.display()))?)));
+    }
+    Ok(Some(GivenPoses::FrameOrder(poses.iter().map(|p| p.world_from_camera).collect())))
 }
 
 /// `--load-map`'s file, read (strictly, or keeping its intact blocks with --skip-corrupt).
@@ -170,7 +221,7 @@ fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfi
         "webfusion": env!("CARGO_PKG_VERSION"),
         "source": source_name,
         "fused_frames": fused_frames,
-        "poses": args.poses.as_ref().map(|p| p.display().to_string()),
+        "poses": args.pose_file().map(|p| p.display().to_string()),
         "refine": args.refine,
         "loaded_from": args.load_map.as_ref().map(|p| p.display().to_string()),
     });
@@ -182,7 +233,7 @@ fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfi
         max_weight: t.max_weight,
         dims_voxels: t.box_dims_voxels(),
         origin_in_world: mapper.origin_in_world(),
-        frame: if args.poses.is_some() { MapFrame::GivenPoses } else { MapFrame::FirstCamera },
+        frame: if args.pose_file().is_some() { MapFrame::GivenPoses } else { MapFrame::FirstCamera },
         creation: creation.to_string(),
     };
     write_map_file(path, &header, &blocks).with_context(|| format!("saving the map to {}", path.display()))?;
@@ -207,7 +258,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let mut fusion = match &loaded {
         Some(file) => {
             let mut fusion = KinectFusion::new_at(&gpu, source.calibration(), config.clone(), file.header.origin_in_world)?;
-            let near = given.as_ref().map(|g| g.poses()[0].world_from_camera);
+            let near = given.as_ref().and_then(GivenPoses::first);
             fusion.mapper_mut().upload_blocks(&gpu, file.blocks.clone(), near.as_ref())?;
             fusion
         }
@@ -273,13 +324,14 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         eprint!("\rframe {}/{} [{}], ICP inliers {inliers}   ", trajectory.len(), n_frames, report.state.name());
     };
     let mut skipped = Vec::new();
+    let start = range.start;
     for index in range {
         let sw = crate::timing::Stopwatch::start();
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         times.record("read", sw.ms());
         let mut guess: Option<Se3> = None;
         if let Some(given) = &given {
-            let Some(pose) = given.pose_at(frame.depth_timestamp_ns, MAX_POSE_GAP_NS) else {
+            let Some(pose) = given.pose_for(index - start, frame.depth_timestamp_ns) else {
                 without_pose.push(index);
                 continue;
             };
@@ -406,7 +458,7 @@ fn write_mesh(mesh: &webfusion_core::mesh::Mesh, path: &Path) -> anyhow::Result<
 /// far tracking moved the given poses (also written to `refine.txt` and summarised on stdout).
 fn given_report(args: &ReconstructArgs, without_pose: &[usize], refined: Option<&[(u64, f64, f64)]>) -> anyhow::Result<serde_json::Value> {
     if !without_pose.is_empty() {
-        println!("{} frames had no given pose within {} ms and were skipped", without_pose.len(), MAX_POSE_GAP_NS / 1_000_000);
+        println!("{} frames had no given pose (within {} ms, or past the end of a per-frame list) and were skipped", without_pose.len(), MAX_POSE_GAP_NS / 1_000_000);
     }
     let refine = match refined {
         Some(refined) if !refined.is_empty() => {
@@ -428,12 +480,12 @@ fn given_report(args: &ReconstructArgs, without_pose: &[usize], refined: Option<
         }
         _ => serde_json::Value::Null,
     };
-    Ok(serde_json::json!({ "file": args.poses.as_ref().map(|p| p.display().to_string()), "frames_without_pose": without_pose, "refine": refine }))
+    Ok(serde_json::json!({ "file": args.pose_file().map(|p| p.display().to_string()), "robot_pose_form": args.robot_poses.as_ref().map(|_| format!("{:?}", args.robot_pose_form)), "frames_without_pose": without_pose, "refine": refine }))
 }
 
 /// `reconstruct --poses` without `--refine`: fuses every frame at its given pose (no tracking),
 /// then writes the poses used, the mesh and the statistics as the tracked run does.
-fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &FusionConfig, source: &mut dyn webfusion_core::source::FrameSource, range: std::ops::Range<usize>, given: &PoseTimeline, loaded: Option<MapFile>) -> anyhow::Result<()> {
+fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &FusionConfig, source: &mut dyn webfusion_core::source::FrameSource, range: std::ops::Range<usize>, given: &GivenPoses, loaded: Option<MapFile>) -> anyhow::Result<()> {
     use webfusion_core::fusion::pose_driven::PoseDrivenMapper;
     let n_frames = range.len();
     let mut times = StageTimes::default();
@@ -442,11 +494,12 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
     let mut mapper: Option<PoseDrivenMapper> = None;
     let started = std::time::Instant::now();
     let mut last = started;
+    let start = range.start;
     for index in range {
         let sw = crate::timing::Stopwatch::start();
         let Some(frame) = crate::read_or_skip(source, index, args.skip_corrupt, &mut skipped)? else { continue };
         times.record("read", sw.ms());
-        let Some(pose) = given.pose_at(frame.depth_timestamp_ns, MAX_POSE_GAP_NS) else {
+        let Some(pose) = given.pose_for(index - start, frame.depth_timestamp_ns) else {
             without_pose.push(index);
             continue;
         };
@@ -472,7 +525,7 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
     }
     eprintln!();
     let Some(mut mapper) = mapper else {
-        anyhow::bail!("no frame of {} has a given pose within {} ms in {}", source.name(), MAX_POSE_GAP_NS / 1_000_000, args.poses.as_ref().map_or(String::new(), |p| p.display().to_string()));
+        anyhow::bail!("no frame of {} has a given pose (within {} ms) in {}", source.name(), MAX_POSE_GAP_NS / 1_000_000, args.pose_file().map_or(String::new(), |p| p.display().to_string()));
     };
     pollster::block_on(mapper.flush(gpu))?;
     let wall_s = started.elapsed().as_secs_f64();

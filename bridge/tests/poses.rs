@@ -161,3 +161,37 @@ fn a_saved_map_continued_at_later_poses_equals_one_run_for_both_kinds() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("not a webfusion map file") && !err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn robot_poses_in_the_thesis_convention_give_the_same_camera_poses() {
+    // The ground truth re-expressed as seed 000's robot poses, one per frame in frame order:
+    // x y z in cm, and α β γ with R = Rz(α) Ry(β) Rx(γ) · (Eq. 5.3's axis change)⁻¹.
+    use glam::{DMat3, DVec3, EulerRot};
+    let dir = scratch("robot");
+    let (tum, gt, stamps) = tum_sample(&dir);
+    let timeline = PoseTimeline::new(gt).expect("timeline");
+    let poses: Vec<webfusion_core::Se3> = stamps.iter().map(|&t| timeline.pose_at(t, MAX_POSE_GAP_NS).expect("each sample frame has ground truth")).collect();
+    let camera_from_sensor = DMat3::from_cols(DVec3::X, -DVec3::Z, DVec3::Y).transpose();
+    let mut text = String::from("# x y z (cm) alpha beta gamma (rad)\n");
+    for p in &poses {
+        let sensor = DMat3::from_quat(p.rotation) * camera_from_sensor;
+        let (a, b, g) = glam::DQuat::from_mat3(&sensor).to_euler(EulerRot::ZYX);
+        let t = p.translation_m * 100.0;
+        text += &format!("{} {} {} {a} {b} {g}\n", t.x, t.y, t.z);
+    }
+    let file = dir.join("robot.txt");
+    std::fs::write(&file, text).expect("robot poses");
+    let out = dir.join("out");
+    let (_, stats) = run(&["reconstruct", tum.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--robot-poses", file.to_str().expect("utf-8"), "--voxel-size", "0.04", "--no-mesh"]);
+    assert_eq!(stats["fused_frames"], serde_json::json!(FRAMES));
+    let used = read_tum_trajectory(&out.join("trajectory.txt")).expect("trajectory.txt");
+    for (u, p) in used.iter().zip(&poses) {
+        let d = p.inverse() * u.world_from_camera;
+        assert!(d.translation_m.length() < 1e-9 && d.rotation_angle_rad() < 1e-9, "{u:?} vs {p:?}");
+    }
+    // Fewer poses than frames: the frames past the list are skipped and listed.
+    let short: String = std::fs::read_to_string(&file).expect("read").lines().take(5).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&file, short).expect("write");
+    let (_, stats) = run(&["reconstruct", tum.to_str().expect("utf-8"), "--out", dir.join("out2").to_str().expect("utf-8"), "--robot-poses", file.to_str().expect("utf-8"), "--voxel-size", "0.04", "--no-mesh"]);
+    assert_eq!(stats["given_poses"]["frames_without_pose"], serde_json::json!((4..FRAMES).collect::<Vec<_>>()), "frames past the list");
+}

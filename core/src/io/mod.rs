@@ -5,6 +5,7 @@
 //! digit by digit into integer nanoseconds, never through `f64`, so a timestamp written back
 //! is the one that was read.
 
+pub mod robot_poses;
 pub mod trajectory;
 pub mod tum;
 
