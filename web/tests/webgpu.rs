@@ -108,6 +108,9 @@ async fn a_swapping_map_on_webgpu_equals_the_large_pools_map() {
         (mapper.download_blocks(&gpu).await.expect("download"), stats)
     };
     let (reference, _) = fuse(8192).await;
+    // The swap kernels were bound (the map's swapper is built with it) but, never dispatched,
+    // never compiled: in the browser a deferred kernel costs nothing until it runs.
+    assert!(!gpu.kernels.block_swap_out.is_compiled() && !gpu.kernels.block_swap_in.is_compiled(), "binding a deferred kernel does not compile it");
     let pool = reference.len() as u32 / 2;
     let (swapped, stats) = fuse(pool).await;
     web_sys::console::log_1(&format!("room: {} blocks, pool {pool}: {} swapped out, {} in, {} on the host", reference.len(), stats.swapped_out_total, stats.swapped_in_total, stats.blocks_on_host).into());
@@ -115,5 +118,6 @@ async fn a_swapping_map_on_webgpu_equals_the_large_pools_map() {
     assert_eq!((stats.pool_full, stats.hash_full, stats.swapped_hits), (0, 0, 0), "no exhaustion, no block missed");
     assert_eq!(swapped.len(), reference.len(), "the same blocks");
     assert!(swapped == reference, "every block equals the large pool's");
+    assert!(gpu.kernels.block_swap_out.is_compiled() && gpu.kernels.block_swap_in.is_compiled(), "dispatching compiled them");
     assert!(gpu.take_errors().is_empty(), "no WebGPU errors");
 }

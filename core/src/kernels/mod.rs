@@ -62,28 +62,40 @@ pub struct DeferredPipeline {
     cell: std::sync::OnceLock<KernelPipeline>,
     device: wgpu::Device,
     spec: KernelSpec,
+    /// Bind group 0's layout, made at once (cheap): bind groups need no compiled pipeline.
+    layout: wgpu::BindGroupLayout,
 }
 
 impl DeferredPipeline {
     /// `compiled` if it was, else compiled on first use.
     fn new(device: &wgpu::Device, spec: KernelSpec, compiled: Option<KernelPipeline>) -> Self {
+        let layout = match &compiled {
+            Some(pipeline) => pipeline.bind_group_layout.clone(),
+            None => KernelPipeline::bind_group_layout(device, spec.0, &(spec.1)()),
+        };
         let cell = std::sync::OnceLock::new();
         if let Some(pipeline) = compiled {
             let _ = cell.set(pipeline);
         }
-        Self { cell, device: device.clone(), spec }
+        Self { cell, device: device.clone(), spec, layout }
     }
 
     /// Whether the pipeline exists yet.
     pub fn is_compiled(&self) -> bool {
         self.cell.get().is_some()
     }
+
+    /// A bind group of `entries`, without compiling the pipeline (a stage binds its deferred
+    /// kernels when it is built, and may never dispatch them: swapping, meshing).
+    pub fn bind_group(&self, device: &wgpu::Device, entries: &[wgpu::BindGroupEntry]) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(&format!("core.{}.bind_group", self.spec.0.name)), layout: &self.layout, entries })
+    }
 }
 
 impl std::ops::Deref for DeferredPipeline {
     type Target = KernelPipeline;
     fn deref(&self) -> &KernelPipeline {
-        self.cell.get_or_init(|| KernelPipeline::new(&self.device, self.spec.0, &(self.spec.1)()))
+        self.cell.get_or_init(|| KernelPipeline::with_layout(&self.device, self.spec.0, self.layout.clone()))
     }
 }
 
@@ -107,9 +119,18 @@ pub struct KernelPipeline {
 impl KernelPipeline {
     /// Compiles `kernel` for `device` with bind group 0 laid out as `entries`.
     pub fn new(device: &wgpu::Device, kernel: &'static webfusion_shaders::Kernel, entries: &[wgpu::BindGroupLayoutEntry]) -> Self {
+        Self::with_layout(device, kernel, Self::bind_group_layout(device, kernel, entries))
+    }
+
+    /// Bind group 0's layout for `kernel` from `entries`.
+    pub fn bind_group_layout(device: &wgpu::Device, kernel: &'static webfusion_shaders::Kernel, entries: &[wgpu::BindGroupLayoutEntry]) -> wgpu::BindGroupLayout {
+        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(&format!("core.{}.bind_group_layout", kernel.name)), entries })
+    }
+
+    /// Compiles `kernel` for `device` with bind group 0 laid out by `bind_group_layout`.
+    pub fn with_layout(device: &wgpu::Device, kernel: &'static webfusion_shaders::Kernel, bind_group_layout: wgpu::BindGroupLayout) -> Self {
         let label = format!("core.{}", kernel.name);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(&label), source: wgpu::ShaderSource::Wgsl(kernel.source.into()) });
-        let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(&format!("{label}.bind_group_layout")), entries });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(&format!("{label}.pipeline_layout")),
             bind_group_layouts: &[Some(&bind_group_layout)],
