@@ -149,7 +149,7 @@ pub fn write_map_file(path: &Path, header: &MapFileHeader, blocks: &[MapBlock]) 
     h.extend_from_slice(&[0u8; 20]);
     let crc = crc32fast::hash(&h);
     h.extend_from_slice(&crc.to_le_bytes());
-    debug_assert_eq!(h.len(), HEADER_BYTES);
+    debug_assert_eq!(h.len(), HEADER_BYTES, "the header layout in the module doc");
     out.write_all(&h).map_err(io)?;
     out.write_all(meta).map_err(io)?;
     out.write_all(&crc32fast::hash(meta).to_le_bytes()).map_err(io)?;
