@@ -9,7 +9,7 @@ use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, TrackingSt
 use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, PoseTimeline, TimedPose, read_tum_trajectory, write_tum_trajectory};
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, TsdfStore as _, VolumePlacement};
 use webfusion_core::fusion::mapper::Mapper;
-use webfusion_core::map::MapKind;
+use webfusion_core::map::{MapKind, MapStats};
 use webfusion_core::map::file::{MapFile, MapFileHeader, MapFrame, read_map_file, read_map_file_recovering, write_map_file};
 use webfusion_core::{GpuOptions, Se3};
 
@@ -255,11 +255,11 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     if let (Some(given), false) = (&given, args.refine) {
         return run_pose_driven(&gpu, args, &config, source.as_mut(), range, given, loaded);
     }
-    let mut fusion = match &loaded {
+    let mut fusion = match loaded {
         Some(file) => {
             let mut fusion = KinectFusion::new_at(&gpu, source.calibration(), config.clone(), file.header.origin_in_world)?;
             let near = given.as_ref().and_then(GivenPoses::first);
-            fusion.mapper_mut().upload_blocks(&gpu, file.blocks.clone(), near.as_ref())?;
+            fusion.mapper_mut().upload_blocks(&gpu, file.blocks, near.as_ref())?;
             fusion
         }
         None => KinectFusion::new(&gpu, source.calibration(), config.clone())?,
@@ -309,7 +309,6 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         host.host_waits += report.host.host_waits;
         host.readbacks += report.host.readbacks;
         map_stats = report.map.or(map_stats);
-
         if let TrackingState::Lost(reason) = report.state {
             eprintln!("\nframe {}: tracking lost ({reason:?}); keeping the last good pose", report.index);
             lost.push(report.index);
@@ -352,15 +351,8 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
 
-    if let Some(stats) = map_stats {
-        let used_mib = (u64::from(stats.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR) as f64 / 1048576.0;
-        println!("sparse map: {} of {} blocks used ({used_mib:.1} MiB of {:.1} MiB)", stats.blocks_used, stats.pool_blocks, fusion.volume().memory_bytes() as f64 / 1048576.0);
-        if stats.swapped_out_total > 0 {
-            println!("swapping: {} blocks on the host ({:.1} MiB of host memory); {} swapped out, {} swapped in; {} band samples met a block still on the host", stats.blocks_on_host, stats.host_bytes as f64 / 1048576.0, stats.swapped_out_total, stats.swapped_in_total, stats.swapped_hits);
-        }
-        if stats.exhausted() {
-            eprintln!("warning: the map ran out of room ({} insertions without a hash slot, {} blocks refused by the full pool): surfaces there were not fused; raise --map-budget-mib or the voxel size", stats.hash_full, stats.pool_full);
-        }
+    if let Some(stats) = &map_stats {
+        print_map_stats(stats, fusion.volume().memory_bytes());
     }
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
@@ -427,7 +419,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             "voxel_size_m": fusion.config().tsdf.voxel_size_m,
             "truncation_m": fusion.config().tsdf.truncation_m,
             "memory_bytes": fusion.volume().memory_bytes(),
-            "sparse": map_stats.map(|m| serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "used_bytes": u64::from(m.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR, "hash_full": m.hash_full, "pool_full": m.pool_full, "out_of_range": m.out_of_range, "blocks_on_host": m.blocks_on_host, "host_bytes": m.host_bytes, "swapped_out_total": m.swapped_out_total, "swapped_in_total": m.swapped_in_total, "swapped_hits": m.swapped_hits, "swap_in_refused": m.swap_in_refused })),
+            "sparse": map_stats.as_ref().map(map_stats_json),
         },
         "stages_ms": times.to_json(),
         "given_poses": given_json,
@@ -452,6 +444,23 @@ fn write_mesh(mesh: &webfusion_core::mesh::Mesh, path: &Path) -> anyhow::Result<
     write(&path.with_extension("glb"), true)?;
     println!("mesh: {} vertices, {} triangles -> {} (+ .glb)", mesh.positions_m.len(), mesh.triangles.len(), path.display());
     Ok(())
+}
+
+/// Prints a sparse map's use (GPU and host) and warns when it ran out of room.
+fn print_map_stats(stats: &MapStats, memory_bytes: u64) {
+    let used_mib = (u64::from(stats.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR) as f64 / 1048576.0;
+    println!("sparse map: {} of {} blocks used ({used_mib:.1} MiB of {:.1} MiB)", stats.blocks_used, stats.pool_blocks, memory_bytes as f64 / 1048576.0);
+    if stats.swapped_out_total > 0 {
+        println!("swapping: {} blocks on the host ({:.1} MiB of host memory); {} swapped out, {} swapped in; {} band samples met a block still on the host", stats.blocks_on_host, stats.host_bytes as f64 / 1048576.0, stats.swapped_out_total, stats.swapped_in_total, stats.swapped_hits);
+    }
+    if stats.exhausted() {
+        eprintln!("warning: the map ran out of room ({} insertions without a hash slot, {} blocks refused by the full pool): surfaces there were not fused; raise --map-budget-mib or the voxel size", stats.hash_full, stats.pool_full);
+    }
+}
+
+/// A sparse map's part of stats.json.
+fn map_stats_json(m: &MapStats) -> serde_json::Value {
+    serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "used_bytes": u64::from(m.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR, "hash_full": m.hash_full, "pool_full": m.pool_full, "out_of_range": m.out_of_range, "blocks_on_host": m.blocks_on_host, "host_bytes": m.host_bytes, "swapped_out_total": m.swapped_out_total, "swapped_in_total": m.swapped_in_total, "swapped_hits": m.swapped_hits, "swap_in_refused": m.swap_in_refused })
 }
 
 /// `--poses`' part of stats.json: the file, the frames without a pose and, with `--refine`, how
@@ -485,7 +494,7 @@ fn given_report(args: &ReconstructArgs, without_pose: &[usize], refined: Option<
 
 /// `reconstruct --poses` without `--refine`: fuses every frame at its given pose (no tracking),
 /// then writes the poses used, the mesh and the statistics as the tracked run does.
-fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &FusionConfig, source: &mut dyn webfusion_core::source::FrameSource, range: std::ops::Range<usize>, given: &GivenPoses, loaded: Option<MapFile>) -> anyhow::Result<()> {
+fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &FusionConfig, source: &mut dyn webfusion_core::source::FrameSource, range: std::ops::Range<usize>, given: &GivenPoses, mut loaded: Option<MapFile>) -> anyhow::Result<()> {
     use webfusion_core::fusion::pose_driven::PoseDrivenMapper;
     let n_frames = range.len();
     let mut times = StageTimes::default();
@@ -507,10 +516,10 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
         // loaded map where it was).
         let m = match &mut mapper {
             Some(m) => m,
-            None => match &loaded {
+            None => match loaded.take() {
                 Some(file) => {
                     let mut m = PoseDrivenMapper::new_at(gpu, source.calibration(), config.preprocess, config.tsdf, file.header.origin_in_world, false)?;
-                    m.mapper_mut().upload_blocks(gpu, file.blocks.clone(), Some(&pose))?;
+                    m.mapper_mut().upload_blocks(gpu, file.blocks, Some(&pose))?;
                     mapper.insert(m)
                 }
                 None => mapper.insert(PoseDrivenMapper::new(gpu, source.calibration(), config.preprocess, config.tsdf, &pose, false)?),
@@ -532,16 +541,12 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
     let map_stats = mapper.map_stats();
-    if let Some(stats) = map_stats {
-        println!("sparse map: {} of {} blocks on the GPU, {} on the host ({:.1} MiB); {} swapped out, {} in", stats.blocks_used, stats.pool_blocks, stats.blocks_on_host, stats.host_bytes as f64 / 1048576.0, stats.swapped_out_total, stats.swapped_in_total);
-        if stats.exhausted() {
-            eprintln!("warning: the map ran out of room ({} insertions without a hash slot, {} blocks refused by the full pool)", stats.hash_full, stats.pool_full);
-        }
+    if let Some(stats) = &map_stats {
+        print_map_stats(stats, mapper.volume().memory_bytes());
     }
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     let given_json = given_report(args, &without_pose, None)?;
-    pollster::block_on(mapper.flush(gpu))?;
     save_map(gpu, mapper.mapper_mut(), config, args, &source.name(), trajectory.len())?;
     if !args.no_mesh {
         let sw = crate::timing::Stopwatch::start();
@@ -563,7 +568,7 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
             "voxel_size_m": config.tsdf.voxel_size_m,
             "truncation_m": config.tsdf.truncation_m,
             "memory_bytes": mapper.volume().memory_bytes(),
-            "sparse": map_stats.map(|m| serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "hash_full": m.hash_full, "pool_full": m.pool_full, "blocks_on_host": m.blocks_on_host, "host_bytes": m.host_bytes, "swapped_out_total": m.swapped_out_total, "swapped_in_total": m.swapped_in_total, "swapped_hits": m.swapped_hits })),
+            "sparse": map_stats.as_ref().map(map_stats_json),
         },
         "stages_ms": times.to_json(),
     });

@@ -452,7 +452,7 @@ impl KinectFusion {
         &self.mapper
     }
 
-    /// The mapper, mutably (to download a swapping map's blocks).
+    /// The mapper, mutably (to load a saved map, or gather a swapping map's blocks).
     pub fn mapper_mut(&mut self) -> &mut Mapper {
         &mut self.mapper
     }

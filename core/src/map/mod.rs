@@ -20,7 +20,7 @@
 //! past: a key without a block reads as unobserved.
 
 use crate::cpu::shared::{
-    BLOCK_VOXELS, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_FREE, MAP_COUNTER_HASH_FULL,
+    BLOCK_VOXELS, BRICK_SHIFT, EMPTY_KEY, brick_dims, brick_index, voxel_index, voxel_weight, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_FREE, MAP_COUNTER_HASH_FULL,
     MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_POOL_FULL, MAP_COUNTER_SWAP_IN_REFUSED,
     MAP_COUNTER_SWAPPED_HITS, MAP_COUNTER_VISIBLE, MAP_COUNTERS, block_of_key,
 };
@@ -311,34 +311,39 @@ impl PoolImage {
     /// brings them back.
     pub fn with_swapped(desc: VolumeDesc, color: bool, blocks: &[MapBlock], swapped: &[[u32; 3]]) -> Result<Self> {
         let d = desc;
-        let bad = |why: String| Err(Error::InvalidConfig(format!("uploading {} map blocks: {why}", blocks.len())));
+        let bad = |why: String| Error::InvalidConfig(format!("uploading {} map blocks: {why}", blocks.len()));
         if blocks.len() > d.pool_blocks as usize {
-            return bad(format!("the pool holds {} blocks", d.pool_blocks));
+            return Err(bad(format!("the pool holds {} blocks", d.pool_blocks)));
         }
-        let n_box = [d.dim_x, d.dim_y, d.dim_z].map(|v| v >> crate::cpu::shared::BRICK_SHIFT);
+        let n_box = [d.dim_x, d.dim_y, d.dim_z].map(|v| v >> BRICK_SHIFT);
         let mut table = vec![EMPTY_KEY; 2 * d.hash_slots as usize];
+        // Puts block `coords`' key into the table with pool index `block`, by the kernels'
+        // probing (a resident block's index, or SWAPPED_BLOCK for one held on the host).
+        let mut insert = |coords: [u32; 3], block: u32| -> Result<u32> {
+            if (0..3).any(|a| coords[a] >= n_box[a]) {
+                return Err(bad(format!("block {coords:?} lies outside the box of {n_box:?} blocks")));
+            }
+            let key = crate::cpu::shared::block_key(coords);
+            let Some(s) = crate::cpu::shared::probe_slot(&table, &d, coords) else {
+                return Err(bad(format!("no hash slot within {} probes of block {coords:?}", crate::cpu::shared::MAP_MAX_PROBES)));
+            };
+            if table[2 * s] == key {
+                return Err(bad(format!("block {coords:?} is given twice")));
+            }
+            table[2 * s] = key;
+            table[2 * s + 1] = block;
+            Ok(key)
+        };
         let mut keys = vec![EMPTY_KEY; d.pool_blocks as usize];
         let voxel_words = BLOCK_VOXELS as usize;
         let mut voxels = vec![0u32; blocks.len() * voxel_words];
         let mut colors = vec![0u32; if color { blocks.len() * voxel_words } else { 0 }];
         let mut surface = vec![0u32; blocks.len()];
         for (i, block) in blocks.iter().enumerate() {
-            if (0..3).any(|a| block.coords[a] >= n_box[a]) {
-                return bad(format!("block {:?} lies outside the box of {n_box:?} blocks", block.coords));
-            }
             if block.voxels.len() != voxel_words || (color && block.colors.len() != voxel_words) {
-                return bad(format!("block {:?} has {} voxel and {} colour words, not {voxel_words}", block.coords, block.voxels.len(), block.colors.len()));
+                return Err(bad(format!("block {:?} has {} voxel and {} colour words, not {voxel_words}", block.coords, block.voxels.len(), block.colors.len())));
             }
-            let key = crate::cpu::shared::block_key(block.coords);
-            let Some(s) = crate::cpu::shared::probe_slot(&table, &d, block.coords) else {
-                return bad(format!("no hash slot within {} probes of block {:?}", crate::cpu::shared::MAP_MAX_PROBES, block.coords));
-            };
-            if table[2 * s] == key {
-                return bad(format!("block {:?} is given twice", block.coords));
-            }
-            table[2 * s] = key;
-            table[2 * s + 1] = i as u32;
-            keys[i] = key;
+            keys[i] = insert(block.coords, i as u32)?;
             voxels[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.voxels);
             if color {
                 colors[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.colors);
@@ -346,18 +351,7 @@ impl PoolImage {
             surface[i] = surface_word(&block.voxels);
         }
         for &coords in swapped {
-            if (0..3).any(|a| coords[a] >= n_box[a]) {
-                return bad(format!("block {coords:?} lies outside the box of {n_box:?} blocks"));
-            }
-            let key = crate::cpu::shared::block_key(coords);
-            let Some(s) = crate::cpu::shared::probe_slot(&table, &d, coords) else {
-                return bad(format!("no hash slot within {} probes of block {coords:?}", crate::cpu::shared::MAP_MAX_PROBES));
-            };
-            if table[2 * s] == key {
-                return bad(format!("block {coords:?} is given twice"));
-            }
-            table[2 * s] = key;
-            table[2 * s + 1] = crate::cpu::shared::SWAPPED_BLOCK;
+            insert(coords, crate::cpu::shared::SWAPPED_BLOCK)?;
         }
         Ok(Self { desc, table, keys, voxels, colors, surface })
     }
@@ -400,36 +394,42 @@ impl SparseMap {
 /// FAR_TSDF (a surface or its band may lie in it).
 pub fn surface_word(voxels: &[u32]) -> u32 {
     let far = crate::cpu::shared::FAR_TSDF;
-    u32::from(voxels.iter().any(|&w| crate::cpu::shared::voxel_weight(w) > 0 && crate::cpu::shared::voxel_tsdf(w) < far))
+    u32::from(voxels.iter().any(|&w| voxel_weight(w) > 0 && crate::cpu::shared::voxel_tsdf(w) < far))
 }
 
-/// A dense box's observed 8³ tiles as blocks, in key order (voxels past the box's edge read 0).
-/// Waits for the GPU.
+/// Voxel coordinates of voxel `v` (x fastest) of the 8³ block at block coordinates `block`: the
+/// inverse of `voxel_in_block`.
+fn block_voxel(block: [u32; 3], v: u32) -> [u32; 3] {
+    [(block[0] << BRICK_SHIFT) + (v & 7), (block[1] << BRICK_SHIFT) + ((v >> 3) & 7), (block[2] << BRICK_SHIFT) + (v >> 6)]
+}
+
+/// Index of voxel `[x, y, z]` in a dense box's words, or `None` past the box's edge.
+fn dense_index(d: &VolumeDesc, [x, y, z]: [u32; 3]) -> Option<usize> {
+    (x < d.dim_x && y < d.dim_y && z < d.dim_z).then(|| voxel_index(d, x, y, z) as usize)
+}
+
+/// A dense box's observed 8³ tiles (its surface bricks) as blocks, in key order (voxels past the
+/// box's edge read 0). Waits for the GPU.
 pub async fn dense_blocks(gpu: &Gpu, dense: &DenseTsdfVolume) -> Result<Vec<MapBlock>> {
     let d = dense.desc();
     let n = d.voxel_count();
     let voxels: Vec<u32> = gpu.read_buffer(dense.voxels(), n).await?;
     let colors: Vec<u32> = if dense.has_color() { gpu.read_buffer(dense.colors(), n).await? } else { Vec::new() };
-    let dims = [d.dim_x, d.dim_y, d.dim_z];
-    let tiles = dims.map(|v| v.div_ceil(8));
+    let tiles = brick_dims(&d);
     let mut blocks = Vec::new();
     for bz in 0..tiles[2] {
         for by in 0..tiles[1] {
             for bx in 0..tiles[0] {
                 let mut block = MapBlock { coords: [bx, by, bz], voxels: vec![0; BLOCK_VOXELS as usize], colors: if colors.is_empty() { Vec::new() } else { vec![0; BLOCK_VOXELS as usize] } };
-                let mut observed = false;
                 for v in 0..BLOCK_VOXELS {
-                    let (x, y, z) = (bx * 8 + (v & 7), by * 8 + ((v >> 3) & 7), bz * 8 + (v >> 6));
-                    if x < dims[0] && y < dims[1] && z < dims[2] {
-                        let i = ((z * dims[1] + y) * dims[0] + x) as usize;
+                    if let Some(i) = dense_index(&d, block_voxel(block.coords, v)) {
                         block.voxels[v as usize] = voxels[i];
-                        observed |= voxels[i] >> 16 > 0;
                         if !colors.is_empty() {
                             block.colors[v as usize] = colors[i];
                         }
                     }
                 }
-                if observed {
+                if block.voxels.iter().any(|&w| voxel_weight(w) > 0) {
                     blocks.push(block);
                 }
             }
@@ -444,8 +444,7 @@ pub async fn dense_blocks(gpu: &Gpu, dense: &DenseTsdfVolume) -> Result<Vec<MapB
 pub fn upload_dense_blocks(gpu: &Gpu, dense: &DenseTsdfVolume, blocks: &[MapBlock]) -> Result<()> {
     dense.reset(gpu);
     let d = dense.desc();
-    let dims = [d.dim_x, d.dim_y, d.dim_z];
-    let tiles = dims.map(|v| v.div_ceil(8));
+    let tiles = brick_dims(&d);
     let n = d.voxel_count();
     let mut voxels = vec![0u32; n];
     let mut colors = vec![0u32; if dense.has_color() { n } else { 0 }];
@@ -453,20 +452,18 @@ pub fn upload_dense_blocks(gpu: &Gpu, dense: &DenseTsdfVolume, blocks: &[MapBloc
     for b in blocks {
         if (0..3).any(|a| b.coords[a] >= tiles[a]) || b.voxels.len() != BLOCK_VOXELS as usize || (dense.has_color() && b.colors.len() != BLOCK_VOXELS as usize) {
             dense.reset(gpu);
-            return Err(Error::InvalidConfig(format!("uploading {} blocks into a {dims:?} box: block {:?} lies outside it or has the wrong word counts", blocks.len(), b.coords)));
+            return Err(Error::InvalidConfig(format!("uploading {} blocks into a {:?} box: block {:?} lies outside it or has the wrong word counts", blocks.len(), [d.dim_x, d.dim_y, d.dim_z], b.coords)));
         }
         for v in 0..BLOCK_VOXELS {
-            let (x, y, z) = (b.coords[0] * 8 + (v & 7), b.coords[1] * 8 + ((v >> 3) & 7), b.coords[2] * 8 + (v >> 6));
-            if x < dims[0] && y < dims[1] && z < dims[2] {
-                let i = ((z * dims[1] + y) * dims[0] + x) as usize;
+            if let Some(i) = dense_index(&d, block_voxel(b.coords, v)) {
                 voxels[i] = b.voxels[v as usize];
                 if dense.has_color() {
                     colors[i] = b.colors[v as usize];
                 }
             }
         }
-        // The box's surface bricks are its 8³ tiles, x fastest.
-        bricks[((b.coords[2] * tiles[1] + b.coords[1]) * tiles[0] + b.coords[0]) as usize] = surface_word(&b.voxels);
+        let [x, y, z] = block_voxel(b.coords, 0);
+        bricks[brick_index(&d, x, y, z) as usize] = surface_word(&b.voxels);
     }
     gpu.write_buffer(dense.voxels(), &voxels);
     if dense.has_color() {

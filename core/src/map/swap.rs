@@ -289,16 +289,6 @@ impl MapSwapper {
         self.unconfirmed.push_back(batch);
     }
 
-    /// Whether this frame swaps anything in.
-    pub fn swaps_in(&self) -> bool {
-        self.swap_in_now > 0
-    }
-
-    /// Whether this frame swaps out.
-    pub fn swaps_out(&self) -> bool {
-        self.swap_out_now
-    }
-
     /// Records the planned swap-in into an open pass (before the frame's allocation).
     pub fn record_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
         if self.swap_in_now > 0 {
