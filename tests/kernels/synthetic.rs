@@ -2,6 +2,7 @@
 //! Synthetic depth scenes with known geometry.
 
 use webfusion_core::PinholeIntrinsics;
+use webfusion_core::sim::room::{camera_ray, depth_units, ray_box_entry, ray_box_exit};
 
 /// 80x60 camera with TUM-like focal lengths scaled to the size.
 pub(crate) const K_SMALL: PinholeIntrinsics = PinholeIntrinsics { fx_px: 64.7, fy_px: 64.6, cx_px: 39.8, cy_px: 31.9, width_px: 80, height_px: 60 };
@@ -60,39 +61,16 @@ impl Room {
 
     /// Distance along the unit ray `dir` from `o` to the first surface (f64 for exactness).
     pub(crate) fn ray_distance(o: [f64; 3], dir: [f64; 3]) -> Option<f64> {
-        let mut best = f64::INFINITY;
-        // Inside the room: the nearest exit face.
-        let mut exit = f64::INFINITY;
-        for i in 0..3 {
-            if dir[i] > 0.0 {
-                exit = exit.min((f64::from(Self::ROOM_MAX[i]) - o[i]) / dir[i]);
-            } else if dir[i] < 0.0 {
-                exit = exit.min((f64::from(Self::ROOM_MIN[i]) - o[i]) / dir[i]);
-            }
+        let (o, dir) = (glam::DVec3::from_array(o), glam::DVec3::from_array(dir));
+        let v = |a: [f32; 3]| glam::DVec3::from_array(a.map(f64::from));
+        // Inside the room: the nearest exit face; then the solid box and the sphere.
+        let mut best = ray_box_exit(o, dir, v(Self::ROOM_MIN), v(Self::ROOM_MAX)).unwrap_or(f64::INFINITY);
+        if let Some(t) = ray_box_entry(o, dir, v(Self::BOX_MIN), v(Self::BOX_MAX)) {
+            best = best.min(t);
         }
-        best = best.min(exit);
-        // Solid box: slab entry.
-        let (mut t_near, mut t_far) = (f64::NEG_INFINITY, f64::INFINITY);
-        for i in 0..3 {
-            let (lo, hi) = (f64::from(Self::BOX_MIN[i]), f64::from(Self::BOX_MAX[i]));
-            if dir[i].abs() < 1e-15 {
-                if o[i] < lo || o[i] > hi {
-                    t_near = f64::INFINITY;
-                }
-                continue;
-            }
-            let (a, b) = ((lo - o[i]) / dir[i], (hi - o[i]) / dir[i]);
-            t_near = t_near.max(a.min(b));
-            t_far = t_far.min(a.max(b));
-        }
-        if t_near <= t_far && t_near > 0.0 {
-            best = best.min(t_near);
-        }
-        // Sphere.
-        let c = Self::SPHERE_CENTRE.map(f64::from);
-        let oc = [o[0] - c[0], o[1] - c[1], o[2] - c[2]];
-        let b = oc[0] * dir[0] + oc[1] * dir[1] + oc[2] * dir[2];
-        let cc = oc[0] * oc[0] + oc[1] * oc[1] + oc[2] * oc[2] - f64::from(Self::SPHERE_RADIUS_M).powi(2);
+        let oc = o - v(Self::SPHERE_CENTRE);
+        let b = oc.dot(dir);
+        let cc = oc.length_squared() - f64::from(Self::SPHERE_RADIUS_M).powi(2);
         let disc = b * b - cc;
         if disc >= 0.0 {
             let t = -b - disc.sqrt();
@@ -105,21 +83,7 @@ impl Room {
 
     /// Raw depth (units of 1/`UNITS_PER_M` m) seen from `world_from_camera`.
     pub(crate) fn render_depth_units(k: &PinholeIntrinsics, world_from_camera: &webfusion_core::Se3) -> Vec<u16> {
-        let mut out = Vec::with_capacity(k.pixel_count());
-        let o = world_from_camera.translation_m;
-        for y in 0..k.height_px {
-            for x in 0..k.width_px {
-                let ray = glam::DVec3::new((f64::from(x) - f64::from(k.cx_px)) / f64::from(k.fx_px), (f64::from(y) - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
-                let dir_cam = ray.normalize();
-                let dir = world_from_camera.rotation * dir_cam;
-                let units = Self::ray_distance(o.to_array(), dir.to_array())
-                    .map(|t| (t * dir_cam.z * f64::from(UNITS_PER_M)).round())
-                    .filter(|&u| u > 0.0 && u < 65535.0)
-                    .map_or(0, |u| u as u16);
-                out.push(units);
-            }
-        }
-        out
+        render_scene_units(k, world_from_camera, Self::ray_distance)
     }
 }
 
@@ -130,11 +94,9 @@ pub(crate) fn render_scene_units(k: &PinholeIntrinsics, world_from_camera: &webf
     let o = world_from_camera.translation_m;
     for y in 0..k.height_px {
         for x in 0..k.width_px {
-            let ray = glam::DVec3::new((f64::from(x) - f64::from(k.cx_px)) / f64::from(k.fx_px), (f64::from(y) - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
-            let dir_cam = ray.normalize();
+            let dir_cam = camera_ray(k, x, y);
             let dir = world_from_camera.rotation * dir_cam;
-            let units = ray_distance(o.to_array(), dir.to_array()).map(|t| (t * dir_cam.z * f64::from(UNITS_PER_M)).round()).filter(|&u| u > 0.0 && u < 65535.0).map_or(0, |u| u as u16);
-            out.push(units);
+            out.push(ray_distance(o.to_array(), dir.to_array()).map_or(0, |t| depth_units(t, dir_cam.z, f64::from(UNITS_PER_M))));
         }
     }
     out

@@ -39,6 +39,50 @@ pub struct Hit {
     pub albedo: [f64; 3],
 }
 
+/// Distance along the ray from `o` (inside the box `lo`..`hi`) in direction `dir` to where it
+/// leaves the box, when that lies ahead.
+pub fn ray_box_exit(o: DVec3, dir: DVec3, lo: DVec3, hi: DVec3) -> Option<f64> {
+    let mut exit = f64::INFINITY;
+    for i in 0..3 {
+        if dir[i] > 0.0 {
+            exit = exit.min((hi[i] - o[i]) / dir[i]);
+        } else if dir[i] < 0.0 {
+            exit = exit.min((lo[i] - o[i]) / dir[i]);
+        }
+    }
+    (exit.is_finite() && exit > 0.0).then_some(exit)
+}
+
+/// Distance along the ray from `o` in direction `dir` to where it enters the solid box
+/// `min`..`max` (the slab method), when that lies ahead.
+pub fn ray_box_entry(o: DVec3, dir: DVec3, min: DVec3, max: DVec3) -> Option<f64> {
+    let (mut t_near, mut t_far) = (f64::NEG_INFINITY, f64::INFINITY);
+    for i in 0..3 {
+        if dir[i].abs() < 1e-15 {
+            if o[i] < min[i] || o[i] > max[i] {
+                t_near = f64::INFINITY;
+            }
+            continue;
+        }
+        let (a, c) = ((min[i] - o[i]) / dir[i], (max[i] - o[i]) / dir[i]);
+        t_near = t_near.max(a.min(c));
+        t_far = t_far.min(a.max(c));
+    }
+    (t_near <= t_far && t_near > 0.0).then_some(t_near)
+}
+
+/// The unit direction, in the camera frame, of pixel (`x`, `y`)'s ray.
+pub fn camera_ray(k: &PinholeIntrinsics, x: u32, y: u32) -> DVec3 {
+    DVec3::new((f64::from(x) - f64::from(k.cx_px)) / f64::from(k.fx_px), (f64::from(y) - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0).normalize()
+}
+
+/// The raw depth of a hit `t_m` along a pixel's unit ray whose camera-frame z is `ray_z`: z depth
+/// in units of 1/`units_per_m` metres, rounded; 0 where it does not fit a u16 (none, or too far).
+pub fn depth_units(t_m: f64, ray_z: f64, units_per_m: f64) -> u16 {
+    let units = (t_m * ray_z * units_per_m).round();
+    if units > 0.0 && units < 65535.0 { units as u16 } else { 0 }
+}
+
 /// A furnished room (see the module doc).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SyntheticRoom {
@@ -98,33 +142,12 @@ impl SyntheticRoom {
     /// The first surface along the unit ray from `o` (inside the room) in direction `dir`.
     pub fn cast(&self, o: DVec3, dir: DVec3) -> Option<Hit> {
         let (lo, hi) = self.bounds();
-        let mut best: Option<(f64, [f64; 3])> = None;
-        // The room's walls, floor and ceiling: the nearest exit face.
-        let mut exit = f64::INFINITY;
-        for i in 0..3 {
-            if dir[i] > 0.0 {
-                exit = exit.min((hi[i] - o[i]) / dir[i]);
-            } else if dir[i] < 0.0 {
-                exit = exit.min((lo[i] - o[i]) / dir[i]);
-            }
-        }
-        if exit.is_finite() && exit > 0.0 {
-            best = Some((exit, [0.82, 0.8, 0.74]));
-        }
+        // The room's walls, floor and ceiling: where the ray leaves it; then the nearest box.
+        let mut best = ray_box_exit(o, dir, lo, hi).map(|t| (t, [0.82, 0.8, 0.74]));
         for b in &self.boxes {
-            let (mut t_near, mut t_far) = (f64::NEG_INFINITY, f64::INFINITY);
-            for i in 0..3 {
-                if dir[i].abs() < 1e-15 {
-                    if o[i] < b.min[i] || o[i] > b.max[i] {
-                        t_near = f64::INFINITY;
-                    }
-                    continue;
-                }
-                let (a, c) = ((b.min[i] - o[i]) / dir[i], (b.max[i] - o[i]) / dir[i]);
-                t_near = t_near.max(a.min(c));
-                t_far = t_far.min(a.max(c));
-            }
-            if t_near <= t_far && t_near > 0.0 && best.is_none_or(|(t, _)| t_near < t) {
+            if let Some(t_near) = ray_box_entry(o, dir, b.min, b.max)
+                && best.is_none_or(|(t, _)| t_near < t)
+            {
                 best = Some((t_near, b.albedo));
             }
         }
@@ -174,12 +197,10 @@ impl SyntheticRoom {
         let o = world_from_camera.translation_m;
         for y in first..end {
             for x in 0..k.width_px {
-                let ray = DVec3::new((f64::from(x) - f64::from(k.cx_px)) / f64::from(k.fx_px), (f64::from(y) - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
-                let dir_cam = ray.normalize();
+                let dir_cam = camera_ray(k, x, y);
                 match self.cast(o, world_from_camera.rotation * dir_cam) {
                     Some(hit) => {
-                        let units = (hit.t_m * dir_cam.z * units_per_m).round();
-                        depth.push(if units > 0.0 && units < 65535.0 { units as u16 } else { 0 });
+                        depth.push(depth_units(hit.t_m, dir_cam.z, units_per_m));
                         let shade = Self::texture(hit.point);
                         color.extend(hit.albedo.map(|a| (255.0 * a * shade).round().clamp(0.0, 255.0) as u8));
                     }
