@@ -23,6 +23,45 @@ pub fn kinect_sigma_m(z_m: f32) -> f32 {
     0.0012 + 0.0019 * d * d
 }
 
+/// Twin of `kinect_sigma_at_angle_m()` in `shared/kinect.wgsl`: the axial noise at `z_m` and
+/// incidence angle `theta_rad`, metres.
+pub fn kinect_sigma_at_angle_m(z_m: f32, theta_rad: f32) -> f32 {
+    let mut sigma = kinect_sigma_m(z_m);
+    if theta_rad > std::f32::consts::FRAC_PI_3 {
+        let g = theta_rad / (std::f32::consts::FRAC_PI_2 - theta_rad);
+        sigma += 0.0001 / z_m.sqrt() * g * g;
+    }
+    sigma
+}
+
+/// Twin of `kinect_lateral_sigma_px()` in `shared/kinect.wgsl`: the lateral noise at incidence
+/// angle `theta_rad`, pixels.
+pub fn kinect_lateral_sigma_px(theta_rad: f32) -> f32 {
+    0.8 + 0.035 * theta_rad / (std::f32::consts::FRAC_PI_2 - theta_rad)
+}
+
+/// Twin of `pcg_hash()` in `shared/random.wgsl`.
+pub fn pcg_hash(v: u32) -> u32 {
+    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
+}
+
+/// Twin of `random_uniform()` in `shared/random.wgsl`: advances `state`, returns (0, 1).
+pub fn random_uniform(state: &mut u32) -> f32 {
+    *state = pcg_hash(*state);
+    ((*state >> 8) as f32 + 0.5) * (1.0 / 16_777_216.0)
+}
+
+/// Twin of `random_gauss2()` in `shared/random.wgsl`: two standard normal numbers.
+pub fn random_gauss2(state: &mut u32) -> [f32; 2] {
+    let u1 = random_uniform(state);
+    let u2 = random_uniform(state);
+    let r = (-2.0 * u1.ln()).sqrt();
+    let phi = std::f32::consts::TAU * u2;
+    [r * phi.cos(), r * phi.sin()]
+}
+
 /// Twin of `depth_to_metres()` in `shared/depth.wgsl`.
 pub fn depth_to_metres(raw_units: u32, metres_per_unit: f32, min_depth_m: f32, max_depth_m: f32) -> f32 {
     if raw_units == 0 {
