@@ -26,6 +26,12 @@ pub trait FrameSource: Send {
     /// Ground-truth camera poses (`world_from_camera`), if the source has them.
     fn ground_truth(&self) -> Option<&[TimedPose]>;
 
+    /// Depth timestamp of frame `index`, nanoseconds: by reading the frame, unless the source
+    /// knows it without decoding (a TUM directory's list).
+    fn frame_timestamp_ns(&mut self, index: usize) -> Result<i64> {
+        Ok(self.read_frame(index)?.depth_timestamp_ns)
+    }
+
     /// Frames the device produced but this source never handed out, so far (a live camera's
     /// gaps in its own frame numbers); files drop nothing.
     fn frames_dropped_by_source(&self) -> u64 {

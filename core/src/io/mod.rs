@@ -10,7 +10,7 @@ pub mod trajectory;
 pub mod tum;
 
 pub use trajectory::{TUM_TRAJECTORY_HEADER, TimedPose, format_tum_trajectory, parse_tum_trajectory, push_tum_line, read_tum_trajectory, write_tum_trajectory};
-pub use tum::{DEFAULT_MAX_TIME_DIFFERENCE_NS, TumDataset, TumFrameFiles, TumOptions};
+pub use tum::{CALIBRATION_FILE, DEFAULT_MAX_TIME_DIFFERENCE_NS, TumDataset, TumFrameFiles, TumOptions, WrittenCalibration, format_calibration_file, read_calibration_file};
 
 /// Nanoseconds per second.
 const NS_PER_S: i64 = 1_000_000_000;

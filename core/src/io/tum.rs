@@ -5,6 +5,10 @@
 //! name (colour RGB8, depth 16-bit with 5000 units per metre) and, for most sequences,
 //! `groundtruth.txt`. Depth and colour are captured at slightly different times; they are
 //! paired the way the benchmark's `associate.py` does it.
+//!
+//! Directories webfusion writes (`simulate`) may also hold [`CALIBRATION_FILE`], which the
+//! reader takes before any calibration named by the path, and may hold depth only (no
+//! `rgb.txt`: every frame's colour is black, its timestamp the depth's).
 
 use std::path::{Component, Path, PathBuf};
 
@@ -45,8 +49,8 @@ pub struct TumFrameFiles {
     pub depth_path: PathBuf,
     /// Colour timestamp, nanoseconds since the Unix epoch.
     pub color_timestamp_ns: i64,
-    /// Colour PNG.
-    pub color_path: PathBuf,
+    /// Colour PNG (`None` in a depth-only directory: the colour is black).
+    pub color_path: Option<PathBuf>,
 }
 
 /// A TUM RGB-D sequence on disk, as a [`FrameSource`] of its associated frames.
@@ -55,6 +59,9 @@ pub struct TumDataset {
     dir: PathBuf,
     name: String,
     calibration: RgbdCalibration,
+    /// The depth images hold distances along each pixel's ray (converted to depth along z on
+    /// reading).
+    radial_depth: bool,
     frames: Vec<TumFrameFiles>,
     ground_truth: Option<Vec<TimedPose>>,
 }
@@ -68,10 +75,10 @@ impl TumDataset {
     /// Opens a TUM directory: reads the image lists and the ground truth, pairs depth with
     /// colour, and settles the calibration. Images are read later, by [`FrameSource::read_frame`].
     ///
-    /// Without an override the calibration comes from the path: the nearest path component
-    /// (the directory itself first, then its parents; symlinks resolved, else as given) naming
-    /// `freiburg1`/`fr1`, 2 or 3 selects the published calibration; otherwise this is
-    /// [`Error::UnknownCalibration`].
+    /// Without an override the calibration comes from the directory's [`CALIBRATION_FILE`],
+    /// else from the path: the nearest path component (the directory itself first, then its
+    /// parents; symlinks resolved, else as given) naming `freiburg1`/`fr1`, 2 or 3 selects the
+    /// published calibration; otherwise this is [`Error::UnknownCalibration`].
     pub fn open_with(dir: impl AsRef<Path>, options: TumOptions) -> Result<Self> {
         let dir = dir.as_ref();
         if options.max_time_difference_ns <= 0 {
@@ -83,14 +90,28 @@ impl TumDataset {
             .file_name()
             .or(resolved_dir.file_name())
             .map_or_else(|| resolved_dir.display().to_string(), |n| n.to_string_lossy().into_owned());
-        let calibration = match options.calibration_override {
-            Some(calibration) => calibration,
-            None => calibration_from_path(&resolved_dir)
+        let file = dir.join(CALIBRATION_FILE);
+        let written = if file.is_file() { Some(read_calibration_file(&file)?) } else { None };
+        let radial_depth = written.is_some_and(|w| w.radial_depth);
+        let calibration = match (options.calibration_override, written) {
+            (Some(calibration), _) => calibration,
+            (None, Some(w)) => w.calibration,
+            (None, None) => calibration_from_path(&resolved_dir)
                 .or_else(|| calibration_from_path(dir))
                 .ok_or_else(|| Error::UnknownCalibration { source_name: dir.display().to_string() })?,
         };
         let depth_list = read_image_list(&dir.join("depth.txt"))?;
-        let color_list = read_image_list(&dir.join("rgb.txt"))?;
+        let rgb_list = dir.join("rgb.txt");
+        if !rgb_list.is_file() && written.is_some() {
+            let frames = depth_list
+                .into_iter()
+                .map(|(t, name)| TumFrameFiles { depth_timestamp_ns: t, depth_path: dir.join(name), color_timestamp_ns: t, color_path: None })
+                .collect();
+            let ground_truth_path = dir.join("groundtruth.txt");
+            let ground_truth = if ground_truth_path.is_file() { Some(read_tum_trajectory(&ground_truth_path)?) } else { None };
+            return Ok(Self { dir: dir.to_owned(), name, calibration, radial_depth, frames, ground_truth });
+        }
+        let color_list = read_image_list(&rgb_list)?;
         let depth_timestamps: Vec<i64> = depth_list.iter().map(|(t, _)| *t).collect();
         let color_timestamps: Vec<i64> = color_list.iter().map(|(t, _)| *t).collect();
         let pairs = associate(&depth_timestamps, &color_timestamps, options.max_time_difference_ns);
@@ -111,12 +132,12 @@ impl TumDataset {
                 depth_timestamp_ns: depth_list[depth_ix].0,
                 depth_path: dir.join(&depth_list[depth_ix].1),
                 color_timestamp_ns: color_list[color_ix].0,
-                color_path: dir.join(&color_list[color_ix].1),
+                color_path: Some(dir.join(&color_list[color_ix].1)),
             })
             .collect();
         let ground_truth_path = dir.join("groundtruth.txt");
         let ground_truth = if ground_truth_path.is_file() { Some(read_tum_trajectory(&ground_truth_path)?) } else { None };
-        Ok(Self { dir: dir.to_owned(), name, calibration, frames, ground_truth })
+        Ok(Self { dir: dir.to_owned(), name, calibration, radial_depth, frames, ground_truth })
     }
 
     /// The directory, as given to `open`.
@@ -150,9 +171,17 @@ impl FrameSource for TumDataset {
         })?;
         let (width_px, height_px) = (self.calibration.intrinsics.width_px, self.calibration.intrinsics.height_px);
         let depth_bytes = read_file(&files.depth_path)?;
-        let depth = png::decode_depth16(&depth_bytes, width_px, height_px).map_err(|e| image_error(&files.depth_path, e))?;
-        let color_bytes = read_file(&files.color_path)?;
-        let color = png::decode_rgb8(&color_bytes, width_px, height_px).map_err(|e| image_error(&files.color_path, e))?;
+        let mut depth = png::decode_depth16(&depth_bytes, width_px, height_px).map_err(|e| image_error(&files.depth_path, e))?;
+        if self.radial_depth {
+            radial_to_planar(&mut depth.units, &self.calibration.intrinsics);
+        }
+        let color = match &files.color_path {
+            Some(path) => {
+                let color_bytes = read_file(path)?;
+                png::decode_rgb8(&color_bytes, width_px, height_px).map_err(|e| image_error(path, e))?
+            }
+            None => crate::ColorImage::new(width_px, height_px, vec![0; 3 * width_px as usize * height_px as usize])?,
+        };
         Ok(RgbdFrame {
             index: index as u64,
             depth_timestamp_ns: files.depth_timestamp_ns,
@@ -164,6 +193,10 @@ impl FrameSource for TumDataset {
 
     fn ground_truth(&self) -> Option<&[TimedPose]> {
         self.ground_truth.as_deref()
+    }
+
+    fn frame_timestamp_ns(&mut self, index: usize) -> Result<i64> {
+        self.frames.get(index).map(|f| f.depth_timestamp_ns).ok_or_else(|| Error::Dataset { path: self.dir.clone(), message: format!("frame {index} does not exist ({} frames)", self.frames.len()) })
     }
 }
 
@@ -299,6 +332,90 @@ fn associate(depth_ns: &[i64], color_ns: &[i64], max_difference_ns: i64) -> Vec<
     pairs
 }
 
+/// The calibration file of a directory webfusion wrote: `key value` lines (`#` comments):
+/// `fx_px`, `fy_px`, `cx_px`, `cy_px` (pixels, pixel centres at integer coordinates),
+/// `width_px`, `height_px`, `depth_units_per_metre` and `depth` (`planar`: along the camera's z,
+/// the TUM convention; `radial`: along each pixel's ray).
+pub const CALIBRATION_FILE: &str = "calibration.txt";
+
+/// What a [`CALIBRATION_FILE`] says.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WrittenCalibration {
+    /// The camera and depth scale.
+    pub calibration: RgbdCalibration,
+    /// The depth images hold distances along each ray.
+    pub radial_depth: bool,
+}
+
+/// The text of a [`CALIBRATION_FILE`].
+pub fn format_calibration_file(w: &WrittenCalibration) -> String {
+    let k = &w.calibration.intrinsics;
+    format!(
+        "# webfusion camera calibration: pinhole, pixel centres at integer coordinates\nfx_px {}\nfy_px {}\ncx_px {}\ncy_px {}\nwidth_px {}\nheight_px {}\ndepth_units_per_metre {}\ndepth {}\n",
+        k.fx_px,
+        k.fy_px,
+        k.cx_px,
+        k.cy_px,
+        k.width_px,
+        k.height_px,
+        w.calibration.depth_units_per_metre,
+        if w.radial_depth { "radial" } else { "planar" }
+    )
+}
+
+/// Reads a [`CALIBRATION_FILE`]; every key must be present once, with a valid value.
+pub fn read_calibration_file(path: &Path) -> Result<WrittenCalibration> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_owned(), source })?;
+    parse_calibration_file(&text, path)
+}
+
+/// Parses the text of a [`CALIBRATION_FILE`] (`path` names it in errors).
+pub fn parse_calibration_file(text: &str, path: &Path) -> Result<WrittenCalibration> {
+    const KEYS: [&str; 8] = ["fx_px", "fy_px", "cx_px", "cy_px", "width_px", "height_px", "depth_units_per_metre", "depth"];
+    let mut values: [Option<&str>; 8] = [None; 8];
+    for (line_ix, line) in text.lines().enumerate() {
+        let Some(fields) = data_fields(line) else { continue };
+        let parse_error = |message: String| Error::Parse { path: path.to_owned(), line: line_ix + 1, message };
+        let [key, value] = fields[..] else {
+            return Err(parse_error(format!("expected `key value`, found {} fields", fields.len())));
+        };
+        let slot = KEYS.iter().position(|k| *k == key).ok_or_else(|| parse_error(format!("unknown key {key:?} (expected one of {})", KEYS.join(", "))))?;
+        if values[slot].replace(value).is_some() {
+            return Err(parse_error(format!("{key} is given twice")));
+        }
+    }
+    let bad = |message: String| Error::Parse { path: path.to_owned(), line: 0, message };
+    let get = |i: usize| values[i].ok_or_else(|| bad(format!("{} is missing", KEYS[i])));
+    let positive = |i: usize| -> Result<f32> {
+        let v = get(i)?;
+        v.parse::<f32>().ok().filter(|x| x.is_finite() && (*x > 0.0 || (i == 2 || i == 3))).ok_or_else(|| bad(format!("{} {v:?} is not a valid number", KEYS[i])))
+    };
+    let size = |i: usize| -> Result<u32> {
+        let v = get(i)?;
+        v.parse::<u32>().ok().filter(|&x| x > 0).ok_or_else(|| bad(format!("{} {v:?} is not a positive whole number of pixels", KEYS[i])))
+    };
+    let radial_depth = match get(7)? {
+        "planar" => false,
+        "radial" => true,
+        other => return Err(bad(format!("depth {other:?}: expected planar or radial"))),
+    };
+    let intrinsics = crate::PinholeIntrinsics { fx_px: positive(0)?, fy_px: positive(1)?, cx_px: positive(2)?, cy_px: positive(3)?, width_px: size(4)?, height_px: size(5)? };
+    Ok(WrittenCalibration { calibration: RgbdCalibration { intrinsics, depth_units_per_metre: positive(6)? }, radial_depth })
+}
+
+/// Distances along each pixel's ray to depths along z, in place (raw units, rounded).
+fn radial_to_planar(units: &mut [u16], k: &crate::PinholeIntrinsics) {
+    let w = k.width_px as usize;
+    for (i, u) in units.iter_mut().enumerate() {
+        if *u == 0 {
+            continue;
+        }
+        let rx = ((i % w) as f64 - f64::from(k.cx_px)) / f64::from(k.fx_px);
+        let ry = ((i / w) as f64 - f64::from(k.cy_px)) / f64::from(k.fy_px);
+        *u = (f64::from(*u) / (rx * rx + ry * ry + 1.0).sqrt()).round() as u16;
+    }
+}
+
 /// The published calibration named by the nearest path component that mentions exactly one
 /// of `freiburg1`/`fr1`, `freiburg2`/`fr2`, `freiburg3`/`fr3` (case-insensitive).
 fn calibration_from_path(dir: &Path) -> Option<RgbdCalibration> {
@@ -417,7 +534,7 @@ mod tests {
         assert_eq!(reference.len(), 100, "pairs in rgbd_assoc.txt");
         for (files, (ts_rgb, rgb, ts_depth, depth)) in dataset.frames().iter().zip(&reference) {
             assert_eq!((files.color_timestamp_ns, files.depth_timestamp_ns), (*ts_rgb, *ts_depth), "timestamps of {depth}");
-            assert_eq!((files.color_path.clone(), files.depth_path.clone()), (dir.join(rgb), dir.join(depth)), "files of {depth}");
+            assert_eq!((files.color_path.clone(), files.depth_path.clone()), (Some(dir.join(rgb)), dir.join(depth)), "files of {depth}");
         }
 
         let frame = dataset.read_frame(99).expect("reading the last frame");
@@ -472,6 +589,51 @@ mod tests {
         RgbdCalibration {
             intrinsics: PinholeIntrinsics { fx_px: 4.0, fy_px: 4.0, cx_px: 1.5, cy_px: 1.0, width_px: 4, height_px: 3 },
             depth_units_per_metre: 1000.0,
+        }
+    }
+
+    #[test]
+    fn a_calibration_file_is_picked_up_and_a_depth_only_radial_directory_reads_as_planar() {
+        let scratch = ScratchDir::new("tum-calibration-file");
+        let dir = scratch.path().join("simulated");
+        std::fs::create_dir_all(dir.join("depth")).expect("mkdir");
+        let k = PinholeIntrinsics { fx_px: 2.0, fy_px: 2.0, cx_px: 1.5, cy_px: 1.0, width_px: 4, height_px: 3 };
+        let written = WrittenCalibration { calibration: RgbdCalibration { intrinsics: k, depth_units_per_metre: 1000.0 }, radial_depth: true };
+        std::fs::write(dir.join(CALIBRATION_FILE), format_calibration_file(&written)).expect("calibration");
+        assert_eq!(read_calibration_file(&dir.join(CALIBRATION_FILE)).expect("reads back"), written, "round trip");
+        // Distances of 2 m along every ray: the corner (0, 0) ray is (-0.75, -0.5, 1).
+        let depth = DepthImage::new(4, 3, vec![2000; 12]).expect("depth");
+        std::fs::write(dir.join("depth/a.png"), png::encode_depth16(&depth).expect("png")).expect("write");
+        std::fs::write(dir.join("depth.txt"), "# depth\n5.000 depth/a.png\n").expect("list");
+        let mut dataset = TumDataset::open(&dir, None).expect("opens with its own calibration, no rgb.txt");
+        assert_eq!(dataset.calibration(), written.calibration);
+        let frame = dataset.read_frame(0).expect("frame");
+        assert_eq!(frame.color_timestamp_ns, frame.depth_timestamp_ns, "depth only: colour at the depth's time");
+        assert_eq!(frame.color.rgb8, vec![0; 36], "black colour");
+        let norm = (0.75f64 * 0.75 + 0.25 + 1.0).sqrt();
+        assert_eq!(frame.depth.units[0], (2000.0 / norm).round() as u16, "radial -> planar at the corner");
+        assert_eq!(dataset.frame_timestamp_ns(0).expect("timestamp"), 5_000_000_000);
+        // Without the calibration file the same directory needs rgb.txt (and a calibration).
+        std::fs::remove_file(dir.join(CALIBRATION_FILE)).expect("rm");
+        assert!(TumDataset::open(&dir, Some(written.calibration)).is_err(), "no rgb.txt, no calibration file");
+    }
+
+    #[test]
+    fn a_bad_calibration_file_is_a_typed_error_naming_the_problem() {
+        let path = Path::new("calibration.txt");
+        let good = format_calibration_file(&WrittenCalibration { calibration: small_calibration(), radial_depth: false });
+        assert!(parse_calibration_file(&good, path).is_ok());
+        for (text, needle) in [
+            (good.replace("fx_px 4\n", ""), "fx_px is missing"),
+            (good.replace("depth planar", "depth spherical"), "planar or radial"),
+            (good.replace("width_px 4", "width_px -4"), "width_px"),
+            (good.replace("fy_px 4", "fy_px NaN"), "fy_px"),
+            (format!("{good}fx_px 5\n"), "twice"),
+            (format!("{good}skew 0\n"), "unknown key"),
+            (good.replace("cx_px 1.5", "cx_px 1.5 2"), "key value"),
+        ] {
+            let err = parse_calibration_file(&text, path).expect_err(needle);
+            assert!(matches!(err, Error::Parse { .. }) && err.to_string().contains(needle), "{needle}: {err}");
         }
     }
 
