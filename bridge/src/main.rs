@@ -4,12 +4,15 @@
 
 mod bench_stream;
 mod calib;
+mod compare;
 mod eval;
 #[cfg(feature = "openni2")]
 mod openni;
+mod plot;
 mod reconstruct;
 mod record;
 mod serve;
+mod simulate;
 mod synth;
 mod timing;
 
@@ -72,6 +75,13 @@ enum Command {
     /// Render the synthetic furnished room along a loop into a `.wfr` recording with exact
     /// ground truth (room-sized runs of the map).
     SynthRoom(synth::SynthRoomArgs),
+    /// Seed 000's virtual depth sensor: render a saved map at given poses into a TUM-layout
+    /// directory (exact or Kinect-noise depth, optional colour) that every command reads back.
+    Simulate(simulate::SimulateArgs),
+    /// Simulated depth against real depth at the same timestamps (seed 000 §6.3): % of pixels
+    /// over 10 % relative error, new valid pixels, coverage, absolute errors; difference images
+    /// and an error-vs-distance chart.
+    Compare(compare::CompareArgs),
 }
 
 #[derive(clap::Args)]
@@ -137,6 +147,8 @@ fn main() -> anyhow::Result<()> {
         Command::Repair(args) => record::repair(&args),
         Command::Eval(args) => eval::run(&args),
         Command::SynthRoom(args) => synth::run(&args),
+        Command::Simulate(args) => simulate::run(&options, &args),
+        Command::Compare(args) => compare::run(&args),
         Command::Serve(args) => serve::run(args),
         #[cfg(feature = "openni2")]
         Command::Devices => {
@@ -161,7 +173,7 @@ fn main() -> anyhow::Result<()> {
     }
 }
 
-fn open(source: &std::path::Path, calibration: &CalibrationArgs) -> anyhow::Result<Box<dyn FrameSource>> {
+pub(crate) fn open(source: &std::path::Path, calibration: &CalibrationArgs) -> anyhow::Result<Box<dyn FrameSource>> {
     open_with(source, calibration.resolve()?)
 }
 

@@ -164,6 +164,12 @@ impl RaycastTarget {
         }
     }
 
+    /// The uniform buffer holding the pose it renders from (a `CameraPose`), for kernels that
+    /// read its images at the same pose.
+    pub fn pose_buffer(&self) -> &wgpu::Buffer {
+        &self.pose
+    }
+
     /// Tiles of [`RANGE_TILE_PX`] along x and y.
     fn tiles(k: PinholeIntrinsics) -> [u32; 2] {
         [k.width_px.div_ceil(RANGE_TILE_PX), k.height_px.div_ceil(RANGE_TILE_PX)]

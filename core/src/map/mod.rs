@@ -489,6 +489,38 @@ pub async fn mesh_of_blocks(gpu: &Gpu, config: &TsdfConfig, origin_in_world: [f3
     Ok(crate::mesh::Mesh::from_triangle_soup(&soup))
 }
 
+/// A map holding every one of `blocks` on the GPU, with the settings and placement of a saved
+/// map's `header`: a sparse map's pool just large enough for them (one binding), a dense box as
+/// it was saved. What a virtual sensor renders from. A sparse map larger than one binding is
+/// [`Error::InvalidConfig`] naming the sizes.
+pub fn resident_map(gpu: &Gpu, header: &file::MapFileHeader, blocks: &[MapBlock]) -> Result<Map> {
+    let base = TsdfConfig { voxel_size_m: header.voxel_size_m, truncation_m: header.truncation_m, max_weight: header.max_weight, color: header.color, swap: false, ..TsdfConfig::default() };
+    match header.kind {
+        MapKind::Dense => {
+            let config = TsdfConfig { kind: MapKind::Dense, dims_voxels: header.dims_voxels, ..base };
+            let map = Map::new(gpu, config, header.origin_in_world)?;
+            let Map::Dense(dense) = &map else { unreachable!("a dense config makes a dense map") };
+            upload_dense_blocks(gpu, dense, blocks)?;
+            Ok(map)
+        }
+        MapKind::Sparse => {
+            let n = u32::try_from(blocks.len()).unwrap_or(u32::MAX).max(1);
+            let config = TsdfConfig { kind: MapKind::Sparse, pool_blocks: n, ..base };
+            if n > MAX_POOL_BLOCKS || config.validate(gpu.limits.max_storage_buffer_binding_size).is_err() {
+                return Err(Error::InvalidConfig(format!(
+                    "the map's {} blocks do not fit one GPU binding ({} blocks of {} KiB at most): rendering it needs it all on the GPU",
+                    blocks.len(),
+                    MAX_POOL_BLOCKS.min((gpu.limits.max_storage_buffer_binding_size / (4 * u64::from(crate::cpu::shared::BLOCK_VOXELS))) as u32),
+                    4 * crate::cpu::shared::BLOCK_VOXELS / 1024
+                )));
+            }
+            let map = SparseMap::new(gpu, config, header.origin_in_world)?;
+            map.upload_blocks(gpu, blocks)?;
+            Ok(Map::Sparse(map))
+        }
+    }
+}
+
 impl TsdfStore for SparseMap {
     fn desc(&self) -> VolumeDesc {
         self.desc

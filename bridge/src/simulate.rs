@@ -1,0 +1,249 @@
+// SPDX-License-Identifier: MIT
+//! `webfusion simulate`: seed 000's virtual depth sensor. Renders a saved map (`.wfm`) at every
+//! given pose into a TUM-layout directory (depth/, optional rgb/, the lists, the poses as
+//! ground truth and a calibration file the reader picks up), so that `reconstruct`, `serve`
+//! and `compare` read it with no flags: a closed loop for planners and trackers.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use webfusion_core::io::trajectory::{TimedPose, read_tum_trajectory, write_tum_trajectory};
+use webfusion_core::io::{CALIBRATION_FILE, WrittenCalibration, format_calibration_file, format_timestamp_s};
+use webfusion_core::map::file::{read_map_file, read_map_file_recovering};
+use webfusion_core::sim::sensor::{KinectModel, SensorOptions, SimulatedFrame, VirtualSensor};
+use webfusion_core::tsdf::TsdfStore as _;
+use webfusion_core::{ColorImage, DepthImage, Gpu, GpuOptions, PinholeIntrinsics, RgbdCalibration};
+
+/// Frame period given to poses without timestamps (`--robot-poses` in frame order): 30 Hz.
+const FRAME_PERIOD_NS: i64 = 33_333_333;
+
+#[derive(clap::Args)]
+pub(crate) struct SimulateArgs {
+    /// The saved map to render (`reconstruct --save-map`).
+    #[arg(long)]
+    map: PathBuf,
+    /// Camera-to-world poses to render at, TUM trajectory format (`timestamp tx ty tz qx qy qz
+    /// qw`, the map's frame); each frame carries its pose's timestamp. `reconstruct`'s
+    /// trajectory.txt holds the poses of the frames it fused, at their depth timestamps.
+    #[arg(long, conflicts_with = "robot_poses")]
+    poses: Option<PathBuf>,
+    /// Poses in seed 000's robot convention instead (see `reconstruct --robot-poses`); without a
+    /// timestamp column the frames are 1/30 s apart.
+    #[arg(long)]
+    robot_poses: Option<PathBuf>,
+    /// The form of `--robot-poses`: `6dof` or `planar`.
+    #[arg(long, default_value = "6dof")]
+    robot_pose_form: webfusion_core::io::robot_poses::RobotPoseForm,
+    /// The output directory (TUM layout; must not hold a simulation already).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Intrinsics `fx,fy,cx,cy` in pixels (optionally `,W,H`); default the Kinect's nominal
+    /// 525 px at 640x480, scaled to --image-size.
+    #[arg(long, value_name = "FX,FY,CX,CY[,W,H]")]
+    intrinsics: Option<String>,
+    /// Image size `WxH` (default 640x480).
+    #[arg(long, value_name = "WxH")]
+    image_size: Option<String>,
+    /// Raw depth units per metre (TUM: 5000).
+    #[arg(long, default_value_t = 5000.0)]
+    depth_scale: f32,
+    /// Write distances along each pixel's ray instead of depth along z.
+    #[arg(long)]
+    radial: bool,
+    /// The depth noise: `none` (exact) or `kinect` (Kinect v1: Nguyen et al. 2012 axial and
+    /// lateral noise, 1/8-pixel disparity quantisation, projector shadows, dropouts at grazing
+    /// angles and depth edges; see ARCHITECTURE.md).
+    #[arg(long, default_value = "none")]
+    noise: NoiseKind,
+    /// Seed of the noise (a frame's noise depends only on the seed, its index and the pixel).
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+    /// Also write the map's colour (rgb/, rgb.txt, rgbd_assoc.txt).
+    #[arg(long)]
+    color: bool,
+    /// Nearest depth with a return, metres.
+    #[arg(long)]
+    min_depth: Option<f32>,
+    /// Farthest depth with a return, metres.
+    #[arg(long)]
+    max_depth: Option<f32>,
+    /// Load the intact blocks of a damaged map file (with a warning) instead of stopping.
+    #[arg(long)]
+    skip_corrupt: bool,
+    /// Time the renders (submit to readback, one frame at a time, nothing written) and print the
+    /// rate instead of writing a directory.
+    #[arg(long)]
+    bench: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum NoiseKind {
+    None,
+    Kinect,
+}
+
+/// The intrinsics of `--intrinsics` / `--image-size`.
+fn intrinsics(args: &SimulateArgs) -> anyhow::Result<PinholeIntrinsics> {
+    let size = match &args.image_size {
+        Some(s) => {
+            let (w, h) = s.split_once('x').with_context(|| format!("--image-size {s:?}: expected WxH"))?;
+            let (w, h): (u32, u32) = (w.parse().with_context(|| format!("--image-size width {w:?}"))?, h.parse().with_context(|| format!("--image-size height {h:?}"))?);
+            anyhow::ensure!((16..=4096).contains(&w) && (16..=4096).contains(&h), "--image-size {s}: 16..=4096 pixels each way");
+            Some((w, h))
+        }
+        None => None,
+    };
+    let Some(spec) = &args.intrinsics else {
+        let (w, h) = size.unwrap_or((640, 480));
+        return Ok(crate::synth::intrinsics(w, h));
+    };
+    let calibration = crate::calib::CalibrationArgs { intrinsics: Some(spec.clone()), depth_scale: None, image_size: args.image_size.clone() }.resolve()?.expect("--intrinsics given");
+    Ok(calibration.intrinsics)
+}
+
+/// The poses to render at, with their timestamps.
+fn poses(args: &SimulateArgs) -> anyhow::Result<Vec<TimedPose>> {
+    let poses = match (&args.poses, &args.robot_poses) {
+        (Some(path), _) => read_tum_trajectory(path).with_context(|| format!("reading the poses {}", path.display()))?,
+        (None, Some(path)) => webfusion_core::io::robot_poses::read_robot_poses(path, args.robot_pose_form)
+            .with_context(|| format!("reading the robot poses {}", path.display()))?
+            .into_iter()
+            .enumerate()
+            .map(|(i, p)| TimedPose { timestamp_ns: p.timestamp_ns.unwrap_or(i as i64 * FRAME_PERIOD_NS), world_from_camera: p.world_from_camera })
+            .collect(),
+        (None, None) => anyhow::bail!("give the poses to render at: --poses FILE (TUM trajectory) or --robot-poses FILE"),
+    };
+    anyhow::ensure!(!poses.is_empty(), "no poses to render at");
+    for pair in poses.windows(2) {
+        anyhow::ensure!(pair[1].timestamp_ns > pair[0].timestamp_ns, "the poses' timestamps must increase (two frames at {} s)", format_timestamp_s(pair[1].timestamp_ns));
+    }
+    Ok(poses)
+}
+
+fn sensor_options(args: &SimulateArgs) -> anyhow::Result<SensorOptions> {
+    let model = KinectModel::default();
+    let near = args.min_depth.unwrap_or(model.min_depth_m);
+    let far = args.max_depth.unwrap_or(model.max_depth_m);
+    anyhow::ensure!(near.is_finite() && far.is_finite() && near >= 0.0 && far > near, "--min-depth {near} / --max-depth {far}: an empty range");
+    let model = KinectModel { min_depth_m: near.max(0.01), ..model };
+    Ok(SensorOptions { units_per_metre: args.depth_scale, radial: args.radial, noise: (args.noise == NoiseKind::Kinect).then_some((model, args.seed)), depth_range_m: (near, far), color: args.color })
+}
+
+/// A TUM-layout directory being written.
+struct SimDir {
+    dir: PathBuf,
+    depth_list: String,
+    rgb_list: Option<String>,
+    assoc: String,
+}
+
+impl SimDir {
+    fn create(dir: &Path, color: bool) -> anyhow::Result<Self> {
+        anyhow::ensure!(!dir.join("depth.txt").exists(), "{} holds a simulation already (depth.txt): choose an empty directory", dir.display());
+        std::fs::create_dir_all(dir.join("depth")).with_context(|| format!("creating {}", dir.display()))?;
+        if color {
+            std::fs::create_dir_all(dir.join("rgb")).with_context(|| format!("creating {}", dir.display()))?;
+        }
+        let header = "# timestamp filename\n";
+        Ok(Self { dir: dir.to_owned(), depth_list: format!("# simulated depth (webfusion simulate)\n{header}"), rgb_list: color.then(|| format!("# map colour (webfusion simulate)\n{header}")), assoc: String::new() })
+    }
+
+    fn write(&mut self, k: &PinholeIntrinsics, t_ns: i64, frame: &SimulatedFrame) -> anyhow::Result<()> {
+        let t = format_timestamp_s(t_ns);
+        let depth = DepthImage::new(k.width_px, k.height_px, frame.depth_units.clone())?;
+        let name = format!("depth/{t}.png");
+        std::fs::write(self.dir.join(&name), webfusion_core::codec::png::encode_depth16(&depth)?).with_context(|| format!("writing {name}"))?;
+        self.depth_list.push_str(&format!("{t} {name}\n"));
+        if let (Some(list), Some(rgb)) = (&mut self.rgb_list, &frame.color_rgb8) {
+            let color = ColorImage::new(k.width_px, k.height_px, rgb.as_flattened().to_vec())?;
+            let rgb_name = format!("rgb/{t}.png");
+            std::fs::write(self.dir.join(&rgb_name), webfusion_core::codec::png::encode_rgb8(&color)?).with_context(|| format!("writing {rgb_name}"))?;
+            list.push_str(&format!("{t} {rgb_name}\n"));
+            self.assoc.push_str(&format!("{t} {rgb_name} {t} {name}\n"));
+        }
+        Ok(())
+    }
+
+    fn finish(self, calibration: WrittenCalibration, poses: &[TimedPose]) -> anyhow::Result<()> {
+        let write = |name: &str, text: &str| std::fs::write(self.dir.join(name), text).with_context(|| format!("writing {}", self.dir.join(name).display()));
+        write("depth.txt", &self.depth_list)?;
+        if let Some(list) = &self.rgb_list {
+            write("rgb.txt", list)?;
+            write("rgbd_assoc.txt", &self.assoc)?;
+        }
+        write_tum_trajectory(&self.dir.join("groundtruth.txt"), poses)?;
+        write(CALIBRATION_FILE, &format_calibration_file(&calibration))
+    }
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<()> {
+    let k = intrinsics(args)?;
+    let poses = poses(args)?;
+    let sensor_options = sensor_options(args)?;
+    anyhow::ensure!(args.bench || args.out.is_some(), "--out DIR is needed (or --bench)");
+    let file = if args.skip_corrupt { read_map_file_recovering(&args.map) } else { read_map_file(&args.map) }.with_context(|| format!("reading the map {}", args.map.display()))?;
+    if let Some(damage) = &file.damage {
+        eprintln!("warning: {}: {damage}; rendering the intact blocks", args.map.display());
+    }
+    let gpu = pollster::block_on(Gpu::new(options))?;
+    let map = webfusion_core::map::resident_map(&gpu, &file.header, &file.blocks).with_context(|| format!("loading {}", args.map.display()))?;
+    println!("map {}: {} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU); {} poses, {}x{}, noise {:?}", args.map.display(), file.blocks.len(), file.header.voxel_size_m * 1e3, file.header.kind.name(), map.memory_bytes() as f64 / 1048576.0, poses.len(), k.width_px, k.height_px, args.noise);
+    let mut sensor = VirtualSensor::new(&gpu, &map, k, sensor_options)?;
+    if args.bench {
+        // One warm-up render, then each pose alone: submit, wait, read back.
+        pollster::block_on(sensor.render(&gpu, &map, &poses[0].world_from_camera, 0))?;
+        let mut ms = Vec::with_capacity(poses.len());
+        let started = std::time::Instant::now();
+        for (i, p) in poses.iter().enumerate() {
+            let t = std::time::Instant::now();
+            pollster::block_on(sensor.render(&gpu, &map, &p.world_from_camera, i as u32))?;
+            ms.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        let total_s = started.elapsed().as_secs_f64();
+        let mut sorted = ms.clone();
+        sorted.sort_by(f64::total_cmp);
+        println!("simulated {} frames in {total_s:.2} s: {:.1} frames/s; per frame median {:.1} ms, p95 {:.1} ms (render + readback, noise {:?})", poses.len(), poses.len() as f64 / total_s, percentile(&sorted, 0.5), percentile(&sorted, 0.95), args.noise);
+        return Ok(());
+    }
+    let out = args.out.as_ref().expect("checked");
+    let mut dir = SimDir::create(out, args.color)?;
+    let started = std::time::Instant::now();
+    let mut returns = 0u64;
+    let mut write = |frame: SimulatedFrame, dir: &mut SimDir| -> anyhow::Result<()> {
+        returns += frame.depth_units.iter().filter(|&&u| u > 0).count() as u64;
+        dir.write(&k, poses[frame.tag as usize].timestamp_ns, &frame)
+    };
+    for (i, p) in poses.iter().enumerate() {
+        while !sensor.can_submit() {
+            let frame = pollster::block_on(sensor.wait(&gpu))?.context("a frame in flight")?;
+            write(frame, &mut dir)?;
+        }
+        sensor.submit(&gpu, &map, &p.world_from_camera, i as u32, i as u64)?;
+        for frame in sensor.collect(&gpu)? {
+            write(frame, &mut dir)?;
+        }
+    }
+    while let Some(frame) = pollster::block_on(sensor.wait(&gpu))? {
+        write(frame, &mut dir)?;
+    }
+    let errors = gpu.take_errors();
+    anyhow::ensure!(errors.is_empty(), "the GPU reported errors: {}", errors.join("; "));
+    let calibration = WrittenCalibration { calibration: RgbdCalibration { intrinsics: k, depth_units_per_metre: args.depth_scale }, radial_depth: args.radial };
+    dir.finish(calibration, &poses)?;
+    let elapsed = started.elapsed().as_secs_f64();
+    println!(
+        "{}: {} frames in {elapsed:.1} s ({:.1} frames/s with PNG writing); {:.1} % of the pixels have a return",
+        out.display(),
+        poses.len(),
+        poses.len() as f64 / elapsed,
+        100.0 * returns as f64 / (poses.len() as f64 * k.pixel_count() as f64)
+    );
+    Ok(())
+}
