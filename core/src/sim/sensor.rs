@@ -9,6 +9,7 @@ use crate::engine::ReadbackRing;
 use crate::fusion::predictor::RaycastTarget;
 use crate::kernels::GpuIntrinsics;
 use crate::kernels::depth_sensor::{self, DepthSensorParams};
+use crate::kernels::projector_shadow::{self, ProjectorShadowParams};
 use crate::tsdf::TsdfStore;
 use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
 
@@ -65,15 +66,14 @@ impl KinectModel {
             disparity_subpixel: self.disparity_subpixel,
             max_incidence_rad: self.max_incidence_deg.to_radians(),
             edge_disparity_px: self.edge_disparity_px,
-            shadow_search_px: self.shadow_search_px(k.fx_px),
             ..Default::default()
         }
     }
 
-    /// Pixels to search for an occluder of the projector: the shadow of a surface at the near
-    /// limit on one at infinity, b·f_x / z_min.
-    pub fn shadow_search_px(&self, fx_px: f32) -> u32 {
-        (self.baseline_m.abs() * fx_px / self.min_depth_m).ceil().clamp(1.0, 1024.0) as u32
+    /// `projector_shadow`'s parameters for images of `k`: the depth-step tolerance converted
+    /// from the IR camera's pixels to the image's.
+    pub fn shadow_params(&self, k: GpuIntrinsics) -> ProjectorShadowParams {
+        ProjectorShadowParams { intrinsics: k, baseline_m: self.baseline_m, edge_disparity_px: self.edge_disparity_px * k.fx_px / self.disparity_focal_px, ..Default::default() }
     }
 }
 
@@ -137,6 +137,8 @@ pub struct VirtualSensor {
     params_buffer: wgpu::Buffer,
     depth_raw: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
+    /// With noise: `projector_shadow`'s parameters, mask and bind group.
+    shadow: Option<(wgpu::Buffer, wgpu::Buffer, wgpu::BindGroup)>,
     options: SensorOptions,
     readback: ReadbackRing<u64>,
 }
@@ -158,18 +160,26 @@ impl VirtualSensor {
         let params_buffer = gpu.uniform_buffer("core.depth_sensor.params", &params);
         let n = intrinsics.pixel_count();
         let depth_raw = gpu.storage_buffer::<u32>("core.depth_sensor.depth_raw", n.div_ceil(2));
+        // The mask is read only with noise; without, one word stands in for it.
+        let mask = gpu.storage_buffer::<u32>("core.projector_shadow.shadow", if options.noise.is_some() { n } else { 1 });
+        let shadow = options.noise.map(|(model, _)| {
+            let p = gpu.uniform_buffer("core.projector_shadow.params", &model.shadow_params(GpuIntrinsics::from(intrinsics)));
+            let bind_group = projector_shadow::Bindings { params: &p, depth_m: &target.depth_m, shadow: &mask }.bind_group(gpu);
+            (p, mask.clone(), bind_group)
+        });
         let bind_group = depth_sensor::Bindings {
             params: &params_buffer,
             pose: target.pose_buffer(),
             depth_m: &target.depth_m,
             vertex_in_world: &target.vertex_in_world,
             normal_in_world: &target.normal_in_world,
+            shadow: &mask,
             depth_raw: &depth_raw,
         }
         .bind_group(gpu);
         let bytes = Self::readback_bytes(n, options.color);
         let readback = ReadbackRing::new(gpu, "core.sensor", bytes, IN_FLIGHT);
-        Ok(Self { target, params, params_buffer, depth_raw, bind_group, options, readback })
+        Ok(Self { target, params, params_buffer, depth_raw, bind_group, shadow, options, readback })
     }
 
     fn readback_bytes(pixels: usize, color: bool) -> u64 {
@@ -203,6 +213,9 @@ impl VirtualSensor {
         self.params.frame_index = frame_index;
         gpu.write_buffer(&self.params_buffer, std::slice::from_ref(&self.params));
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.depth_sensor"), timestamp_writes: None });
+        if let Some((_, _, shadow)) = &self.shadow {
+            gpu.kernels.projector_shadow.dispatch_in(&mut pass, shadow, [self.target.intrinsics.height_px, 1, 1]);
+        }
         let words = self.target.intrinsics.pixel_count().div_ceil(2) as u32;
         gpu.kernels.depth_sensor.dispatch_in(&mut pass, &self.bind_group, [words, 1, 1]);
         Ok(())

@@ -13,9 +13,8 @@
 //!    σ_L(θ) pixels per axis (Nguyen et al. 2012), nearest pixel (no mixing across edges);
 //! 3. depth edges: a sampled pixel whose 4-neighbour's disparity differs by more than
 //!    `edge_disparity_px` straddles a depth step the pattern matcher cannot resolve: no return;
-//! 4. projector shadow: the sampled point is dark when a nearer surface crosses the segment
-//!    from it to the IR projector (`baseline_m` along the camera's +x; the segment projects onto
-//!    the pixel's row, searched `shadow_search_px` pixels towards the projector);
+//! 4. projector shadow: the sampled point is dark where `projector_shadow` found the IR
+//!    projector's light blocked by a nearer surface;
 //! 5. axial noise: a normal sample of σ_z(z, θ) (Nguyen et al. 2012) added to the depth;
 //! 6. disparity quantisation: disparity = b·f / z in steps of 1/`disparity_subpixel` pixel
 //!    (b = |baseline_m|, f = `disparity_focal_px`, the IR camera's focal length), back to depth.
@@ -52,11 +51,8 @@ struct DepthSensorParams {
     max_incidence_rad: f32,
     // Disparity difference to a neighbour that marks a depth edge, pixels.
     edge_disparity_px: f32,
-    // Pixels searched towards the projector for an occluder.
-    shadow_search_px: u32,
     _pad0: u32,
     _pad1: u32,
-    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: DepthSensorParams;
@@ -68,8 +64,10 @@ struct DepthSensorParams {
 @group(0) @binding(3) var<storage, read> vertex_in_world: array<vec4<f32>>;
 // The raycast's unit normals, world frame (NaN: none).
 @group(0) @binding(4) var<storage, read> normal_in_world: array<vec4<f32>>;
+// Per pixel, 1 where the projector's light is blocked (`projector_shadow`; read with noise only).
+@group(0) @binding(5) var<storage, read> shadow: array<u32>;
 // Out: raw depth, pixel i in bits 16 (i & 1) .. 16 (i & 1) + 15 of word i / 2.
-@group(0) @binding(5) var<storage, read_write> depth_raw: array<u32>;
+@group(0) @binding(6) var<storage, read_write> depth_raw: array<u32>;
 
 // The model's depth at pixel (x, y); NaN outside the image or where nothing was hit.
 fn model_depth(x: i32, y: i32) -> f32 {
@@ -102,36 +100,6 @@ fn at_depth_edge(x: i32, y: i32, z_m: f32) -> bool {
     for (var i = 0u; i < 4u; i = i + 1u) {
         let zn = model_depth(x + neighbours[i].x, y + neighbours[i].y);
         if is_valid_f32(zn) && abs(disparity_px(zn) - d) > params.edge_disparity_px {
-            return true;
-        }
-    }
-    return false;
-}
-
-// True when a nearer surface hides the point seen at (x, y) (depth z) from the projector.
-fn in_projector_shadow(x: i32, y: i32, z_m: f32) -> bool {
-    let k = params.intrinsics;
-    let p = back_project(k, f32(x), f32(y), z_m);
-    let b = params.baseline_m;
-    // Points of the segment p -> (b, 0, 0) project onto row y, moving towards sign(b).
-    let step = select(-1, 1, b > 0.0);
-    for (var i = 1u; i <= params.shadow_search_px; i = i + 1u) {
-        let qx = x + step * i32(i);
-        if qx < 0 || qx >= i32(k.width_px) {
-            return false;
-        }
-        // The segment's point seen at column qx: x(t) = a z(t), z(t) = p.z (1 - t).
-        let a = (f32(qx) - k.cx_px) / k.fx_px;
-        let t = (a * p.z - p.x) / (b - p.x + a * p.z);
-        if t <= 0.0 {
-            continue;
-        }
-        if t >= 1.0 {
-            return false;
-        }
-        let z_segment = p.z * (1.0 - t);
-        let zq = model_depth(qx, y);
-        if is_valid_f32(zq) && disparity_px(zq) - disparity_px(z_segment) > params.edge_disparity_px {
             return true;
         }
     }
@@ -183,7 +151,7 @@ fn sense(ix: u32) -> u32 {
     }
     let s = u32(sy) * k.width_px + u32(sx);
     let theta = incidence_rad(s);
-    if theta > params.max_incidence_rad || at_depth_edge(sx, sy, zs) || in_projector_shadow(sx, sy, zs) {
+    if theta > params.max_incidence_rad || at_depth_edge(sx, sy, zs) || shadow[s] != 0u {
         return 0u;
     }
     let z_noisy = zs + random_gauss2(&state).x * kinect_sigma_at_angle_m(zs, theta);

@@ -32,11 +32,13 @@ struct Scene {
     depth_m: Vec<f32>,
     vertex: Vec<[f32; 4]>,
     normal: Vec<[f32; 4]>,
+    /// The projector's shadow (`projector_shadow`'s twin; its own test checks the GPU).
+    shadow: Vec<u32>,
 }
 
 impl Scene {
     fn input(&self) -> SensorInput<'_> {
-        SensorInput { depth_m: &self.depth_m, vertex_in_world: &self.vertex, normal_in_world: &self.normal }
+        SensorInput { depth_m: &self.depth_m, vertex_in_world: &self.vertex, normal_in_world: &self.normal, shadow: &self.shadow }
     }
 }
 
@@ -72,7 +74,8 @@ fn scene(k: GpuIntrinsics, depth_m: Vec<f32>, normal_cam: impl Fn(usize) -> [f32
             normal.push(cpu::shared::INVALID_VEC4);
         }
     }
-    Scene { k, pose, depth_m, vertex, normal }
+    let shadow = cpu::projector_shadow(&KinectModel::default().shadow_params(k), &depth_m);
+    Scene { k, pose, depth_m, vertex, normal, shadow }
 }
 
 const W: u32 = 320;
@@ -116,7 +119,7 @@ fn run(p: &DepthSensorParams, s: &Scene) -> (Vec<u16>, Vec<u16>) {
         &gpu,
         &gpu.kernels.depth_sensor,
         p,
-        &[Slot::In(bytemuck::bytes_of(&s.pose)), Slot::In(bytemuck::cast_slice(&s.depth_m)), Slot::In(bytemuck::cast_slice(&s.vertex)), Slot::In(bytemuck::cast_slice(&s.normal)), Slot::Out(4 * words)],
+        &[Slot::In(bytemuck::bytes_of(&s.pose)), Slot::In(bytemuck::cast_slice(&s.depth_m)), Slot::In(bytemuck::cast_slice(&s.vertex)), Slot::In(bytemuck::cast_slice(&s.normal)), Slot::In(bytemuck::cast_slice(&s.shadow)), Slot::Out(4 * words)],
         [words as u32, 1, 1],
     );
     finish(&gpu);

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/sim/depth_sensor.wgsl`, statement by statement.
 
-use crate::cpu::shared::{back_project, dot3, invalid_f32, is_valid_f32, kinect_lateral_sigma_px, kinect_sigma_at_angle_m, pcg_hash, random_gauss2};
+use crate::cpu::shared::{dot3, invalid_f32, is_valid_f32, kinect_lateral_sigma_px, kinect_sigma_at_angle_m, pcg_hash, random_gauss2};
 use crate::kernels::gpu_data::CameraPose;
 use crate::kernels::depth_sensor::DepthSensorParams;
 
@@ -15,6 +15,8 @@ pub struct SensorInput<'a> {
     pub vertex_in_world: &'a [[f32; 4]],
     /// Unit normals, world frame.
     pub normal_in_world: &'a [[f32; 4]],
+    /// Per pixel, 1 where the projector's light is blocked (`projector_shadow`).
+    pub shadow: &'a [u32],
 }
 
 struct Sensor<'a> {
@@ -55,33 +57,6 @@ impl Sensor<'_> {
             let zn = self.model_depth(x + dx, y + dy);
             is_valid_f32(zn) && (self.disparity_px(zn) - d).abs() > self.p.edge_disparity_px
         })
-    }
-
-    fn in_projector_shadow(&self, x: i32, y: i32, z_m: f32) -> bool {
-        let k = &self.p.intrinsics;
-        let p = back_project(k, x as f32, y as f32, z_m);
-        let b = self.p.baseline_m;
-        let step = if b > 0.0 { 1 } else { -1 };
-        for i in 1..=self.p.shadow_search_px as i32 {
-            let qx = x + step * i;
-            if qx < 0 || qx >= k.width_px as i32 {
-                return false;
-            }
-            let a = (qx as f32 - k.cx_px) / k.fx_px;
-            let t = (a * p[2] - p[0]) / (b - p[0] + a * p[2]);
-            if t <= 0.0 {
-                continue;
-            }
-            if t >= 1.0 {
-                return false;
-            }
-            let z_segment = p[2] * (1.0 - t);
-            let zq = self.model_depth(qx, y);
-            if is_valid_f32(zq) && self.disparity_px(zq) - self.disparity_px(z_segment) > self.p.edge_disparity_px {
-                return true;
-            }
-        }
-        false
     }
 
     fn to_units(&self, x: i32, y: i32, z_m: f32) -> u32 {
@@ -128,7 +103,7 @@ impl Sensor<'_> {
         }
         let s = sy as usize * k.width_px as usize + sx as usize;
         let theta = self.incidence_rad(s);
-        if theta > self.p.max_incidence_rad || self.at_depth_edge(sx, sy, zs) || self.in_projector_shadow(sx, sy, zs) {
+        if theta > self.p.max_incidence_rad || self.at_depth_edge(sx, sy, zs) || self.input.shadow[s] != 0 {
             return 0;
         }
         let z_noisy = zs + random_gauss2(&mut state)[0] * kinect_sigma_at_angle_m(zs, theta);
