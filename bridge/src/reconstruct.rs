@@ -116,6 +116,11 @@ pub(crate) struct ReconstructArgs {
     /// --skip-corrupt (then its intact blocks are loaded, with a warning).
     #[arg(long)]
     load_map: Option<PathBuf>,
+    /// Farthest depth fused and tracked, metres (default 5: beyond it a Kinect's noise exceeds
+    /// the truncation band several times; a map for simulating a whole room may want the
+    /// sensor's full range).
+    #[arg(long)]
+    max_depth: Option<f32>,
     #[command(flatten)]
     calibration: CalibrationArgs,
 }
@@ -133,6 +138,10 @@ impl ReconstructArgs {
         config.icp.rgb_weight = self.rgb_weight;
         config.icp.noise_weighting = !self.no_noise_weighting;
         config.icp.converged_update_m = self.icp_converged;
+        if let Some(m) = self.max_depth {
+            anyhow::ensure!(m.is_finite() && m > config.preprocess.min_depth_m, "--max-depth {m}: beyond the nearest depth {} m", config.preprocess.min_depth_m);
+            config.preprocess.max_depth_m = m;
+        }
         config.validate()?;
         Ok(config)
     }
