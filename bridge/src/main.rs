@@ -9,6 +9,7 @@ mod eval;
 #[cfg(feature = "openni2")]
 mod openni;
 mod plot;
+mod pose_args;
 mod reconstruct;
 mod record;
 mod serve;

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, TrackingState};
-use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, PoseTimeline, TimedPose, read_tum_trajectory, write_tum_trajectory};
+use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, PoseTimeline, TimedPose, write_tum_trajectory};
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, TsdfStore as _, VolumePlacement};
 use webfusion_core::fusion::mapper::Mapper;
 use webfusion_core::map::{MapKind, MapStats};
@@ -87,22 +87,8 @@ pub(crate) struct ReconstructArgs {
     /// first.
     #[arg(long)]
     skip_corrupt: bool,
-    /// Fuse at these camera-to-world poses (a TUM trajectory file) instead of tracking: each
-    /// frame takes the pose at its depth timestamp, interpolated between the two nearest given
-    /// poses when the nearest is within 20 ms; frames without one are skipped and counted. The
-    /// map and the outputs are in the poses' frame.
-    #[arg(long, conflicts_with = "robot_poses")]
-    poses: Option<PathBuf>,
-    /// Like `--poses`, with seed 000's robot poses: x y z (cm) α β γ (rad; world X right, Y
-    /// forward, Z up; T = Trans·Rz(α)·Ry(β)·Rx(γ)) per line, or the planar form (see
-    /// `--robot-pose-form`); one per frame in frame order, or each with a leading timestamp
-    /// (seconds, then associated as `--poses` is).
-    #[arg(long)]
-    robot_poses: Option<PathBuf>,
-    /// The form of `--robot-poses`: `6dof` (x y z α β γ) or `planar` (x y θ pan tilt: a base
-    /// heading and a pan-tilt head at a fixed height).
-    #[arg(long, default_value = "6dof")]
-    robot_pose_form: webfusion_core::io::robot_poses::RobotPoseForm,
+    #[command(flatten)]
+    given: crate::pose_args::PoseFileArgs,
     /// With `--poses`: use them only as each frame's initial guess for tracking, and report how
     /// far tracking moved each one (`refine.txt`, stats.json).
     #[arg(long)]
@@ -175,19 +161,18 @@ impl GivenPoses {
 impl ReconstructArgs {
     /// The file of `--poses` or `--robot-poses`.
     fn pose_file(&self) -> Option<&PathBuf> {
-        self.poses.as_ref().or(self.robot_poses.as_ref())
+        self.given.file()
     }
 }
 
 /// The given poses of `--poses` or `--robot-poses`, read and checked.
 fn given_poses(args: &ReconstructArgs) -> anyhow::Result<Option<GivenPoses>> {
     anyhow::ensure!(args.pose_file().is_some() || !(args.refine || args.load_map.is_some()), "--refine and --load-map need --poses or --robot-poses (relocalising into a map needs feature odometry, not built yet)");
-    if let Some(path) = &args.poses {
-        let poses = read_tum_trajectory(path).with_context(|| format!("reading the given poses {}", path.display()))?;
-        return Ok(Some(GivenPoses::Timeline(PoseTimeline::new(poses).with_context(|| format!("the given poses {}", path.display()))?)));
+    if let Some(poses) = args.given.tum()? {
+        return Ok(Some(GivenPoses::Timeline(PoseTimeline::new(poses).with_context(|| format!("the given poses {}", args.pose_file().map(|p| p.display().to_string()).unwrap_or_default()))?)));
     }
-    let Some(path) = &args.robot_poses else { return Ok(None) };
-    let poses = webfusion_core::io::robot_poses::read_robot_poses(path, args.robot_pose_form).with_context(|| format!("reading the robot poses {}", path.display()))?;
+    let Some(path) = &args.given.robot_poses else { return Ok(None) };
+    let poses = args.given.robot()?.unwrap_or_default();
     if poses.iter().all(|p| p.timestamp_ns.is_some()) {
         let timed = poses.iter().map(|p| TimedPose { timestamp_ns: p.timestamp_ns.unwrap_or_default(), world_from_camera: p.world_from_camera }).collect();
         return Ok(Some(GivenPoses::Timeline(PoseTimeline::new(timed).with_context(|| format!("the robot poses {}", path.display()))?)));
@@ -498,7 +483,7 @@ fn given_report(args: &ReconstructArgs, without_pose: &[usize], refined: Option<
         }
         _ => serde_json::Value::Null,
     };
-    Ok(serde_json::json!({ "file": args.pose_file().map(|p| p.display().to_string()), "robot_pose_form": args.robot_poses.as_ref().map(|_| format!("{:?}", args.robot_pose_form)), "frames_without_pose": without_pose, "refine": refine }))
+    Ok(serde_json::json!({ "file": args.pose_file().map(|p| p.display().to_string()), "robot_pose_form": args.given.robot_poses.as_ref().map(|_| format!("{:?}", args.given.robot_pose_form)), "frames_without_pose": without_pose, "refine": refine }))
 }
 
 /// `reconstruct --poses` without `--refine`: fuses every frame at its given pose (no tracking),

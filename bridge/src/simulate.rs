@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use webfusion_core::io::trajectory::{TimedPose, read_tum_trajectory, write_tum_trajectory};
+use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::io::{CALIBRATION_FILE, WrittenCalibration, format_calibration_file, format_timestamp_s};
 use webfusion_core::map::file::{read_map_file, read_map_file_recovering};
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, SimulatedFrame, VirtualSensor};
@@ -22,18 +22,10 @@ pub(crate) struct SimulateArgs {
     /// The saved map to render (`reconstruct --save-map`).
     #[arg(long)]
     map: PathBuf,
-    /// Camera-to-world poses to render at, TUM trajectory format (`timestamp tx ty tz qx qy qz
-    /// qw`, the map's frame); each frame carries its pose's timestamp. `reconstruct`'s
-    /// trajectory.txt holds the poses of the frames it fused, at their depth timestamps.
-    #[arg(long, conflicts_with = "robot_poses")]
-    poses: Option<PathBuf>,
-    /// Poses in seed 000's robot convention instead (see `reconstruct --robot-poses`); without a
-    /// timestamp column the frames are 1/30 s apart.
-    #[arg(long)]
-    robot_poses: Option<PathBuf>,
-    /// The form of `--robot-poses`: `6dof` or `planar`.
-    #[arg(long, default_value = "6dof")]
-    robot_pose_form: webfusion_core::io::robot_poses::RobotPoseForm,
+    /// The poses to render at (`--poses`: `reconstruct`'s trajectory.txt holds the poses of the
+    /// frames it fused, at their depth timestamps).
+    #[command(flatten)]
+    given: crate::pose_args::PoseFileArgs,
     /// The output directory (TUM layout; must not hold a simulation already).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -103,14 +95,9 @@ fn intrinsics(args: &SimulateArgs) -> anyhow::Result<PinholeIntrinsics> {
 
 /// The poses to render at, with their timestamps.
 fn poses(args: &SimulateArgs) -> anyhow::Result<Vec<TimedPose>> {
-    let poses = match (&args.poses, &args.robot_poses) {
-        (Some(path), _) => read_tum_trajectory(path).with_context(|| format!("reading the poses {}", path.display()))?,
-        (None, Some(path)) => webfusion_core::io::robot_poses::read_robot_poses(path, args.robot_pose_form)
-            .with_context(|| format!("reading the robot poses {}", path.display()))?
-            .into_iter()
-            .enumerate()
-            .map(|(i, p)| TimedPose { timestamp_ns: p.timestamp_ns.unwrap_or(i as i64 * FRAME_PERIOD_NS), world_from_camera: p.world_from_camera })
-            .collect(),
+    let poses = match (args.given.tum()?, args.given.robot()?) {
+        (Some(poses), _) => poses,
+        (None, Some(robot)) => robot.into_iter().enumerate().map(|(i, p)| TimedPose { timestamp_ns: p.timestamp_ns.unwrap_or(i as i64 * FRAME_PERIOD_NS), world_from_camera: p.world_from_camera }).collect(),
         (None, None) => anyhow::bail!("give the poses to render at: --poses FILE (TUM trajectory) or --robot-poses FILE"),
     };
     anyhow::ensure!(!poses.is_empty(), "no poses to render at");
