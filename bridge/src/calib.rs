@@ -22,6 +22,14 @@ pub(crate) struct CalibrationArgs {
     pub(crate) image_size: Option<String>,
 }
 
+/// `--image-size WxH`: whole pixels, 16 to 4096 each way.
+pub(crate) fn parse_image_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = s.split_once('x').with_context(|| format!("--image-size {s:?}: expected WxH"))?;
+    let (w, h): (u32, u32) = (w.parse().with_context(|| format!("--image-size width {w:?}"))?, h.parse().with_context(|| format!("--image-size height {h:?}"))?);
+    anyhow::ensure!((16..=4096).contains(&w) && (16..=4096).contains(&h), "--image-size {s}: 16..=4096 pixels each way");
+    Ok((w, h))
+}
+
 impl CalibrationArgs {
     /// The override, or `None` to use the source's calibration.
     pub(crate) fn resolve(&self) -> anyhow::Result<Option<RgbdCalibration>> {
@@ -42,10 +50,7 @@ impl CalibrationArgs {
                 (w as u32, h as u32)
             }
             (None, _) => (640, 480),
-            (Some(s), _) => {
-                let (w, h) = s.split_once('x').with_context(|| format!("--image-size {s:?}: expected WxH"))?;
-                (w.parse().with_context(|| format!("--image-size width {w:?}"))?, h.parse().with_context(|| format!("--image-size height {h:?}"))?)
-            }
+            (Some(s), _) => parse_image_size(s)?,
         };
         let depth_units_per_metre = self.depth_scale.unwrap_or(TUM_DEPTH_UNITS_PER_METRE);
         anyhow::ensure!(depth_units_per_metre > 0.0 && depth_units_per_metre.is_finite(), "--depth-scale must be a positive number");

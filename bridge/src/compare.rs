@@ -66,32 +66,11 @@ fn bin_json(b: &DistanceBin) -> serde_json::Value {
     })
 }
 
-/// Pairs each simulated frame with the real frame nearest in depth time within `max_ns`,
-/// closest pairs first, each frame used once; sorted by simulated frame.
+/// Pairs each simulated frame with the real frame nearest in depth time within `max_ns`
+/// (inclusive), closest pairs first, each frame used once (the TUM tools' rule,
+/// [`webfusion_core::io::tum::associate`]); sorted by simulated frame.
 fn pair_frames(sim_ns: &[i64], real_ns: &[i64], max_ns: i64) -> Vec<(usize, usize)> {
-    let mut candidates = Vec::new();
-    for (i, &t) in sim_ns.iter().enumerate() {
-        let at = real_ns.partition_point(|&r| r < t);
-        let nearest = at.saturating_sub(1)..(at + 1).min(real_ns.len());
-        for (j, &r) in real_ns.iter().enumerate().take(nearest.end).skip(nearest.start) {
-            let d = r.abs_diff(t);
-            if d <= max_ns.unsigned_abs() {
-                candidates.push((d, i, j));
-            }
-        }
-    }
-    candidates.sort_unstable();
-    let (mut sim_used, mut real_used) = (vec![false; sim_ns.len()], vec![false; real_ns.len()]);
-    let mut pairs = Vec::new();
-    for (_, i, j) in candidates {
-        if !sim_used[i] && !real_used[j] {
-            sim_used[i] = true;
-            real_used[j] = true;
-            pairs.push((i, j));
-        }
-    }
-    pairs.sort_unstable();
-    pairs
+    webfusion_core::io::tum::associate(sim_ns, real_ns, max_ns.saturating_add(1))
 }
 
 pub(crate) fn run(args: &CompareArgs) -> anyhow::Result<()> {
@@ -193,5 +172,7 @@ mod tests {
         // 500 ms has no partner; 33 takes 30 (3 ms) over 40 (7 ms).
         assert_eq!(pair_frames(&sim, &real, 20 * ms), vec![(0, 0), (1, 1), (2, 3)]);
         assert!(pair_frames(&sim, &real, ms / 2).is_empty());
+        // The bound is inclusive: 33 ms and 30 ms pair at exactly 3 ms.
+        assert_eq!(pair_frames(&sim[1..2], &real[1..2], 3 * ms), vec![(0, 0)]);
     }
 }

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
+use webfusion_core::io::tum::ImageListWriter;
 use webfusion_core::io::{CALIBRATION_FILE, WrittenCalibration, format_calibration_file, format_timestamp_s};
 use webfusion_core::map::file::{read_map_file, read_map_file_recovering};
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, SimulatedFrame, VirtualSensor};
@@ -76,15 +77,7 @@ pub(crate) enum NoiseKind {
 
 /// The intrinsics of `--intrinsics` / `--image-size`.
 fn intrinsics(args: &SimulateArgs) -> anyhow::Result<PinholeIntrinsics> {
-    let size = match &args.image_size {
-        Some(s) => {
-            let (w, h) = s.split_once('x').with_context(|| format!("--image-size {s:?}: expected WxH"))?;
-            let (w, h): (u32, u32) = (w.parse().with_context(|| format!("--image-size width {w:?}"))?, h.parse().with_context(|| format!("--image-size height {h:?}"))?);
-            anyhow::ensure!((16..=4096).contains(&w) && (16..=4096).contains(&h), "--image-size {s}: 16..=4096 pixels each way");
-            Some((w, h))
-        }
-        None => None,
-    };
+    let size = args.image_size.as_deref().map(crate::calib::parse_image_size).transpose()?;
     let Some(spec) = &args.intrinsics else {
         let (w, h) = size.unwrap_or((640, 480));
         return Ok(crate::synth::intrinsics(w, h));
@@ -116,36 +109,30 @@ fn sensor_options(args: &SimulateArgs) -> anyhow::Result<SensorOptions> {
     Ok(SensorOptions { units_per_metre: args.depth_scale, radial: args.radial, noise: (args.noise == NoiseKind::Kinect).then_some((model, args.seed)), depth_range_m: (near, far), color: args.color })
 }
 
-/// A TUM-layout directory being written.
+/// A TUM-layout directory being written: depth (and colour) image folders with their lists, the
+/// association list, and at the end the poses and the calibration.
 struct SimDir {
     dir: PathBuf,
-    depth_list: String,
-    rgb_list: Option<String>,
+    depth: ImageListWriter,
+    rgb: Option<ImageListWriter>,
     assoc: String,
 }
 
 impl SimDir {
     fn create(dir: &Path, color: bool) -> anyhow::Result<Self> {
         anyhow::ensure!(!dir.join("depth.txt").exists(), "{} holds a simulation already (depth.txt): choose an empty directory", dir.display());
-        std::fs::create_dir_all(dir.join("depth")).with_context(|| format!("creating {}", dir.display()))?;
-        if color {
-            std::fs::create_dir_all(dir.join("rgb")).with_context(|| format!("creating {}", dir.display()))?;
-        }
-        let header = "# timestamp filename\n";
-        Ok(Self { dir: dir.to_owned(), depth_list: format!("# simulated depth (webfusion simulate)\n{header}"), rgb_list: color.then(|| format!("# map colour (webfusion simulate)\n{header}")), assoc: String::new() })
+        let depth = ImageListWriter::create(dir, "depth", "# simulated depth (webfusion simulate)").with_context(|| format!("creating {}", dir.display()))?;
+        let rgb = color.then(|| ImageListWriter::create(dir, "rgb", "# map colour (webfusion simulate)")).transpose().with_context(|| format!("creating {}", dir.display()))?;
+        Ok(Self { dir: dir.to_owned(), depth, rgb, assoc: String::new() })
     }
 
-    fn write(&mut self, k: &PinholeIntrinsics, t_ns: i64, frame: &SimulatedFrame) -> anyhow::Result<()> {
-        let t = format_timestamp_s(t_ns);
+    fn write(&mut self, k: &PinholeIntrinsics, index: usize, t_ns: i64, frame: &SimulatedFrame) -> anyhow::Result<()> {
         let depth = DepthImage::new(k.width_px, k.height_px, frame.depth_units.clone())?;
-        let name = format!("depth/{t}.png");
-        std::fs::write(self.dir.join(&name), webfusion_core::codec::png::encode_depth16(&depth)?).with_context(|| format!("writing {name}"))?;
-        self.depth_list.push_str(&format!("{t} {name}\n"));
-        if let (Some(list), Some(rgb)) = (&mut self.rgb_list, &frame.color_rgb8) {
+        let name = self.depth.write(index, t_ns, &webfusion_core::codec::png::encode_depth16(&depth)?)?;
+        if let (Some(list), Some(rgb)) = (&mut self.rgb, &frame.color_rgb8) {
             let color = ColorImage::new(k.width_px, k.height_px, rgb.as_flattened().to_vec())?;
-            let rgb_name = format!("rgb/{t}.png");
-            std::fs::write(self.dir.join(&rgb_name), webfusion_core::codec::png::encode_rgb8(&color)?).with_context(|| format!("writing {rgb_name}"))?;
-            list.push_str(&format!("{t} {rgb_name}\n"));
+            let rgb_name = list.write(index, t_ns, &webfusion_core::codec::png::encode_rgb8(&color)?)?;
+            let t = format_timestamp_s(t_ns);
             self.assoc.push_str(&format!("{t} {rgb_name} {t} {name}\n"));
         }
         Ok(())
@@ -153,9 +140,9 @@ impl SimDir {
 
     fn finish(self, calibration: WrittenCalibration, poses: &[TimedPose]) -> anyhow::Result<()> {
         let write = |name: &str, text: &str| std::fs::write(self.dir.join(name), text).with_context(|| format!("writing {}", self.dir.join(name).display()));
-        write("depth.txt", &self.depth_list)?;
-        if let Some(list) = &self.rgb_list {
-            write("rgb.txt", list)?;
+        self.depth.finish()?;
+        if let Some(list) = self.rgb {
+            list.finish()?;
             write("rgbd_assoc.txt", &self.assoc)?;
         }
         write_tum_trajectory(&self.dir.join("groundtruth.txt"), poses)?;
@@ -205,7 +192,7 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
     let mut returns = 0u64;
     let mut write = |frame: SimulatedFrame, dir: &mut SimDir| -> anyhow::Result<()> {
         returns += frame.depth_units.iter().filter(|&&u| u > 0).count() as u64;
-        dir.write(&k, poses[frame.tag as usize].timestamp_ns, &frame)
+        dir.write(&k, frame.tag as usize, poses[frame.tag as usize].timestamp_ns, &frame)
     };
     for (i, p) in poses.iter().enumerate() {
         while !sensor.can_submit() {

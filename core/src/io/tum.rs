@@ -228,22 +228,25 @@ pub fn write_tum_dataset(dir: &Path, source: &mut dyn FrameSource, frames: std::
     Ok(frames.len())
 }
 
-/// One image folder of a TUM directory being written, and its list file.
-struct ImageListWriter<'a> {
-    dir: &'a Path,
+/// One image folder of a TUM directory being written (`<dir>/<sub>/<t>.png`), and its list file
+/// `<dir>/<sub>.txt`, written by [`ImageListWriter::finish`].
+pub struct ImageListWriter {
+    dir: PathBuf,
     sub: &'static str,
     list: String,
 }
 
-impl<'a> ImageListWriter<'a> {
-    fn create(dir: &'a Path, sub: &'static str, header: &str) -> Result<Self> {
+impl ImageListWriter {
+    /// Creates `<dir>/<sub>/`; `header` is the list file's first comment line.
+    pub fn create(dir: &Path, sub: &'static str, header: &str) -> Result<Self> {
         let folder = dir.join(sub);
         std::fs::create_dir_all(&folder).map_err(|source| Error::Io { path: folder, source })?;
-        Ok(Self { dir, sub, list: format!("{header}\n# timestamp filename\n") })
+        Ok(Self { dir: dir.to_owned(), sub, list: format!("{header}\n# timestamp filename\n") })
     }
 
-    /// Writes `<sub>/<t>.png` (never over an existing file) and lists it.
-    fn write(&mut self, index: usize, timestamp_ns: i64, png_bytes: &[u8]) -> Result<()> {
+    /// Writes `<sub>/<t>.png` (never over an existing file) and lists it; returns the name
+    /// relative to the directory. `index` names the frame in the error for an existing file.
+    pub fn write(&mut self, index: usize, timestamp_ns: i64, png_bytes: &[u8]) -> Result<String> {
         use std::io::Write as _;
         let name = format!("{}/{}.png", self.sub, format_timestamp_s(timestamp_ns));
         let path = self.dir.join(&name);
@@ -256,10 +259,11 @@ impl<'a> ImageListWriter<'a> {
         })?;
         file.write_all(png_bytes).map_err(io_error)?;
         self.list.push_str(&format!("{} {name}\n", format_timestamp_s(timestamp_ns)));
-        Ok(())
+        Ok(name)
     }
 
-    fn finish(self) -> Result<()> {
+    /// Writes the list file.
+    pub fn finish(self) -> Result<()> {
         let path = self.dir.join(format!("{}.txt", self.sub));
         std::fs::write(&path, &self.list).map_err(|source| Error::Io { path, source })
     }
@@ -297,8 +301,9 @@ fn read_image_list(path: &Path) -> Result<Vec<(i64, String)>> {
 /// Pairs depth with colour timestamps like the benchmark's `associate.py`: all pairs closer
 /// than `max_difference_ns` are candidates; the closest candidate is taken first and each
 /// timestamp is used at most once. Ties go to the earlier depth, then the earlier colour
-/// timestamp. Returns `(depth_ix, color_ix)` sorted by depth timestamp.
-fn associate(depth_ns: &[i64], color_ns: &[i64], max_difference_ns: i64) -> Vec<(usize, usize)> {
+/// timestamp. Returns `(depth_ix, color_ix)` sorted by depth timestamp. Any two timestamp lists
+/// pair the same way (`webfusion compare` pairs simulated with real depth by it).
+pub fn associate(depth_ns: &[i64], color_ns: &[i64], max_difference_ns: i64) -> Vec<(usize, usize)> {
     let max_difference = max_difference_ns.unsigned_abs();
     let mut color_order: Vec<usize> = (0..color_ns.len()).collect();
     color_order.sort_by_key(|&ix| (color_ns[ix], ix));
