@@ -4,5 +4,6 @@
 //! renders a fused map at any pose.
 
 pub mod compare;
+pub mod plane_scenes;
 pub mod room;
 pub mod sensor;
