@@ -1,0 +1,736 @@
+// SPDX-License-Identifier: MIT
+//! CPU reference of plane segmentation ([`super`]'s pipeline), stage by stage: per-pixel
+//! passes, small histograms, per-plane sums and small per-plane solves, the shape the GPU
+//! kernels take. Sums and solves are in f64 here: this is the accuracy the GPU's f32 kernels
+//! are held to.
+
+#![expect(clippy::needless_range_loop, reason = "per-pixel passes index several buffers by pixel, as kernels do")]
+
+use super::{DISTANCE_BINS, MAX_DISTANCE_PEAKS, MAX_NORMAL_PEAKS, NO_LABEL, NORMAL_BINS, Plane, PlaneConfig, Segmentation};
+use crate::PinholeIntrinsics;
+use crate::cpu::preprocess::chain::CpuPyramidLevel;
+use crate::cpu::shared::kinect_sigma_m;
+
+/// The normal-histogram bin (x, y) of a unit normal: 003's [acos n_x, acos n_y] / π · 32 on the
+/// hemisphere n_z ≥ 0 (a normal with n_z < 0 is negated first); `None` for an invalid normal.
+pub fn normal_bin(n: [f32; 4]) -> Option<(usize, usize)> {
+    if !n[0].is_finite() || !n[1].is_finite() || !n[2].is_finite() {
+        return None;
+    }
+    let s = if n[2] < 0.0 { -1.0 } else { 1.0 };
+    let bin = |c: f32| (((s * c).clamp(-1.0, 1.0).acos() / std::f32::consts::PI * NORMAL_BINS as f32) as usize).min(NORMAL_BINS - 1);
+    Some((bin(n[0]), bin(n[1])))
+}
+
+/// The unit normal (n_z ≥ 0) at continuous bin coordinates, bin i spanning [i, i + 1).
+pub fn bin_normal(bx: f32, by: f32) -> [f32; 3] {
+    let step = std::f32::consts::PI / NORMAL_BINS as f32;
+    let (x, y) = ((bx * step).cos(), (by * step).cos());
+    let z = (1.0 - x * x - y * y).max(0.0).sqrt();
+    let len = (x * x + y * y + z * z).sqrt();
+    [x / len, y / len, z / len]
+}
+
+/// Stage 1a: the histogram of the normals of the pixels `free` admits.
+pub fn normal_histogram(normals: &[[f32; 4]], free: impl Fn(usize) -> bool) -> Vec<u32> {
+    let mut hist = vec![0u32; NORMAL_BINS * NORMAL_BINS];
+    for (ix, &n) in normals.iter().enumerate() {
+        if let Some((bx, by)) = normal_bin(n).filter(|_| free(ix)) {
+            hist[by * NORMAL_BINS + bx] += 1;
+        }
+    }
+    hist
+}
+
+/// Stage 1b: up to [`MAX_NORMAL_PEAKS`] peaks of `hist`, highest first: the arg-max bin (the
+/// first of equals), refined to the count-weighted centroid of its 3 x 3 neighbourhood, then
+/// every bin within `exclusion_bins` cleared; it stops at a bin below `min_count`. Bins within
+/// `clear_bins` of each of `known` normals are cleared first (a later round's peaks are new
+/// planes).
+pub fn normal_peaks(hist: &[u32], min_count: u32, exclusion_bins: f32, known: &[[f32; 3]], clear_bins: f32) -> Vec<[f32; 3]> {
+    let mut h = hist.to_vec();
+    let clear = |h: &mut [u32], cx: f32, cy: f32, r: f32| {
+        for by in 0..NORMAL_BINS {
+            for bx in 0..NORMAL_BINS {
+                let (dx, dy) = (bx as f32 + 0.5 - cx, by as f32 + 0.5 - cy);
+                if dx * dx + dy * dy < r * r {
+                    h[by * NORMAL_BINS + bx] = 0;
+                }
+            }
+        }
+    };
+    for n in known {
+        if let Some((bx, by)) = normal_bin([n[0], n[1], n[2], 0.0]) {
+            clear(&mut h, bx as f32 + 0.5, by as f32 + 0.5, clear_bins);
+        }
+    }
+    let mut peaks = Vec::new();
+    while peaks.len() < MAX_NORMAL_PEAKS {
+        let (best, &count) = h.iter().enumerate().max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(&a.0))).expect("a histogram has bins");
+        if count < min_count.max(1) {
+            break;
+        }
+        let (px, py) = (best % NORMAL_BINS, best / NORMAL_BINS);
+        let (mut sx, mut sy, mut sw) = (0.0f32, 0.0f32, 0.0f32);
+        for by in py.saturating_sub(1)..=(py + 1).min(NORMAL_BINS - 1) {
+            for bx in px.saturating_sub(1)..=(px + 1).min(NORMAL_BINS - 1) {
+                let w = h[by * NORMAL_BINS + bx] as f32;
+                sx += w * (bx as f32 + 0.5);
+                sy += w * (by as f32 + 0.5);
+                sw += w;
+            }
+        }
+        peaks.push(bin_normal(sx / sw, sy / sw));
+        clear(&mut h, px as f32 + 0.5, py as f32 + 0.5, exclusion_bins);
+    }
+    peaks
+}
+
+/// Stage 2b: the planes of one distance histogram, as bin intervals `[lo, hi]`, largest mass
+/// first, at most [`MAX_DISTANCE_PEAKS`]. The histogram is smoothed by [1 2 1]/4; a local
+/// maximum is a peak when its prominence (its height above the higher of the lowest points
+/// between it and higher ground on either side) is at least half its height; each peak owns the
+/// bins up to the lowest bin between it and its neighbouring peaks, and no further than
+/// `reach_bins`; a peak owning fewer than `min_mass` pixels is dropped.
+pub fn distance_peaks(hist: &[u32], min_mass: u32, reach_bins: usize) -> Vec<[usize; 2]> {
+    let n = hist.len();
+    let at = |i: isize| if i < 0 || i as usize >= n { 0.0 } else { hist[i as usize] as f32 };
+    let s: Vec<f32> = (0..n as isize).map(|i| 0.25 * at(i - 1) + 0.5 * at(i) + 0.25 * at(i + 1)).collect();
+    // Local maxima (a plateau counts once, at its middle) and their prominence: the line at a
+    // peak's height is extended each way until it meets strictly higher ground (an equal peak
+    // does not stop it); the col is the higher of the lowest points passed on the sides that
+    // met higher ground (none: the highest peak, whose prominence is its height).
+    let mut peaks = Vec::new();
+    let mut i = 0;
+    while i < n {
+        let end = (i..n).find(|&j| s[j] != s[i]).unwrap_or(n);
+        let rising = i > 0 && s[i - 1] >= s[i];
+        let falls = end == n || s[end] < s[i];
+        if s[i] > 0.0 && !rising && falls {
+            let h = s[i];
+            let side = |range: &mut dyn Iterator<Item = usize>| -> Option<f32> {
+                let mut low = h;
+                for j in range {
+                    if s[j] > h {
+                        return Some(low);
+                    }
+                    low = low.min(s[j]);
+                }
+                None
+            };
+            let cols = [side(&mut (0..i).rev()), side(&mut (end..n))];
+            let col = cols.iter().flatten().fold(None, |a: Option<f32>, &c| Some(a.map_or(c, |a| a.max(c))));
+            if h - col.unwrap_or(0.0) >= 0.5 * h {
+                peaks.push((i + end - 1) / 2);
+            }
+        }
+        i = end;
+    }
+    let mut intervals: Vec<([usize; 2], u32)> = Vec::new();
+    for (k, &p) in peaks.iter().enumerate() {
+        // The valley towards each neighbour: its lowest bin (the first of equals).
+        let valley = |a: usize, b: usize| (a + 1..b).min_by(|&x, &y| s[x].total_cmp(&s[y])).unwrap_or(a);
+        let lo = if k == 0 { 0 } else { valley(peaks[k - 1], p) + 1 };
+        let hi = if k + 1 == peaks.len() { n - 1 } else { valley(p, peaks[k + 1]) };
+        let (lo, hi) = (lo.max(p.saturating_sub(reach_bins)), hi.min(p + reach_bins));
+        let mass: u32 = hist[lo..=hi].iter().sum();
+        if mass >= min_mass.max(1) {
+            intervals.push(([lo, hi], mass));
+        }
+    }
+    intervals.sort_by(|a, b| b.1.cmp(&a.1).then(a.0[0].cmp(&b.0[0])));
+    intervals.truncate(MAX_DISTANCE_PEAKS);
+    intervals.into_iter().map(|(i, _)| i).collect()
+}
+
+/// Sums over a plane's pixels, from which it is fitted; sums of two planes add up to the sums
+/// of their union (003's merge, after Biswas & Veloso).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlaneSums {
+    /// Pixels.
+    pub count: f64,
+    /// Σ p.
+    pub p: [f64; 3],
+    /// Σ p pᵀ (row-major, symmetric).
+    pub pp: [[f64; 3]; 3],
+    /// Σ n (pixel normals).
+    pub n: [f64; 3],
+    /// Σ n pᵀ: entry (i, j) = Σ n_i p_j.
+    pub np: [[f64; 3]; 3],
+    /// Σ of the pixels' footprints on the plane, m².
+    pub area_m2: f64,
+    /// Σ σ(z)² r rᵀ: each raw point's noise covariance as the sensor model shapes it (axial
+    /// noise along its unit ray r); zero for filtered points.
+    pub noise: [[f64; 3]; 3],
+}
+
+impl PlaneSums {
+    /// Adds one pixel: point `p`, normal `n`, footprint `area_m2`.
+    pub fn add(&mut self, p: [f32; 3], n: [f32; 4], area_m2: f32) {
+        let (p, n) = (p.map(f64::from), [n[0], n[1], n[2]].map(f64::from));
+        self.count += 1.0;
+        for i in 0..3 {
+            self.p[i] += p[i];
+            self.n[i] += n[i];
+            for j in 0..3 {
+                self.pp[i][j] += p[i] * p[j];
+                self.np[i][j] += n[i] * p[j];
+            }
+        }
+        self.area_m2 += f64::from(area_m2);
+    }
+
+    /// Adds the model noise of raw point `p`: σ(z) of depth, i.e. σ |p| / z along the ray, so
+    /// (σ / z)² p pᵀ.
+    pub fn add_noise(&mut self, p: [f32; 3]) {
+        let r = p.map(f64::from);
+        let s2 = (f64::from(kinect_sigma_m(p[2])) / r[2]).powi(2);
+        for i in 0..3 {
+            for j in 0..3 {
+                self.noise[i][j] += s2 * r[i] * r[j];
+            }
+        }
+    }
+
+    /// The sums of both.
+    pub fn merged(&self, o: &PlaneSums) -> PlaneSums {
+        let mut m = *self;
+        m.count += o.count;
+        m.area_m2 += o.area_m2;
+        for i in 0..3 {
+            m.p[i] += o.p[i];
+            m.n[i] += o.n[i];
+            for j in 0..3 {
+                m.pp[i][j] += o.pp[i][j];
+                m.np[i][j] += o.np[i][j];
+                m.noise[i][j] += o.noise[i][j];
+            }
+        }
+        m
+    }
+}
+
+/// Eigen-decomposition of a symmetric 3 x 3 matrix by cyclic Jacobi rotations: eigenvalues
+/// ascending, and `vectors[i]` the unit eigenvector of `values[i]`.
+pub fn eigen_symmetric3(m: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
+    let mut a = m;
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let scale = (0..3).map(|i| a[i][i].abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+    for _ in 0..50 {
+        let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+        if off <= (1e-30 * scale) * scale {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q].abs() <= 1e-300 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            // A ← Jᵀ A J, V ← V J with J the rotation in the (p, q) plane.
+            let mut j = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+            j[p][p] = c;
+            j[q][q] = c;
+            j[p][q] = s;
+            j[q][p] = -s;
+            let mul = |x: &[[f64; 3]; 3], y: &[[f64; 3]; 3]| -> [[f64; 3]; 3] { std::array::from_fn(|r| std::array::from_fn(|k| (0..3).map(|i| x[r][i] * y[i][k]).sum())) };
+            let jt: [[f64; 3]; 3] = std::array::from_fn(|r| std::array::from_fn(|k| j[k][r]));
+            a = mul(&mul(&jt, &a), &j);
+            v = mul(&v, &j);
+        }
+    }
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&x, &y| a[x][x].total_cmp(&a[y][y]));
+    (order.map(|i| a[i][i]), order.map(|i| [v[0][i], v[1][i], v[2][i]]))
+}
+
+/// A plane fitted to its sums.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneFit {
+    /// The sums it was fitted to.
+    pub sums: PlaneSums,
+    /// Unit normal facing the camera (n·centroid < 0).
+    pub normal: [f64; 3],
+    /// d of n·p + d = 0, metres.
+    pub offset_m: f64,
+    /// Mean point.
+    pub centroid: [f64; 3],
+    /// In-plane axes: the largest spread first.
+    pub tangents: [[f64; 3]; 2],
+    /// Variance of the points along each tangent, m².
+    pub tangent_variance_m2: [f64; 2],
+    /// Root-mean-square distance of the points from the plane, metres.
+    pub rms_m: f64,
+    /// Turn of the normal across the plane, degrees: the larger over both in-plane axes t of
+    /// |cov(n·t, p·t) / var(p·t)| (the normal's rate of turn, 1/radius) times √12 · std(p·t)
+    /// (the extent of a uniformly covered interval with that spread).
+    pub bend_deg: f64,
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Fits a plane to `sums` (at least 3 pixels): the smallest eigenvector of the points'
+/// covariance less their noise covariance. Depth noise moves points along their rays and
+/// inflates the scatter along them, which tilts a narrow plane seen obliquely towards the rays
+/// (errors in variables: E[Σ (n·p + d)²] gains Σ σ² (n·r)², smallest for n across the rays);
+/// subtracting it removes that bias (a 30 cm tread at 2.5 m with 1 cm depth noise tilts by 1°
+/// without). The model gives the noise's shape (its direction and growth with depth); its
+/// level is measured on the plane itself: the variance of the points along the normal, where
+/// a plane has no extent, over the model's prediction of it (at most 1), so noise-free data
+/// gets no correction and a quieter sensor a smaller one. Two rounds, each with the last
+/// normal.
+pub fn fit(sums: &PlaneSums) -> Option<PlaneFit> {
+    if sums.count < 3.0 {
+        return None;
+    }
+    let k = 1.0 / sums.count;
+    let c = sums.p.map(|v| v * k);
+    let nbar = sums.n.map(|v| v * k);
+    let raw_cov: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| sums.pp[i][j] * k - c[i] * c[j]));
+    let quad = |m: &[[f64; 3]; 3], v: [f64; 3]| (0..3).map(|i| (0..3).map(|j| v[i] * m[i][j] * v[j]).sum::<f64>()).sum::<f64>();
+    let (mut values, mut vectors) = eigen_symmetric3(raw_cov);
+    for _ in 0..2 {
+        let predicted = quad(&sums.noise, vectors[0]) * k;
+        if predicted <= 0.0 {
+            break;
+        }
+        let level = (quad(&raw_cov, vectors[0]) / predicted).clamp(0.0, 1.0);
+        let cov: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| raw_cov[i][j] - level * sums.noise[i][j] * k));
+        (values, vectors) = eigen_symmetric3(cov);
+    }
+    let mut normal = vectors[0];
+    if dot(normal, c) > 0.0 {
+        normal = normal.map(|v| -v);
+    }
+    // cov(n, p)(i, j) = E[n_i p_j] − E[n_i] E[p_j].
+    let cov_np: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| sums.np[i][j] * k - nbar[i] * c[j]));
+    let tangents = [vectors[2], vectors[1]];
+    let variance = [values[2].max(0.0), values[1].max(0.0)];
+    let mut bend = 0.0f64;
+    for (t, var) in tangents.iter().zip(variance) {
+        if var <= 0.0 {
+            continue;
+        }
+        // tᵀ cov(n, p) t = cov(n·t, p·t).
+        let rate = (0..3).map(|i| (0..3).map(|j| t[i] * cov_np[i][j] * t[j]).sum::<f64>()).sum::<f64>() / var;
+        bend = bend.max(rate.abs() * (12.0 * var).sqrt());
+    }
+    Some(PlaneFit {
+        sums: *sums,
+        normal,
+        offset_m: -dot(normal, c),
+        centroid: c,
+        tangents,
+        tangent_variance_m2: variance,
+        rms_m: quad(&raw_cov, normal).max(0.0).sqrt(),
+        bend_deg: bend.to_degrees(),
+    })
+}
+
+/// Footprint on a plane of normal `n` of the pixel whose point is `p`, m²: the pixel's solid
+/// angle cos³θ / (f_x f_y) times r² over the cosine of incidence |n·p| / r, = z³ / (f_x f_y |n·p|).
+fn footprint_m2(k: &PinholeIntrinsics, p: [f32; 3], n: [f64; 3]) -> f32 {
+    let np = (n[0] * f64::from(p[0]) + n[1] * f64::from(p[1]) + n[2] * f64::from(p[2])).abs().max(1e-6);
+    (f64::from(p[2]).powi(3) / (f64::from(k.fx_px) * f64::from(k.fy_px) * np)) as f32
+}
+
+fn point(v: [f32; 4]) -> Option<[f32; 3]> {
+    (v[2].is_finite() && v[2] > 0.0).then_some([v[0], v[1], v[2]])
+}
+
+fn normal3(n: [f32; 4]) -> Option<[f64; 3]> {
+    n[0].is_finite().then_some([f64::from(n[0]), f64::from(n[1]), f64::from(n[2])])
+}
+
+/// Stage 2 (the inner loop at one level): the planes of each normal peak. Pixels `free` admits
+/// with a normal within the segmentation angle of a peak (the nearest) are histogrammed by
+/// their distance |n_peak·p|; each distance peak's pixels are summed and fitted; fits smaller
+/// than `min_pixels` or bent past the limit are dropped (the count of bent ones is added to
+/// `curved`). Returns the fits and, per normal peak, the mean normal of its pixels (oriented
+/// like the peak): a direction the offsets of parallel planes do not bias, unlike a fit to
+/// their union.
+fn inner_pass(level: &CpuPyramidLevel, peaks: &[[f32; 3]], free: &dyn Fn(usize) -> bool, config: &PlaneConfig, min_pixels: u32, curved: &mut u32) -> (Vec<PlaneFit>, Vec<[f32; 3]>) {
+    let cos_seg = config.normal_segment_deg.to_radians().cos();
+    let n_px = level.vertex_in_camera.len();
+    // 2a: the nearest peak and the distance bin of each pixel; the distance histograms.
+    let mut assigned: Vec<Option<(usize, usize)>> = vec![None; n_px];
+    let mut hist = vec![0u32; peaks.len() * DISTANCE_BINS];
+    let mut normal_sums = vec![[0.0f64; 3]; peaks.len()];
+    for ix in 0..n_px {
+        let (Some(p), Some(n)) = (point(level.vertex_in_camera[ix]), normal3(level.normal_in_camera[ix])) else { continue };
+        if !free(ix) {
+            continue;
+        }
+        let best = peaks.iter().enumerate().map(|(k, pk)| (k, (n[0] as f32 * pk[0] + n[1] as f32 * pk[1] + n[2] as f32 * pk[2]).abs())).max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)));
+        let Some((k, _)) = best.filter(|&(_, c)| c >= cos_seg) else { continue };
+        let pk = peaks[k];
+        let sign = if n[0] * f64::from(pk[0]) + n[1] * f64::from(pk[1]) + n[2] * f64::from(pk[2]) < 0.0 { -1.0 } else { 1.0 };
+        for i in 0..3 {
+            normal_sums[k][i] += sign * n[i];
+        }
+        let d = (pk[0] * p[0] + pk[1] * p[1] + pk[2] * p[2]).abs();
+        let bin = (d / config.distance_bin_m) as usize;
+        if bin < DISTANCE_BINS {
+            hist[k * DISTANCE_BINS + bin] += 1;
+            assigned[ix] = Some((k, bin));
+        }
+    }
+    // 2b: the distance peaks of each normal peak.
+    let reach = (config.distance_reach_m / config.distance_bin_m).round() as usize;
+    let intervals: Vec<Vec<[usize; 2]>> = (0..peaks.len()).map(|k| distance_peaks(&hist[k * DISTANCE_BINS..(k + 1) * DISTANCE_BINS], min_pixels, reach)).collect();
+    // 2c: the sums of each (normal peak, distance peak).
+    let mut sums = vec![PlaneSums::default(); peaks.len() * MAX_DISTANCE_PEAKS];
+    let k_img = &level.intrinsics;
+    for ix in 0..n_px {
+        let Some((k, bin)) = assigned[ix] else { continue };
+        let Some(j) = intervals[k].iter().position(|[lo, hi]| (*lo..=*hi).contains(&bin)) else { continue };
+        let p = point(level.vertex_in_camera[ix]).expect("assigned pixels have points");
+        let pk = peaks[k].map(f64::from);
+        sums[k * MAX_DISTANCE_PEAKS + j].add(p, level.normal_in_camera[ix], footprint_m2(k_img, p, pk));
+    }
+    // 2d: fits.
+    let mut fits: Vec<PlaneFit> = Vec::new();
+    for k in 0..peaks.len() {
+        for j in 0..intervals[k].len() {
+            let s = &sums[k * MAX_DISTANCE_PEAKS + j];
+            if s.count < f64::from(min_pixels.max(3)) {
+                continue;
+            }
+            let Some(f) = fit(s) else { continue };
+            if f.bend_deg > f64::from(config.max_bend_deg) {
+                *curved += 1;
+                continue;
+            }
+            fits.push(f);
+        }
+    }
+    let mean_normals = peaks
+        .iter()
+        .zip(&normal_sums)
+        .map(|(pk, s)| {
+            let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+            if len > 0.0 { s.map(|v| (v / len) as f32) } else { *pk }
+        })
+        .collect();
+    (fits, mean_normals)
+}
+
+/// Stage 3: merges planes within the merge angle whose offsets, each measured at the other's
+/// centroid, differ by less than `merge_sigmas` σ(z) at their mean depth; largest first.
+pub fn merge(mut planes: Vec<PlaneFit>, config: &PlaneConfig) -> Vec<PlaneFit> {
+    planes.sort_by(|a, b| b.sums.count.total_cmp(&a.sums.count));
+    let cos_merge = f64::from(config.merge_angle_deg).to_radians().cos();
+    let mut out: Vec<PlaneFit> = Vec::new();
+    for p in planes {
+        let close = out.iter().position(|q| {
+            let apart = (dot(p.normal, q.centroid) + p.offset_m).abs().min((dot(q.normal, p.centroid) + q.offset_m).abs());
+            let z = 0.5 * (p.centroid[2] + q.centroid[2]);
+            dot(p.normal, q.normal) >= cos_merge && apart < f64::from(config.merge_sigmas) * f64::from(kinect_sigma_m(z as f32))
+        });
+        match close.and_then(|i| fit(&out[i].sums.merged(&p.sums)).map(|f| (i, f))) {
+            Some((i, f)) => out[i] = f,
+            None => out.push(p),
+        }
+    }
+    out
+}
+
+/// Stage 4: labels every pixel with the plane nearest along the plane's normal, among those
+/// within the labelling angle and distance; returns the labels and each plane's new sums.
+///
+/// The sums take only pixels whose neighbours within [`PlaneConfig::fit_margin_px`] all carry
+/// the same label, and, with `raw_depth_m` (the depth before the edge-preserving filter, same
+/// size), each such pixel's raw point when it too lies within the distance. Where surfaces meet,
+/// the filters round the corner and blend the normals, so the pixels along a plane's border
+/// (those of the next surface within the distance and angle, and its own rounded edge) pull a
+/// narrow plane's fit: a 30 cm stair tread seven pixels deep at 2.5 m tilts by 0.6°, moving its
+/// offset by 2.5 cm. Raw points are noisier but unbiased.
+pub fn label(level: &CpuPyramidLevel, planes: &[PlaneFit], config: &PlaneConfig, raw_depth_m: Option<&[f32]>) -> (Vec<u32>, Vec<PlaneSums>) {
+    let k_img = level.intrinsics;
+    let cos_label = f64::from(config.label_angle_deg).to_radians().cos();
+    let mut labels = vec![NO_LABEL; level.vertex_in_camera.len()];
+    for (ix, l) in labels.iter_mut().enumerate() {
+        let (Some(p), Some(n)) = (point(level.vertex_in_camera[ix]), normal3(level.normal_in_camera[ix])) else { continue };
+        let tolerance = f64::from(config.label_distance_m(p[2]));
+        let p64 = p.map(f64::from);
+        let mut best: Option<(usize, f64)> = None;
+        for (k, plane) in planes.iter().enumerate() {
+            let r = (dot(plane.normal, p64) + plane.offset_m).abs();
+            if dot(n, plane.normal).abs() >= cos_label && r < tolerance && best.is_none_or(|(_, b)| r < b) {
+                best = Some((k, r));
+            }
+        }
+        if let Some((k, _)) = best {
+            *l = k as u32;
+        }
+    }
+    let mut sums = vec![PlaneSums::default(); planes.len()];
+    let (w, h) = (k_img.width_px as i64, k_img.height_px as i64);
+    let m = i64::from(config.fit_margin_px);
+    for (ix, &l) in labels.iter().enumerate() {
+        if l == NO_LABEL {
+            continue;
+        }
+        let (x, y) = (ix as i64 % w, ix as i64 / w);
+        let interior = (-m..=m).all(|dy| (-m..=m).all(|dx| {
+            let (u, v) = (x + dx, y + dy);
+            u >= 0 && v >= 0 && u < w && v < h && labels[(v * w + u) as usize] == l
+        }));
+        if !interior {
+            continue;
+        }
+        let plane = &planes[l as usize];
+        let p = point(level.vertex_in_camera[ix]).expect("labelled pixels have points");
+        let p = match raw_depth_m {
+            None => p,
+            Some(raw) => {
+                let z = raw[ix];
+                if !(z.is_finite() && z > 0.0) {
+                    continue;
+                }
+                let q = [(x as f32 - k_img.cx_px) / k_img.fx_px * z, (y as f32 - k_img.cy_px) / k_img.fy_px * z, z];
+                if (dot(plane.normal, q.map(f64::from)) + plane.offset_m).abs() >= f64::from(config.label_distance_m(z)) {
+                    continue;
+                }
+                q
+            }
+        };
+        sums[l as usize].add(p, level.normal_in_camera[ix], footprint_m2(&k_img, p, plane.normal));
+        if raw_depth_m.is_some() {
+            sums[l as usize].add_noise(p);
+        }
+    }
+    (labels, sums)
+}
+
+/// Segments one preprocessed frame (its pyramid, level 0 at full resolution; `raw_depth_m` the
+/// full-resolution depth before filtering, for the final fits, see [`label`]).
+///
+/// # Panics
+/// If `levels` is empty.
+pub fn segment(levels: &[CpuPyramidLevel], raw_depth_m: Option<&[f32]>, config: &PlaneConfig) -> Segmentation {
+    let full = &levels[0];
+    let inner_l = config.inner_level_for(full.intrinsics.width_px, levels.len());
+    let inner = &levels[inner_l];
+    let n_full = full.vertex_in_camera.len();
+    let min_full = (config.min_plane_fraction * n_full as f32).ceil() as u32;
+    let min_inner = (config.min_plane_fraction * inner.vertex_in_camera.len() as f32).ceil() as u32;
+    let min_peak = (config.min_normal_peak_fraction * n_full as f32).ceil() as u32;
+    let mut planes: Vec<PlaneFit> = Vec::new();
+    let mut labels = vec![NO_LABEL; n_full];
+    let mut curved = 0u32;
+    for round in 0..config.rounds {
+        let free_full = |ix: usize| labels[ix] == NO_LABEL;
+        let hist = normal_histogram(&full.normal_in_camera, free_full);
+        let known: Vec<[f32; 3]> = if round == 0 { Vec::new() } else { planes.iter().map(|p| p.normal.map(|v| v as f32)).collect() };
+        let peaks = normal_peaks(&hist, min_peak, config.normal_peak_exclusion_bins, &known, 0.5 * config.normal_peak_exclusion_bins);
+        if peaks.is_empty() {
+            break;
+        }
+        // An inner-level pixel is free when the full-resolution pixel at its corner is.
+        let (w_inner, w_full) = (inner.intrinsics.width_px as usize, full.intrinsics.width_px as usize);
+        let free_inner = |ix: usize| labels[((ix / w_inner) << inner_l) * w_full + ((ix % w_inner) << inner_l)] == NO_LABEL;
+        // 003's realignment, with the mean normal of each peak's pixels (003 took its largest
+        // plane's fitted normal, which a parallel plane a few cm away tilts); then again.
+        let (_, realigned) = inner_pass(inner, &peaks, &free_inner, config, min_inner, &mut curved);
+        let mut second_curved = 0;
+        let (second, _) = inner_pass(inner, &realigned, &free_inner, config, min_inner, &mut second_curved);
+        curved = curved.max(second_curved);
+        planes.extend(second);
+        planes = merge(planes, config);
+        // Final labelling with every plane so far; drop the small and the bent, then relabel.
+        let (_, sums) = label(full, &planes, config, raw_depth_m);
+        let refit: Vec<Option<PlaneFit>> = sums.iter().map(fit).collect();
+        let keep: Vec<bool> = refit
+            .iter()
+            .map(|f| match f {
+                Some(f) if f.sums.count >= f64::from(min_full) && f.bend_deg <= f64::from(config.max_bend_deg) && f.offset_m >= dot(f.centroid, f.centroid).sqrt() * f64::from(config.max_incidence_deg).to_radians().cos() => true,
+                Some(f) => {
+                    curved += u32::from(f.bend_deg > f64::from(config.max_bend_deg));
+                    false
+                }
+                None => false,
+            })
+            .collect();
+        planes = refit.into_iter().zip(&keep).filter_map(|(f, &k)| f.filter(|_| k)).collect();
+        let (l2, sums2) = label(full, &planes, config, raw_depth_m);
+        labels = l2;
+        // A plane whose raw points all fell outside its distance is gone.
+        let kept: Vec<Option<PlaneFit>> = sums2.iter().map(fit).collect();
+        if kept.iter().any(Option::is_none) {
+            let renumber: Vec<u32> = kept.iter().scan(0u32, |next, f| Some(if f.is_some() { *next += 1; *next - 1 } else { NO_LABEL })).collect();
+            for l in &mut labels {
+                if *l != NO_LABEL {
+                    *l = renumber[*l as usize];
+                }
+            }
+        }
+        planes = kept.into_iter().flatten().collect();
+    }
+    finish(full, planes, labels, curved)
+}
+
+/// Orders the planes by size, renumbers the labels and measures each plane's extent.
+fn finish(full: &CpuPyramidLevel, planes: Vec<PlaneFit>, labels: Vec<u32>, curved: u32) -> Segmentation {
+    let mut order: Vec<usize> = (0..planes.len()).collect();
+    order.sort_by(|&a, &b| planes[b].sums.count.total_cmp(&planes[a].sums.count));
+    let mut rank = vec![NO_LABEL; planes.len()];
+    for (r, &i) in order.iter().enumerate() {
+        rank[i] = r as u32;
+    }
+    let labels: Vec<u32> = labels.iter().map(|&l| if l == NO_LABEL { NO_LABEL } else { rank[l as usize] }).collect();
+    let mut extent = vec![[[f64::INFINITY, f64::NEG_INFINITY]; 2]; planes.len()];
+    for (ix, &l) in labels.iter().enumerate() {
+        if l == NO_LABEL {
+            continue;
+        }
+        let f = &planes[order[l as usize]];
+        let p = point(full.vertex_in_camera[ix]).expect("labelled pixels have points").map(f64::from);
+        let rel = [p[0] - f.centroid[0], p[1] - f.centroid[1], p[2] - f.centroid[2]];
+        for a in 0..2 {
+            let u = dot(rel, f.tangents[a]);
+            extent[l as usize][a] = [extent[l as usize][a][0].min(u), extent[l as usize][a][1].max(u)];
+        }
+    }
+    let to32 = |v: [f64; 3]| v.map(|x| x as f32);
+    let planes = order
+        .iter()
+        .enumerate()
+        .map(|(r, &i)| {
+            let f = &planes[i];
+            Plane {
+                normal: to32(f.normal),
+                offset_m: f.offset_m as f32,
+                centroid_m: to32(f.centroid),
+                pixels: f.sums.count as u32,
+                area_m2: f.sums.area_m2 as f32,
+                tangent: to32(f.tangents[0]),
+                extent_m: extent[r].map(|e| e.map(|x| x as f32)),
+                rms_m: f.rms_m as f32,
+                bend_deg: f.bend_deg as f32,
+            }
+        })
+        .collect();
+    Segmentation { labels, planes, curved_rejected: curved }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::RgbdCalibration;
+    use crate::cpu::preprocess::chain::preprocess;
+    use crate::preprocess::PreprocessConfig;
+    use crate::sim::plane_scenes::{NO_PLANE, PlaneScene, UNITS_PER_METRE};
+
+    const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 262.5, fy_px: 262.5, cx_px: 159.5, cy_px: 119.5, width_px: 320, height_px: 240 };
+
+    #[test]
+    fn normal_bins_map_back_to_their_normals() {
+        for n in [[0.0f32, 0.0, -1.0], [0.6, 0.0, -0.8], [0.0, -0.8, -0.6], [-0.48, 0.6, -0.64]] {
+            let (bx, by) = normal_bin([n[0], n[1], n[2], 0.0]).unwrap();
+            let back = bin_normal(bx as f32 + 0.5, by as f32 + 0.5);
+            let cos = (back[0] * -n[0] + back[1] * -n[1] + back[2] * -n[2]).abs();
+            assert!(cos > 8f32.to_radians().cos(), "{n:?} -> bin ({bx}, {by}) -> {back:?}");
+        }
+        assert_eq!(normal_bin([f32::NAN, 0.0, 0.0, 0.0]), None);
+    }
+
+    #[test]
+    fn jacobi_diagonalises_a_known_matrix() {
+        // R diag(1, 2, 5) Rᵀ for a rotation about (1, 1, 1).
+        let r = glam::DMat3::from_axis_angle(glam::DVec3::ONE.normalize(), 0.7);
+        let m = r * glam::DMat3::from_diagonal(glam::DVec3::new(5.0, 1.0, 2.0)) * r.transpose();
+        let a: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| m.col(j)[i]));
+        let (values, vectors) = eigen_symmetric3(a);
+        for (v, e) in values.iter().zip([1.0, 2.0, 5.0]) {
+            assert!((v - e).abs() < 1e-12, "{values:?}");
+        }
+        // The smallest eigenvector is R's second column (the 1.0 entry).
+        let c = r.col(1);
+        assert!((dot(vectors[0], [c.x, c.y, c.z]).abs() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn prominence_keeps_two_close_modes_apart_and_one_noisy_mode_whole() {
+        // Two Gaussian bumps 4 bins apart (2 cm at 5 mm bins, σ 0.8 bin): two planes.
+        let bump = |c: f32, s: f32, m: f32| (0..64).map(move |i| (m * (-0.5 * ((i as f32 - c) / s).powi(2)).exp()) as u32);
+        let two: Vec<u32> = bump(20.0, 0.8, 400.0).zip(bump(24.0, 0.8, 300.0)).map(|(a, b)| a + b).collect();
+        let peaks = distance_peaks(&two, 50, 6);
+        assert_eq!(peaks.len(), 2, "{peaks:?}");
+        assert!(peaks[0][0] <= 20 && 20 <= peaks[0][1] && peaks[1][0] <= 24 && 24 <= peaks[1][1] && peaks[0][1] < peaks[1][0], "{peaks:?}");
+        // One wide noisy bump (σ 3 bins) with counting noise: one plane.
+        let mut state = 5u32;
+        let one: Vec<u32> = bump(30.0, 3.0, 200.0).map(|v| (v as f32 * (0.8 + 0.4 * crate::cpu::shared::random_uniform(&mut state))) as u32).collect();
+        assert_eq!(distance_peaks(&one, 50, 6).len(), 1);
+        // Below the smallest mass: none.
+        assert!(distance_peaks(&one, 100_000, 6).is_empty());
+    }
+
+    /// Per scene: matches each found plane to the true plane most of its pixels show, and
+    /// returns (precision, recall over true planes > 2 % of the image, worst normal error in
+    /// degrees, worst offset error in metres) of the matched ones.
+    fn score(scene: &PlaneScene, noise: Option<u32>, config: &PlaneConfig) -> (f64, f64, f64, f64, Segmentation) {
+        let r = scene.render(&K, noise);
+        let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_METRE as f32 };
+        let pre = preprocess(&calibration, &PreprocessConfig::default(), &r.frame);
+        let seg = segment(&pre.levels, Some(&pre.depth_unfiltered_m), config);
+        let truth = scene.planes_in_camera();
+        let n = K.pixel_count();
+        let true_pixels: Vec<usize> = (0..truth.len()).map(|s| r.plane_of_pixel.iter().filter(|&&l| l == s as u32).count()).collect();
+        let mut found = vec![false; truth.len()];
+        let (mut tp, mut worst_deg, mut worst_m) = (0usize, 0.0f64, 0.0f64);
+        for (k, plane) in seg.planes.iter().enumerate() {
+            let mut votes = vec![0usize; truth.len()];
+            for (ix, &l) in seg.labels.iter().enumerate() {
+                if l == k as u32 && r.plane_of_pixel[ix] != NO_PLANE {
+                    votes[r.plane_of_pixel[ix] as usize] += 1;
+                }
+            }
+            let (s, &v) = votes.iter().enumerate().max_by_key(|(_, v)| **v).unwrap();
+            let Some(t) = truth[s].filter(|_| v * 2 > plane.pixels as usize) else {
+                eprintln!("  {}: plane {k} ({} px, n {:?}, d {:.3}) matches no true plane", scene.name, plane.pixels, plane.normal, plane.offset_m);
+                continue;
+            };
+            let n_err = (plane.normal.map(f64::from)[0] * t.normal.x + plane.normal.map(f64::from)[1] * t.normal.y + plane.normal.map(f64::from)[2] * t.normal.z).clamp(-1.0, 1.0).acos().to_degrees();
+            let d_err = (f64::from(plane.offset_m) - t.offset_m).abs();
+            eprintln!("  {}: plane {k} = surface {s}: {} px ({} true), normal off {n_err:.3}°, offset off {:.1} mm, bend {:.1}°", scene.name, plane.pixels, true_pixels[s], d_err * 1e3, plane.bend_deg);
+            if found[s] {
+                eprintln!("  {}: surface {s} found twice", scene.name);
+                continue;
+            }
+            found[s] = true;
+            tp += 1;
+            worst_deg = worst_deg.max(n_err);
+            worst_m = worst_m.max(d_err);
+        }
+        let big: Vec<usize> = (0..truth.len()).filter(|&s| truth[s].is_some() && true_pixels[s] * 50 > n).collect();
+        let recall = big.iter().filter(|&&s| found[s]).count() as f64 / big.len() as f64;
+        let precision = if seg.planes.is_empty() { 1.0 } else { tp as f64 / seg.planes.len() as f64 };
+        for &s in &big {
+            if !found[s] {
+                eprintln!("  {}: surface {s} ({} px) missed", scene.name, true_pixels[s]);
+            }
+        }
+        (precision, recall, worst_deg, worst_m, seg)
+    }
+
+    #[test]
+    fn synthetic_scenes_exact_and_noisy() {
+        let config = PlaneConfig::default();
+        let mut failures = Vec::new();
+        for scene in PlaneScene::all() {
+            for noise in [None, Some(3)] {
+                let (precision, recall, deg, m, seg) = score(&scene, noise, &config);
+                eprintln!("{} ({}): {} planes, precision {precision:.2}, recall {recall:.2}, normal error ≤ {deg:.3}°, offset error ≤ {:.1} mm, {} curved rejected", scene.name, if noise.is_some() { "noisy" } else { "exact" }, seg.planes.len(), m * 1e3, seg.curved_rejected);
+                if precision < 1.0 || recall < 1.0 || deg >= 1.0 || m >= 0.01 {
+                    failures.push(format!("{} {:?}", scene.name, noise));
+                }
+            }
+        }
+        assert!(failures.is_empty(), "failed: {failures:?}");
+    }
+}
