@@ -8,6 +8,7 @@ mod compare;
 mod eval;
 #[cfg(feature = "openni2")]
 mod openni;
+mod planes;
 mod plot;
 mod pose_args;
 mod reconstruct;
@@ -83,6 +84,9 @@ enum Command {
     /// over 10 % relative error, new valid pixels, coverage, absolute errors; difference images
     /// and an error-vs-distance chart.
     Compare(compare::CompareArgs),
+    /// Seed 003's plane segmentation of every frame: each frame's planes (normal, offset,
+    /// area, extent) in its camera frame as `frames.json`, and optionally label images.
+    Planes(planes::PlanesArgs),
 }
 
 #[derive(clap::Args)]
@@ -150,6 +154,7 @@ fn main() -> anyhow::Result<()> {
         Command::SynthRoom(args) => synth::run(&args),
         Command::Simulate(args) => simulate::run(&options, &args),
         Command::Compare(args) => compare::run(&args),
+        Command::Planes(args) => planes::run(&args),
         Command::Serve(args) => serve::run(args),
         #[cfg(feature = "openni2")]
         Command::Devices => {
