@@ -9,7 +9,12 @@
 use super::{DISTANCE_BINS, MAX_DISTANCE_PEAKS, MAX_NORMAL_PEAKS, NO_LABEL, NORMAL_BINS, Plane, PlaneConfig, Segmentation};
 use crate::PinholeIntrinsics;
 use crate::cpu::preprocess::chain::CpuPyramidLevel;
+use crate::cpu::planes::normal_histogram::normal_bin_1d;
 use crate::cpu::shared::kinect_sigma_m;
+use crate::kernels::normal_histogram::NormalHistogramParams;
+use crate::kernels::normal_peaks::NormalPeaksParams;
+use crate::kernels::distance_histogram::DistanceHistogramParams;
+use crate::cpu::planes::distance_histogram::NO_ASSIGNMENT;
 
 /// The normal-histogram bin (x, y) of a unit normal: 003's [acos n_x, acos n_y] / π · 32 on the
 /// hemisphere n_z ≥ 0 (a normal with n_z < 0 is negated first); `None` for an invalid normal.
@@ -18,72 +23,27 @@ pub fn normal_bin(n: [f32; 4]) -> Option<(usize, usize)> {
         return None;
     }
     let s = if n[2] < 0.0 { -1.0 } else { 1.0 };
-    let bin = |c: f32| (((s * c).clamp(-1.0, 1.0).acos() / std::f32::consts::PI * NORMAL_BINS as f32) as usize).min(NORMAL_BINS - 1);
-    Some((bin(n[0]), bin(n[1])))
+    Some((normal_bin_1d(s * n[0]), normal_bin_1d(s * n[1])))
 }
 
-/// The unit normal (n_z ≥ 0) at continuous bin coordinates, bin i spanning [i, i + 1).
-pub fn bin_normal(bx: f32, by: f32) -> [f32; 3] {
-    let step = std::f32::consts::PI / NORMAL_BINS as f32;
-    let (x, y) = ((bx * step).cos(), (by * step).cos());
-    let z = (1.0 - x * x - y * y).max(0.0).sqrt();
-    let len = (x * x + y * y + z * z).sqrt();
-    [x / len, y / len, z / len]
-}
-
-/// Stage 1a: the histogram of the normals of the pixels `free` admits.
-pub fn normal_histogram(normals: &[[f32; 4]], free: impl Fn(usize) -> bool) -> Vec<u32> {
+/// Stage 1a (kernel `normal_histogram`): the histogram of the normals of the pixels no plane
+/// has yet.
+pub fn normal_histogram(normals: &[[f32; 4]], labels: &[u32]) -> Vec<u32> {
     let mut hist = vec![0u32; NORMAL_BINS * NORMAL_BINS];
-    for (ix, &n) in normals.iter().enumerate() {
-        if let Some((bx, by)) = normal_bin(n).filter(|_| free(ix)) {
-            hist[by * NORMAL_BINS + bx] += 1;
-        }
-    }
+    let params = NormalHistogramParams { pixel_count: normals.len() as u32, use_labels: 1, ..Default::default() };
+    crate::cpu::normal_histogram(&params, normals, labels, &mut hist);
     hist
 }
 
-/// Stage 1b: up to [`MAX_NORMAL_PEAKS`] peaks of `hist`, highest first: the arg-max bin (the
-/// first of equals), refined to the count-weighted centroid of its 3 x 3 neighbourhood, then
-/// every bin within `exclusion_bins` cleared; it stops at a bin below `min_count`. Bins within
-/// `clear_bins` of each of `known` normals are cleared first (a later round's peaks are new
-/// planes).
+/// Stage 1b (kernel `normal_peaks`): up to [`MAX_NORMAL_PEAKS`] peaks of `hist`, highest
+/// first, after clearing the bins within `clear_bins` of each of `known` normals (a later
+/// round's peaks are new planes); see the kernel.
 pub fn normal_peaks(hist: &[u32], min_count: u32, exclusion_bins: f32, known: &[[f32; 3]], clear_bins: f32) -> Vec<[f32; 3]> {
-    let mut h = hist.to_vec();
-    let clear = |h: &mut [u32], cx: f32, cy: f32, r: f32| {
-        for by in 0..NORMAL_BINS {
-            for bx in 0..NORMAL_BINS {
-                let (dx, dy) = (bx as f32 + 0.5 - cx, by as f32 + 0.5 - cy);
-                if dx * dx + dy * dy < r * r {
-                    h[by * NORMAL_BINS + bx] = 0;
-                }
-            }
-        }
-    };
-    for n in known {
-        if let Some((bx, by)) = normal_bin([n[0], n[1], n[2], 0.0]) {
-            clear(&mut h, bx as f32 + 0.5, by as f32 + 0.5, clear_bins);
-        }
-    }
-    let mut peaks = Vec::new();
-    while peaks.len() < MAX_NORMAL_PEAKS {
-        let (best, &count) = h.iter().enumerate().max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(&a.0))).expect("a histogram has bins");
-        if count < min_count.max(1) {
-            break;
-        }
-        let (px, py) = (best % NORMAL_BINS, best / NORMAL_BINS);
-        let (mut sx, mut sy, mut sw) = (0.0f32, 0.0f32, 0.0f32);
-        for by in py.saturating_sub(1)..=(py + 1).min(NORMAL_BINS - 1) {
-            for bx in px.saturating_sub(1)..=(px + 1).min(NORMAL_BINS - 1) {
-                let w = h[by * NORMAL_BINS + bx] as f32;
-                sx += w * (bx as f32 + 0.5);
-                sy += w * (by as f32 + 0.5);
-                sw += w;
-            }
-        }
-        peaks.push(bin_normal(sx / sw, sy / sw));
-        clear(&mut h, px as f32 + 0.5, py as f32 + 0.5, exclusion_bins);
-    }
-    peaks
+    let params = NormalPeaksParams { min_count, known_count: known.len() as u32, exclusion_bins, clear_bins };
+    let known: Vec<[f32; 4]> = known.iter().map(|n| [n[0], n[1], n[2], 0.0]).collect();
+    let (mut peaks, mut count) = (vec![[0.0f32; 4]; MAX_NORMAL_PEAKS], [0u32]);
+    crate::cpu::normal_peaks(&params, hist, &known, &mut peaks, &mut count);
+    peaks[..count[0] as usize].iter().map(|p| [p[0], p[1], p[2]]).collect()
 }
 
 /// Stage 2b: the planes of one distance histogram, as bin intervals `[lo, hi]`, largest mass
@@ -346,39 +306,35 @@ fn normal3(n: [f32; 4]) -> Option<[f64; 3]> {
     n[0].is_finite().then_some([f64::from(n[0]), f64::from(n[1]), f64::from(n[2])])
 }
 
-/// Stage 2 (the inner loop at one level): the planes of each normal peak. Pixels `free` admits
-/// with a normal within the segmentation angle of a peak (the nearest) are histogrammed by
+/// Stage 2 (the inner loop at one level): the planes of each normal peak. Free pixels (`free`:
+/// the full-resolution labels, their width and this level's log2 scale; a pixel is free when
+/// the full-resolution pixel at its corner is unlabelled) with a normal within the segmentation angle of a peak (the nearest) are histogrammed by
 /// their distance |n_peak·p|; each distance peak's pixels are summed and fitted; fits smaller
 /// than `min_pixels` or bent past the limit are dropped (the count of bent ones is added to
 /// `curved`). Returns the fits and, per normal peak, the mean normal of its pixels (oriented
 /// like the peak): a direction the offsets of parallel planes do not bias, unlike a fit to
 /// their union.
-fn inner_pass(level: &CpuPyramidLevel, peaks: &[[f32; 3]], free: &dyn Fn(usize) -> bool, config: &PlaneConfig, min_pixels: u32, curved: &mut u32) -> (Vec<PlaneFit>, Vec<[f32; 3]>) {
-    let cos_seg = config.normal_segment_deg.to_radians().cos();
+fn inner_pass(level: &CpuPyramidLevel, peaks: &[[f32; 3]], free: (&[u32], u32, u32), config: &PlaneConfig, min_pixels: u32, curved: &mut u32) -> (Vec<PlaneFit>, Vec<[f32; 3]>) {
     let n_px = level.vertex_in_camera.len();
-    // 2a: the nearest peak and the distance bin of each pixel; the distance histograms.
-    let mut assigned: Vec<Option<(usize, usize)>> = vec![None; n_px];
+    // 2a (kernel `distance_histogram`): the nearest peak and distance bin of each pixel, the
+    // distance histograms and the normal sums.
+    let (labels, full_width_px, level_shift) = free;
+    let params = DistanceHistogramParams {
+        width_px: level.intrinsics.width_px,
+        height_px: level.intrinsics.height_px,
+        full_width_px,
+        level_shift,
+        cos_segment: config.normal_segment_deg.to_radians().cos(),
+        bin_m: config.distance_bin_m,
+        use_labels: 1,
+        ..Default::default()
+    };
+    let peaks4: Vec<[f32; 4]> = peaks.iter().map(|p| [p[0], p[1], p[2], 0.0]).collect();
+    let mut assignment = vec![NO_ASSIGNMENT; n_px];
     let mut hist = vec![0u32; peaks.len() * DISTANCE_BINS];
-    let mut normal_sums = vec![[0.0f64; 3]; peaks.len()];
-    for ix in 0..n_px {
-        let (Some(p), Some(n)) = (point(level.vertex_in_camera[ix]), normal3(level.normal_in_camera[ix])) else { continue };
-        if !free(ix) {
-            continue;
-        }
-        let best = peaks.iter().enumerate().map(|(k, pk)| (k, (n[0] as f32 * pk[0] + n[1] as f32 * pk[1] + n[2] as f32 * pk[2]).abs())).max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)));
-        let Some((k, _)) = best.filter(|&(_, c)| c >= cos_seg) else { continue };
-        let pk = peaks[k];
-        let sign = if n[0] * f64::from(pk[0]) + n[1] * f64::from(pk[1]) + n[2] * f64::from(pk[2]) < 0.0 { -1.0 } else { 1.0 };
-        for i in 0..3 {
-            normal_sums[k][i] += sign * n[i];
-        }
-        let d = (pk[0] * p[0] + pk[1] * p[1] + pk[2] * p[2]).abs();
-        let bin = (d / config.distance_bin_m) as usize;
-        if bin < DISTANCE_BINS {
-            hist[k * DISTANCE_BINS + bin] += 1;
-            assigned[ix] = Some((k, bin));
-        }
-    }
+    let mut normal_sums = vec![0i32; 4 * peaks.len()];
+    crate::cpu::distance_histogram(&params, &level.vertex_in_camera, &level.normal_in_camera, labels, &peaks4, &[peaks.len() as u32], &mut assignment, &mut hist, &mut normal_sums);
+    let assigned: Vec<Option<(usize, usize)>> = assignment.iter().map(|&a| (a != NO_ASSIGNMENT).then_some(((a >> 16) as usize, (a & 0xffff) as usize))).collect();
     // 2b: the distance peaks of each normal peak.
     let reach = (config.distance_reach_m / config.distance_bin_m).round() as usize;
     let intervals: Vec<Vec<[usize; 2]>> = (0..peaks.len()).map(|k| distance_peaks(&hist[k * DISTANCE_BINS..(k + 1) * DISTANCE_BINS], min_pixels, reach)).collect();
@@ -410,8 +366,9 @@ fn inner_pass(level: &CpuPyramidLevel, peaks: &[[f32; 3]], free: &dyn Fn(usize) 
     }
     let mean_normals = peaks
         .iter()
-        .zip(&normal_sums)
+        .zip(normal_sums.chunks(4))
         .map(|(pk, s)| {
+            let s = [s[0], s[1], s[2]].map(f64::from);
             let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
             if len > 0.0 { s.map(|v| (v / len) as f32) } else { *pk }
         })
@@ -524,21 +481,19 @@ pub fn segment(levels: &[CpuPyramidLevel], raw_depth_m: Option<&[f32]>, config: 
     let mut labels = vec![NO_LABEL; n_full];
     let mut curved = 0u32;
     for round in 0..config.rounds {
-        let free_full = |ix: usize| labels[ix] == NO_LABEL;
-        let hist = normal_histogram(&full.normal_in_camera, free_full);
+        let hist = normal_histogram(&full.normal_in_camera, &labels);
         let known: Vec<[f32; 3]> = if round == 0 { Vec::new() } else { planes.iter().map(|p| p.normal.map(|v| v as f32)).collect() };
         let peaks = normal_peaks(&hist, min_peak, config.normal_peak_exclusion_bins, &known, 0.5 * config.normal_peak_exclusion_bins);
         if peaks.is_empty() {
             break;
         }
         // An inner-level pixel is free when the full-resolution pixel at its corner is.
-        let (w_inner, w_full) = (inner.intrinsics.width_px as usize, full.intrinsics.width_px as usize);
-        let free_inner = |ix: usize| labels[((ix / w_inner) << inner_l) * w_full + ((ix % w_inner) << inner_l)] == NO_LABEL;
+        let free_inner = (labels.as_slice(), full.intrinsics.width_px, inner_l as u32);
         // 003's realignment, with the mean normal of each peak's pixels (003 took its largest
         // plane's fitted normal, which a parallel plane a few cm away tilts); then again.
-        let (_, realigned) = inner_pass(inner, &peaks, &free_inner, config, min_inner, &mut curved);
+        let (_, realigned) = inner_pass(inner, &peaks, free_inner, config, min_inner, &mut curved);
         let mut second_curved = 0;
-        let (second, _) = inner_pass(inner, &realigned, &free_inner, config, min_inner, &mut second_curved);
+        let (second, _) = inner_pass(inner, &realigned, free_inner, config, min_inner, &mut second_curved);
         curved = curved.max(second_curved);
         planes.extend(second);
         planes = merge(planes, config);
@@ -632,7 +587,7 @@ mod tests {
     fn normal_bins_map_back_to_their_normals() {
         for n in [[0.0f32, 0.0, -1.0], [0.6, 0.0, -0.8], [0.0, -0.8, -0.6], [-0.48, 0.6, -0.64]] {
             let (bx, by) = normal_bin([n[0], n[1], n[2], 0.0]).unwrap();
-            let back = bin_normal(bx as f32 + 0.5, by as f32 + 0.5);
+            let back = crate::cpu::planes::normal_peaks::bin_normal(bx as f32 + 0.5, by as f32 + 0.5);
             let cos = (back[0] * -n[0] + back[1] * -n[1] + back[2] * -n[2]).abs();
             assert!(cos > 8f32.to_radians().cos(), "{n:?} -> bin ({bx}, {by}) -> {back:?}");
         }
