@@ -14,6 +14,8 @@ use crate::cpu::shared::kinect_sigma_m;
 use crate::kernels::normal_histogram::NormalHistogramParams;
 use crate::kernels::normal_peaks::NormalPeaksParams;
 use crate::kernels::distance_histogram::DistanceHistogramParams;
+use crate::kernels::distance_peaks::DistancePeaksParams;
+use crate::kernels::plane_label::PlaneLabelParams;
 use crate::cpu::planes::distance_histogram::NO_ASSIGNMENT;
 
 /// The normal-histogram bin (x, y) of a unit normal: 003's [acos n_x, acos n_y] / π · 32 on the
@@ -46,61 +48,16 @@ pub fn normal_peaks(hist: &[u32], min_count: u32, exclusion_bins: f32, known: &[
     peaks[..count[0] as usize].iter().map(|p| [p[0], p[1], p[2]]).collect()
 }
 
-/// Stage 2b: the planes of one distance histogram, as bin intervals `[lo, hi]`, largest mass
-/// first, at most [`MAX_DISTANCE_PEAKS`]. The histogram is smoothed by [1 2 1]/4; a local
-/// maximum is a peak when its prominence (its height above the higher of the lowest points
-/// between it and higher ground on either side) is at least half its height; each peak owns the
-/// bins up to the lowest bin between it and its neighbouring peaks, and no further than
-/// `reach_bins`; a peak owning fewer than `min_mass` pixels is dropped.
+/// Stage 2b (kernel `distance_peaks`): the planes of one distance histogram (of
+/// [`DISTANCE_BINS`] bins), as bin intervals `[lo, hi]`, most pixels first, at most
+/// [`MAX_DISTANCE_PEAKS`]: peaks of the [1 2 1]/4-smoothed histogram whose prominence is at
+/// least half their height, each owning the bins up to the valleys towards its neighbours and
+/// at most `reach_bins` from it, with at least `min_mass` pixels; see the kernel.
 pub fn distance_peaks(hist: &[u32], min_mass: u32, reach_bins: usize) -> Vec<[usize; 2]> {
-    let n = hist.len();
-    let at = |i: isize| if i < 0 || i as usize >= n { 0.0 } else { hist[i as usize] as f32 };
-    let s: Vec<f32> = (0..n as isize).map(|i| 0.25 * at(i - 1) + 0.5 * at(i) + 0.25 * at(i + 1)).collect();
-    // Local maxima (a plateau counts once, at its middle) and their prominence: the line at a
-    // peak's height is extended each way until it meets strictly higher ground (an equal peak
-    // does not stop it); the col is the higher of the lowest points passed on the sides that
-    // met higher ground (none: the highest peak, whose prominence is its height).
-    let mut peaks = Vec::new();
-    let mut i = 0;
-    while i < n {
-        let end = (i..n).find(|&j| s[j] != s[i]).unwrap_or(n);
-        let rising = i > 0 && s[i - 1] >= s[i];
-        let falls = end == n || s[end] < s[i];
-        if s[i] > 0.0 && !rising && falls {
-            let h = s[i];
-            let side = |range: &mut dyn Iterator<Item = usize>| -> Option<f32> {
-                let mut low = h;
-                for j in range {
-                    if s[j] > h {
-                        return Some(low);
-                    }
-                    low = low.min(s[j]);
-                }
-                None
-            };
-            let cols = [side(&mut (0..i).rev()), side(&mut (end..n))];
-            let col = cols.iter().flatten().fold(None, |a: Option<f32>, &c| Some(a.map_or(c, |a| a.max(c))));
-            if h - col.unwrap_or(0.0) >= 0.5 * h {
-                peaks.push((i + end - 1) / 2);
-            }
-        }
-        i = end;
-    }
-    let mut intervals: Vec<([usize; 2], u32)> = Vec::new();
-    for (k, &p) in peaks.iter().enumerate() {
-        // The valley towards each neighbour: its lowest bin (the first of equals).
-        let valley = |a: usize, b: usize| (a + 1..b).min_by(|&x, &y| s[x].total_cmp(&s[y])).unwrap_or(a);
-        let lo = if k == 0 { 0 } else { valley(peaks[k - 1], p) + 1 };
-        let hi = if k + 1 == peaks.len() { n - 1 } else { valley(p, peaks[k + 1]) };
-        let (lo, hi) = (lo.max(p.saturating_sub(reach_bins)), hi.min(p + reach_bins));
-        let mass: u32 = hist[lo..=hi].iter().sum();
-        if mass >= min_mass.max(1) {
-            intervals.push(([lo, hi], mass));
-        }
-    }
-    intervals.sort_by(|a, b| b.1.cmp(&a.1).then(a.0[0].cmp(&b.0[0])));
-    intervals.truncate(MAX_DISTANCE_PEAKS);
-    intervals.into_iter().map(|(i, _)| i).collect()
+    let params = DistancePeaksParams { min_mass, reach_bins: reach_bins as u32, ..Default::default() };
+    let (mut intervals, mut count) = (vec![[0u32; 4]; MAX_DISTANCE_PEAKS], [0u32]);
+    crate::cpu::distance_peaks(&params, &hist[..DISTANCE_BINS], &[1], &mut intervals, &mut count);
+    intervals[..count[0] as usize].iter().map(|i| [i[0] as usize, i[1] as usize]).collect()
 }
 
 /// Sums over a plane's pixels, from which it is fitted; sums of two planes add up to the sums
@@ -302,10 +259,6 @@ fn point(v: [f32; 4]) -> Option<[f32; 3]> {
     (v[2].is_finite() && v[2] > 0.0).then_some([v[0], v[1], v[2]])
 }
 
-fn normal3(n: [f32; 4]) -> Option<[f64; 3]> {
-    n[0].is_finite().then_some([f64::from(n[0]), f64::from(n[1]), f64::from(n[2])])
-}
-
 /// Stage 2 (the inner loop at one level): the planes of each normal peak. Free pixels (`free`:
 /// the full-resolution labels, their width and this level's log2 scale; a pixel is free when
 /// the full-resolution pixel at its corner is unlabelled) with a normal within the segmentation angle of a peak (the nearest) are histogrammed by
@@ -408,23 +361,11 @@ pub fn merge(mut planes: Vec<PlaneFit>, config: &PlaneConfig) -> Vec<PlaneFit> {
 /// offset by 2.5 cm. Raw points are noisier but unbiased.
 pub fn label(level: &CpuPyramidLevel, planes: &[PlaneFit], config: &PlaneConfig, raw_depth_m: Option<&[f32]>) -> (Vec<u32>, Vec<PlaneSums>) {
     let k_img = level.intrinsics;
-    let cos_label = f64::from(config.label_angle_deg).to_radians().cos();
+    // Kernel `plane_label`.
+    let params = PlaneLabelParams { pixel_count: level.vertex_in_camera.len() as u32, cos_label: config.label_angle_deg.to_radians().cos(), min_distance_m: config.label_min_distance_m, ..Default::default() };
+    let planes4: Vec<[f32; 4]> = planes.iter().map(|p| [p.normal[0] as f32, p.normal[1] as f32, p.normal[2] as f32, p.offset_m as f32]).collect();
     let mut labels = vec![NO_LABEL; level.vertex_in_camera.len()];
-    for (ix, l) in labels.iter_mut().enumerate() {
-        let (Some(p), Some(n)) = (point(level.vertex_in_camera[ix]), normal3(level.normal_in_camera[ix])) else { continue };
-        let tolerance = f64::from(config.label_distance_m(p[2]));
-        let p64 = p.map(f64::from);
-        let mut best: Option<(usize, f64)> = None;
-        for (k, plane) in planes.iter().enumerate() {
-            let r = (dot(plane.normal, p64) + plane.offset_m).abs();
-            if dot(n, plane.normal).abs() >= cos_label && r < tolerance && best.is_none_or(|(_, b)| r < b) {
-                best = Some((k, r));
-            }
-        }
-        if let Some((k, _)) = best {
-            *l = k as u32;
-        }
-    }
+    crate::cpu::plane_label(&params, &level.vertex_in_camera, &level.normal_in_camera, &planes4, &[planes.len() as u32], &mut labels);
     let mut sums = vec![PlaneSums::default(); planes.len()];
     let (w, h) = (k_img.width_px as i64, k_img.height_px as i64);
     let m = i64::from(config.fit_margin_px);
@@ -612,7 +553,7 @@ mod tests {
     #[test]
     fn prominence_keeps_two_close_modes_apart_and_one_noisy_mode_whole() {
         // Two Gaussian bumps 4 bins apart (2 cm at 5 mm bins, σ 0.8 bin): two planes.
-        let bump = |c: f32, s: f32, m: f32| (0..64).map(move |i| (m * (-0.5 * ((i as f32 - c) / s).powi(2)).exp()) as u32);
+        let bump = |c: f32, s: f32, m: f32| (0..DISTANCE_BINS).map(move |i| (m * (-0.5 * ((i as f32 - c) / s).powi(2)).exp()) as u32);
         let two: Vec<u32> = bump(20.0, 0.8, 400.0).zip(bump(24.0, 0.8, 300.0)).map(|(a, b)| a + b).collect();
         let peaks = distance_peaks(&two, 50, 6);
         assert_eq!(peaks.len(), 2, "{peaks:?}");
