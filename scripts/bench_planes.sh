@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Benchmarks `webfusion planes` against a peer, Open3D's RANSAC `segment_plane` repeated for
+# as many planes per frame as webfusion found (scripts/peers/open3d_planes.py), on the same TUM
+# frames in the same run, and prints per-stage median ms per frame and the speed ratios.
+#
+#   scripts/bench_planes.sh [--data DIR] [--frames A..B] [--out DIR]
+#
+#   --data DIR    TUM directory (default: $WEBFUSION_TUM_DIR or ../shared/data/tum_fr1_rpy_0-99)
+#   --frames A..B frames of the source (default: all)
+#   --out DIR     where both runs write (default: target/bench-planes)
+#
+# webfusion's stages: preprocess (depth to vertex and normal maps) and segment (the whole
+# segmentation), from frames.json; Open3D's: cloud (depth to points) and segment (RANSAC).
+# Env: WEBFUSION_BIN (default target/release/webfusion, built when missing).
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+data="${WEBFUSION_TUM_DIR:-$ROOT/../shared/data/tum_fr1_rpy_0-99}"; frames=""; out="$ROOT/target/bench-planes"
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --data) data="${2:?$1 needs a value}"; shift 2 ;;
+    --frames) frames="${2:?$1 needs a value}"; shift 2 ;;
+    --out) out="${2:?$1 needs a value}"; shift 2 ;;
+    -h|--help) sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "unknown argument: $1" >&2; exit 2 ;;
+  esac
+done
+[ -f "$data/depth.txt" ] || { echo "no TUM directory at $data (use --data DIR)" >&2; exit 2; }
+data="$(cd "$data" && pwd)"
+mkdir -p "$out"; out="$(cd "$out" && pwd)"
+cd "$ROOT"
+WF="${WEBFUSION_BIN:-$ROOT/target/release/webfusion}"
+[ -x "$WF" ] || cargo build --release -p webfusion-bridge >&2
+scripts/peers/setup_venv.sh >&2
+PY="$ROOT/.venv-peers/bin/python"
+rm -rf "$out/webfusion"
+"$WF" planes "$data" --out "$out/webfusion" ${frames:+--frames "$frames"} >&2
+"$PY" scripts/peers/open3d_planes.py "$data" "$out/webfusion/frames.json" "$out/open3d.json"
+"$PY" - "$out/webfusion/frames.json" "$out/open3d.json" <<'PYEOF'
+import json, statistics, sys
+wf = json.load(open(sys.argv[1]))["frames"]
+o3 = json.load(open(sys.argv[2]))["frames"]
+med = lambda xs: statistics.median(xs) if xs else float("nan")
+wp, ws = med([f["stages_ms"]["preprocess"] for f in wf]), med([f["stages_ms"]["segment"] for f in wf])
+oc, os_ = med([f["cloud_ms"] for f in o3]), med([f["segment_ms"] for f in o3])
+planes = med([len(f["planes"]) for f in wf])
+print(f"{len(wf)} frames, {planes:g} planes per frame (median); per-frame median ms")
+print(f"{'':24}{'depth to points':>16}{'segmentation':>14}{'total':>10}")
+print(f"{'webfusion (CPU reference)':24}{wp:16.1f}{ws:14.1f}{wp + ws:10.1f}")
+print(f"{'Open3D segment_plane':24}{oc:16.1f}{os_:14.1f}{oc + os_:10.1f}")
+print(f"ratio webfusion / Open3D: segmentation {ws / os_:.2f}, total {(wp + ws) / (oc + os_):.2f} (below 1: webfusion faster)")
+PYEOF
