@@ -11,7 +11,7 @@
 //! back face could follow); the surface point is the
 //! linear interpolation of the crossing (the sample before it re-read trilinearly when it was a
 //! nearest-voxel one). Writes the world-frame vertex, the depth (camera z) a virtual sensor at
-//! this pose would see and the model colour (trilinear, see `sample_color`); `surface_normals` then derives the
+//! this pose would see and the model colour (nearest voxel); `surface_normals` then derives the
 //! normals from the vertices. Misses, back faces and unobserved space give NaN / 0. A prediction rendered at the pose a depth image was just fused at may
 //! search each ray only within μ + 3σ (Kinect noise) of that pixel's measured depth instead of
 //! the whole depth range: the fused surface lies there, and a model surface further in front is
@@ -237,38 +237,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let p = origin + dir * t_hit;
     vertex_in_world[ix] = vec4<f32>(p, 1.0);
     depth_m[ix] = t_hit * z_per_t;
-    color_rgba8[ix] = sample_color(d, p) | OPAQUE;
-}
-
-// The model colour at a surface point: the colours of the 8 voxel centres around it blended
-// trilinearly, over the observed ones only (weights renormalised), so the rendered colour
-// varies smoothly with the point, as the TSDF does, instead of jumping from voxel to voxel as
-// the view moves (which the photometric term would read as motion). 0 where none of the 8 was
-// observed or the point lies at the map's edge; the placeholder word when colour is off.
-fn sample_color(d: VolumeDesc, p_world: vec3<f32>) -> u32 {
-    let g = (p_world - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m - vec3<f32>(0.5);
-    let base_rel = floor(g);
-    let base_f = base_rel + vec3<f32>(voxel_anchor(d));
-    if any(base_f < vec3<f32>(0.0)) || base_f.x >= f32(d.dim_x - 1u) || base_f.y >= f32(d.dim_y - 1u) || base_f.z >= f32(d.dim_z - 1u) {
-        return 0u;
+    // Nearest voxel centre's colour.
+    let g = (p - vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m)) / d.voxel_size_m + vec3<f32>(voxel_anchor(d));
+    let c = min(vec3<u32>(max(g, vec3<f32>(0.0))), vec3<u32>(d.dim_x - 1u, d.dim_y - 1u, d.dim_z - 1u));
+    let c_slot = voxel_slot(d, c.x, c.y, c.z);
+    var rgb = 0u;
+    if c_slot != NO_SLOT {
+        rgb = color_volume[min(c_slot, arrayLength(&color_volume) - 1u)];
     }
-    let b = vec3<u32>(base_f);
-    let f = g - base_rel;
-    var rgb = vec3<f32>(0.0);
-    var weight_sum = 0.0;
-    for (var c = 0u; c < 8u; c++) {
-        let corner = vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u);
-        let slot = voxel_slot(d, b.x + corner.x, b.y + corner.y, b.z + corner.z);
-        if slot == NO_SLOT || voxel_weight(tsdf_volume[slot]) == 0u {
-            continue;
-        }
-        let w3 = select(vec3<f32>(1.0) - f, f, corner == vec3<u32>(1u));
-        let w = w3.x * w3.y * w3.z;
-        rgb += w * unpack_rgb8(color_volume[min(slot, arrayLength(&color_volume) - 1u)]);
-        weight_sum += w;
-    }
-    if weight_sum <= 0.0 {
-        return 0u;
-    }
-    return pack_rgb8(rgb / weight_sum);
+    color_rgba8[ix] = rgb | OPAQUE;
 }

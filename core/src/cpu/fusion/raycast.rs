@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/fusion/raycast.wgsl`.
 
-use crate::cpu::shared::{BRICK_SHIFT, FAR_TSDF, INVALID, INVALID_VEC4, MAP_SPARSE, MapRef, NO_SLOT, TsdfSample, back_project, box_corner_in_world, dot3, is_valid_f32, kinect_sigma_m, sample_tsdf, transform_vector, pack_rgb8, unpack_rgb8, voxel_anchor, voxel_slot, voxel_tsdf, voxel_weight};
+use crate::cpu::shared::{BRICK_SHIFT, FAR_TSDF, INVALID, INVALID_VEC4, MAP_SPARSE, MapRef, NO_SLOT, TsdfSample, back_project, box_corner_in_world, dot3, is_valid_f32, kinect_sigma_m, sample_tsdf, transform_vector, voxel_anchor, voxel_slot, voxel_tsdf, voxel_weight};
 use crate::cpu::fusion::raycast_range::tile_depth_range;
 use crate::kernels::GpuIntrinsics;
 use crate::kernels::raycast::{CameraPose, RaycastParams};
@@ -205,43 +205,12 @@ pub fn raycast(
             let p: [f32; 3] = at(t_hit);
             vertex_in_world[ix] = [p[0], p[1], p[2], 1.0];
             depth_m[ix] = t_hit * z_per_t;
-            color_rgba8[ix] = sample_color(map, d, color_volume, p) | OPAQUE;
+            let origin_v = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
+            let anchor = voxel_anchor(d);
+            let c: [u32; 3] = std::array::from_fn(|i| (((p[i] - origin_v[i]) / d.voxel_size_m + anchor[i] as f32).max(0.0) as u32).min(dims[i] - 1));
+            let c_slot = voxel_slot(map, d, c[0], c[1], c[2]);
+            let rgb = if c_slot == NO_SLOT { 0 } else { color_volume[(c_slot as usize).min(color_volume.len() - 1)] };
+            color_rgba8[ix] = rgb | OPAQUE;
         }
     }
-}
-
-/// `sample_color()`: the trilinear blend of the observed ones among the 8 voxel colours around
-/// `p_world`, 0 where none is observed or the point lies at the map's edge.
-pub fn sample_color(map: MapRef<'_>, d: &VolumeDesc, color_volume: &[u32], p_world: [f32; 3]) -> u32 {
-    let origin = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
-    let dims = [d.dim_x, d.dim_y, d.dim_z];
-    let anchor = voxel_anchor(d);
-    let g: [f32; 3] = std::array::from_fn(|i| (p_world[i] - origin[i]) / d.voxel_size_m - 0.5);
-    let base_rel = g.map(f32::floor);
-    let base_f: [f32; 3] = std::array::from_fn(|i| base_rel[i] + anchor[i] as f32);
-    if (0..3).any(|i| base_f[i] < 0.0 || base_f[i] >= (dims[i] - 1) as f32) {
-        return 0;
-    }
-    let b = base_f.map(|v| v as u32);
-    let f: [f32; 3] = std::array::from_fn(|i| g[i] - base_rel[i]);
-    let mut rgb = [0.0f32; 3];
-    let mut weight_sum = 0.0f32;
-    for c in 0..8u32 {
-        let corner = [c & 1, (c >> 1) & 1, c >> 2];
-        let slot = voxel_slot(map, d, b[0] + corner[0], b[1] + corner[1], b[2] + corner[2]);
-        if slot == NO_SLOT || voxel_weight(map.tsdf_volume[slot as usize]) == 0 {
-            continue;
-        }
-        let w3: [f32; 3] = std::array::from_fn(|i| if corner[i] == 1 { f[i] } else { 1.0 - f[i] });
-        let w = w3[0] * w3[1] * w3[2];
-        let c_rgb = unpack_rgb8(color_volume[(slot as usize).min(color_volume.len() - 1)]);
-        for (acc, v) in rgb.iter_mut().zip(c_rgb) {
-            *acc += w * v;
-        }
-        weight_sum += w;
-    }
-    if weight_sum <= 0.0 {
-        return 0;
-    }
-    pack_rgb8(rgb.map(|v| v / weight_sum))
 }
