@@ -8,9 +8,8 @@
 //! realignment to the pixels' mean normal. It records (peak, bin) for the plane sums, or
 //! NO_ASSIGNMENT. Mirrors core/src/cpu/planes/distance_histogram.rs.
 #import invalid
+#import planes
 
-const DISTANCE_BINS: u32 = 1024u;
-const NO_LABEL: u32 = 0xffffffffu;
 const NO_ASSIGNMENT: u32 = 0xffffffffu;
 // Fixed-point scale of the normal sums: 2^14 per unit keeps 2^17 pixels' sum within i32.
 const NORMAL_SUM_SCALE: f32 = 16384.0;

@@ -11,9 +11,8 @@
 //! the MAX_DISTANCE_PEAKS with the most pixels are kept, most first (the lower bin among
 //! equals). The 256 invocations find and test the maxima of 4 bins each; the first turns them
 //! into intervals. Mirrors core/src/cpu/planes/distance_peaks.rs.
+#import planes
 
-const DISTANCE_BINS: u32 = 1024u;
-const MAX_DISTANCE_PEAKS: u32 = 8u;
 const WORKGROUP: u32 = 256u;
 
 struct DistancePeaksParams {

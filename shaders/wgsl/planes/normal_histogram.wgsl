@@ -6,10 +6,7 @@
 //! earlier round labelled (`labels` not NO_LABEL), are not counted. Mirrors
 //! core/src/cpu/planes/normal_histogram.rs.
 #import invalid
-
-const NORMAL_BINS: u32 = 32u;
-const NO_LABEL: u32 = 0xffffffffu;
-const PI: f32 = 3.14159265358979;
+#import planes
 
 struct NormalHistogramParams {
     // Pixels of the normal map.
@@ -27,11 +24,6 @@ struct NormalHistogramParams {
 @group(0) @binding(2) var<storage, read> labels: array<u32>;
 // In/out: NORMAL_BINS² counts, row-major (y, x), cleared by the caller.
 @group(0) @binding(3) var<storage, read_write> histogram: array<atomic<u32>>;
-
-// The bin of one normal component on [-1, 1].
-fn normal_bin_1d(c: f32) -> u32 {
-    return min(u32(acos(clamp(c, -1.0, 1.0)) / PI * f32(NORMAL_BINS)), NORMAL_BINS - 1u);
-}
 
 @compute @workgroup_size(256, 1, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {

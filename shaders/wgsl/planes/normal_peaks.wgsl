@@ -8,12 +8,10 @@
 //! planes are cleared first. Each of the 256 invocations owns 4 bins. Mirrors
 //! core/src/cpu/planes/normal_peaks.rs.
 #import invalid
+#import planes
 
-const NORMAL_BINS: u32 = 32u;
 const BIN_COUNT: u32 = 1024u;
-const MAX_NORMAL_PEAKS: u32 = 8u;
 const WORKGROUP: u32 = 256u;
-const PI: f32 = 3.14159265358979;
 
 struct NormalPeaksParams {
     // The smallest count a peak's bin may have.
@@ -40,19 +38,6 @@ struct NormalPeaksParams {
 var<workgroup> bins: array<u32, 1024>;
 var<workgroup> best_count: array<u32, 256>;
 var<workgroup> best_index: array<u32, 256>;
-
-fn normal_bin_1d(c: f32) -> u32 {
-    return min(u32(acos(clamp(c, -1.0, 1.0)) / PI * f32(NORMAL_BINS)), NORMAL_BINS - 1u);
-}
-
-// The unit normal (n_z ≥ 0) at continuous bin coordinates.
-fn bin_normal(b: vec2<f32>) -> vec3<f32> {
-    let step = PI / f32(NORMAL_BINS);
-    let x = cos(b.x * step);
-    let y = cos(b.y * step);
-    let z = sqrt(max(1.0 - x * x - y * y, 0.0));
-    return vec3<f32>(x, y, z) / sqrt(x * x + y * y + z * z);
-}
 
 // Clears this invocation's bins whose centres lie within `radius` of `centre` (bin coordinates).
 fn clear_around(lid: u32, centre: vec2<f32>, radius: f32) {

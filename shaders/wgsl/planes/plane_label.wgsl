@@ -7,8 +7,7 @@
 //! core/src/cpu/planes/plane_label.rs.
 #import invalid
 #import kinect
-
-const NO_LABEL: u32 = 0xffffffffu;
+#import planes
 
 struct PlaneLabelParams {
     // Pixels of the maps.
