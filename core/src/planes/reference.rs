@@ -9,7 +9,6 @@
 use super::{DISTANCE_BINS, MAX_DISTANCE_PEAKS, MAX_NORMAL_PEAKS, NO_LABEL, NORMAL_BINS, Plane, PlaneConfig, Segmentation};
 use crate::PinholeIntrinsics;
 use crate::cpu::preprocess::chain::CpuPyramidLevel;
-use crate::cpu::planes::normal_histogram::normal_bin_1d;
 use crate::cpu::shared::kinect_sigma_m;
 use crate::kernels::normal_histogram::NormalHistogramParams;
 use crate::kernels::normal_peaks::NormalPeaksParams;
@@ -17,16 +16,6 @@ use crate::kernels::distance_histogram::DistanceHistogramParams;
 use crate::kernels::distance_peaks::DistancePeaksParams;
 use crate::kernels::plane_label::PlaneLabelParams;
 use crate::cpu::planes::distance_histogram::NO_ASSIGNMENT;
-
-/// The normal-histogram bin (x, y) of a unit normal: 003's [acos n_x, acos n_y] / π · 32 on the
-/// hemisphere n_z ≥ 0 (a normal with n_z < 0 is negated first); `None` for an invalid normal.
-pub fn normal_bin(n: [f32; 4]) -> Option<(usize, usize)> {
-    if !n[0].is_finite() || !n[1].is_finite() || !n[2].is_finite() {
-        return None;
-    }
-    let s = if n[2] < 0.0 { -1.0 } else { 1.0 };
-    Some((normal_bin_1d(s * n[0]), normal_bin_1d(s * n[1])))
-}
 
 /// Stage 1a (kernel `normal_histogram`): the histogram of the normals of the pixels no plane
 /// has yet.
@@ -259,18 +248,22 @@ fn point(v: [f32; 4]) -> Option<[f32; 3]> {
     (v[2].is_finite() && v[2] > 0.0).then_some([v[0], v[1], v[2]])
 }
 
-/// Stage 2 (the inner loop at one level): the planes of each normal peak. Free pixels (`free`:
-/// the full-resolution labels, their width and this level's log2 scale; a pixel is free when
-/// the full-resolution pixel at its corner is unlabelled) with a normal within the segmentation angle of a peak (the nearest) are histogrammed by
-/// their distance |n_peak·p|; each distance peak's pixels are summed and fitted; fits smaller
-/// than `min_pixels` or bent past the limit are dropped (the count of bent ones is added to
-/// `curved`). Returns the fits and, per normal peak, the mean normal of its pixels (oriented
-/// like the peak): a direction the offsets of parallel planes do not bias, unlike a fit to
-/// their union.
-fn inner_pass(level: &CpuPyramidLevel, peaks: &[[f32; 3]], free: (&[u32], u32, u32), config: &PlaneConfig, min_pixels: u32, curved: &mut u32) -> (Vec<PlaneFit>, Vec<[f32; 3]>) {
+/// Stage 2a's output: per pixel its (normal peak, distance bin), per peak its distance
+/// histogram and the mean normal of its pixels.
+struct Assigned {
+    assigned: Vec<Option<(usize, usize)>>,
+    hist: Vec<u32>,
+    /// Oriented like the peak: a direction the offsets of parallel planes do not bias, unlike a
+    /// fit to their union (003's realignment target).
+    mean_normals: Vec<[f32; 3]>,
+}
+
+/// Stage 2a (kernel `distance_histogram`): free pixels (`free`: the full-resolution labels,
+/// their width and this level's log2 scale; a pixel is free when the full-resolution pixel at
+/// its corner is unlabelled) with a normal within the segmentation angle of a peak (the
+/// nearest) get its label and their distance bin along it.
+fn assign(level: &CpuPyramidLevel, peaks: &[[f32; 3]], free: (&[u32], u32, u32), config: &PlaneConfig) -> Assigned {
     let n_px = level.vertex_in_camera.len();
-    // 2a (kernel `distance_histogram`): the nearest peak and distance bin of each pixel, the
-    // distance histograms and the normal sums.
     let (labels, full_width_px, level_shift) = free;
     let params = DistanceHistogramParams {
         width_px: level.intrinsics.width_px,
@@ -287,7 +280,26 @@ fn inner_pass(level: &CpuPyramidLevel, peaks: &[[f32; 3]], free: (&[u32], u32, u
     let mut hist = vec![0u32; peaks.len() * DISTANCE_BINS];
     let mut normal_sums = vec![0i32; 4 * peaks.len()];
     crate::cpu::distance_histogram(&params, &level.vertex_in_camera, &level.normal_in_camera, labels, &peaks4, &[peaks.len() as u32], &mut assignment, &mut hist, &mut normal_sums);
-    let assigned: Vec<Option<(usize, usize)>> = assignment.iter().map(|&a| (a != NO_ASSIGNMENT).then_some(((a >> 16) as usize, (a & 0xffff) as usize))).collect();
+    let assigned = assignment.iter().map(|&a| (a != NO_ASSIGNMENT).then_some(((a >> 16) as usize, (a & 0xffff) as usize))).collect();
+    let mean_normals = peaks
+        .iter()
+        .zip(normal_sums.chunks(4))
+        .map(|(pk, s)| {
+            let s = [s[0], s[1], s[2]].map(f64::from);
+            let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+            if len > 0.0 { s.map(|v| (v / len) as f32) } else { *pk }
+        })
+        .collect();
+    Assigned { assigned, hist, mean_normals }
+}
+
+/// Stage 2 (the inner loop at one level): the planes of each normal peak. Pixels are assigned
+/// ([`assign`]); each distance peak's pixels are summed and fitted; fits smaller than
+/// `min_pixels` or bent past the limit are dropped (the count of bent ones is added to
+/// `curved`).
+fn inner_pass(level: &CpuPyramidLevel, peaks: &[[f32; 3]], free: (&[u32], u32, u32), config: &PlaneConfig, min_pixels: u32, curved: &mut u32) -> Vec<PlaneFit> {
+    let n_px = level.vertex_in_camera.len();
+    let Assigned { assigned, hist, .. } = assign(level, peaks, free, config);
     // 2b: the distance peaks of each normal peak.
     let reach = (config.distance_reach_m / config.distance_bin_m).round() as usize;
     let intervals: Vec<Vec<[usize; 2]>> = (0..peaks.len()).map(|k| distance_peaks(&hist[k * DISTANCE_BINS..(k + 1) * DISTANCE_BINS], min_pixels, reach)).collect();
@@ -317,16 +329,7 @@ fn inner_pass(level: &CpuPyramidLevel, peaks: &[[f32; 3]], free: (&[u32], u32, u
             fits.push(f);
         }
     }
-    let mean_normals = peaks
-        .iter()
-        .zip(normal_sums.chunks(4))
-        .map(|(pk, s)| {
-            let s = [s[0], s[1], s[2]].map(f64::from);
-            let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
-            if len > 0.0 { s.map(|v| (v / len) as f32) } else { *pk }
-        })
-        .collect();
-    (fits, mean_normals)
+    fits
 }
 
 /// Stage 3: merges planes within the merge angle whose offsets, each measured at the other's
@@ -432,11 +435,8 @@ pub fn segment(levels: &[CpuPyramidLevel], raw_depth_m: Option<&[f32]>, config: 
         let free_inner = (labels.as_slice(), full.intrinsics.width_px, inner_l as u32);
         // 003's realignment, with the mean normal of each peak's pixels (003 took its largest
         // plane's fitted normal, which a parallel plane a few cm away tilts); then again.
-        let (_, realigned) = inner_pass(inner, &peaks, free_inner, config, min_inner, &mut curved);
-        let mut second_curved = 0;
-        let (second, _) = inner_pass(inner, &realigned, free_inner, config, min_inner, &mut second_curved);
-        curved = curved.max(second_curved);
-        planes.extend(second);
+        let realigned = assign(inner, &peaks, free_inner, config).mean_normals;
+        planes.extend(inner_pass(inner, &realigned, free_inner, config, min_inner, &mut curved));
         planes = merge(planes, config);
         // Final labelling with every plane so far; drop the small and the bent, then relabel.
         let (_, sums) = label(full, &planes, config, raw_depth_m);
@@ -527,12 +527,12 @@ mod tests {
     #[test]
     fn normal_bins_map_back_to_their_normals() {
         for n in [[0.0f32, 0.0, -1.0], [0.6, 0.0, -0.8], [0.0, -0.8, -0.6], [-0.48, 0.6, -0.64]] {
-            let (bx, by) = normal_bin([n[0], n[1], n[2], 0.0]).unwrap();
+            let (bx, by) = crate::cpu::planes::normal_histogram::normal_bin([n[0], n[1], n[2], 0.0]);
             let back = crate::cpu::planes::normal_peaks::bin_normal(bx as f32 + 0.5, by as f32 + 0.5);
             let cos = (back[0] * -n[0] + back[1] * -n[1] + back[2] * -n[2]).abs();
             assert!(cos > 8f32.to_radians().cos(), "{n:?} -> bin ({bx}, {by}) -> {back:?}");
         }
-        assert_eq!(normal_bin([f32::NAN, 0.0, 0.0, 0.0]), None);
+        assert_eq!(normal_histogram(&[[f32::NAN, 0.0, 0.0, 0.0]], &[NO_LABEL]).iter().sum::<u32>(), 0, "an invalid normal has no bin");
     }
 
     #[test]

@@ -38,6 +38,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if params.use_labels != 0u && labels[ix] != NO_LABEL {
         return;
     }
-    let h = select(n.xyz, -n.xyz, n.z < 0.0);
-    atomicAdd(&histogram[normal_bin_1d(h.y) * NORMAL_BINS + normal_bin_1d(h.x)], 1u);
+    let b = normal_bin(n.xyz);
+    atomicAdd(&histogram[b.y * NORMAL_BINS + b.x], 1u);
 }

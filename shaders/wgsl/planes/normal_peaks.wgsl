@@ -57,11 +57,7 @@ fn main(@builtin(local_invocation_index) lid: u32) {
     }
     workgroupBarrier();
     for (var k = 0u; k < params.known_count; k++) {
-        var n = known_normals[k].xyz;
-        if n.z < 0.0 {
-            n = -n;
-        }
-        clear_around(lid, vec2<f32>(f32(normal_bin_1d(n.x)) + 0.5, f32(normal_bin_1d(n.y)) + 0.5), params.clear_bins);
+        clear_around(lid, vec2<f32>(normal_bin(known_normals[k].xyz)) + vec2<f32>(0.5), params.clear_bins);
     }
     workgroupBarrier();
     var found = 0u;

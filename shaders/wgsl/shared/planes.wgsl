@@ -20,6 +20,13 @@ fn normal_bin_1d(c: f32) -> u32 {
     return min(u32(acos(clamp(c, -1.0, 1.0)) / PLANES_PI * f32(NORMAL_BINS)), NORMAL_BINS - 1u);
 }
 
+// The normal-histogram bin (x, y) of a unit normal: on the hemisphere n_z ≥ 0 (one with
+// n_z < 0 is negated first).
+fn normal_bin(n: vec3<f32>) -> vec2<u32> {
+    let h = select(n, -n, n.z < 0.0);
+    return vec2<u32>(normal_bin_1d(h.x), normal_bin_1d(h.y));
+}
+
 // The unit normal (n_z ≥ 0) at continuous bin coordinates, bin i spanning [i, i + 1).
 fn bin_normal(b: vec2<f32>) -> vec3<f32> {
     let step = PLANES_PI / f32(NORMAL_BINS);

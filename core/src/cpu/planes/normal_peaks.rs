@@ -2,7 +2,7 @@
 //! CPU reference of `shaders/wgsl/planes/normal_peaks.wgsl` (the workgroup's reductions as one
 //! sequential search with the same tie rule: the lowest index among equal counts).
 
-use crate::cpu::planes::normal_histogram::normal_bin_1d;
+use crate::cpu::planes::normal_histogram::normal_bin;
 use crate::cpu::shared::INVALID_VEC4;
 use crate::kernels::normal_peaks::NormalPeaksParams;
 use crate::planes::{MAX_NORMAL_PEAKS, NORMAL_BINS};
@@ -30,11 +30,8 @@ fn clear_around(bins: &mut [u32], centre: [f32; 2], radius: f32) {
 pub fn normal_peaks(params: &NormalPeaksParams, histogram: &[u32], known_normals: &[[f32; 4]], peaks: &mut [[f32; 4]], peak_count: &mut [u32]) {
     let mut bins = histogram[..NORMAL_BINS * NORMAL_BINS].to_vec();
     for k in 0..params.known_count as usize {
-        let mut n = known_normals[k];
-        if n[2] < 0.0 {
-            n = [-n[0], -n[1], -n[2], n[3]];
-        }
-        clear_around(&mut bins, [normal_bin_1d(n[0]) as f32 + 0.5, normal_bin_1d(n[1]) as f32 + 0.5], params.clear_bins);
+        let (bx, by) = normal_bin(known_normals[k]);
+        clear_around(&mut bins, [bx as f32 + 0.5, by as f32 + 0.5], params.clear_bins);
     }
     let mut found = 0;
     for p in 0..MAX_NORMAL_PEAKS {
