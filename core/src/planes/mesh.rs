@@ -1,0 +1,626 @@
+// SPDX-License-Identifier: MIT
+//! Seed 003's planar meshes (§4.4 of its digest), CPU reference: each plane gets its own
+//! frame and a grid of square texels on it; the texels its pixels cover are rectified into a
+//! texture, and a quadtree over the texel grid turns each fully covered 2ᵏ x 2ᵏ block into one
+//! quad (two triangles), so a plane of any size costs triangles only along its outline.
+//!
+//! - **Plane frame**: origin on the plane, axes `u` (the tangent, the points' largest spread),
+//!   `v = n × u`, normal `n`; (u, v, n) is right-handed, so a quad counter-clockwise in (u, v)
+//!   faces along `n`, towards the cameras that saw it.
+//! - **Texel grid**: texel (x, y) spans `min_m + [x, x + 1] x [y, y + 1] / px_per_m` in (u, v),
+//!   `px_per_m` a power of two (003: textures of different views then compare by halving or
+//!   doubling). A texel is covered when the pixel its centre projects to belongs to the plane.
+//! - **Quadtree** ([`quadtree_degrees`], 003's Algorithm 4 with its errata fixed: neighbours at
+//!   `step`, and read-then-write per step): a texel's degree is the side of the quad whose
+//!   first texel it is, −1 for none; four quads of one side filling an aligned block become
+//!   one, up to [`MAX_QUAD_TEXELS`]. Quads are made of whole covered texels, so the mesh
+//!   covers exactly the covered texels (003's spanned texel centres, see the function).
+//! - **Compaction** ([`quadtree_mesh`]): the quads' corners on the lattice of texel corners
+//!   in row-major order, two counter-clockwise triangles per quad.
+//!
+//! [`frame_plane_mesh`] meshes one plane of one frame (003's per-frame output); the world
+//! model ([`super::world`]) meshes its accumulated grids with the same functions.
+
+use super::{NO_LABEL, Plane, PlaneConfig, Segmentation};
+use crate::{ColorImage, PinholeIntrinsics};
+
+/// Largest quad side, texels (003: 256, from its two 16 x 16 phases).
+pub const MAX_QUAD_TEXELS: u32 = 256;
+/// Largest texture side, texels (003: 1024).
+pub const MAX_TEXTURE_PX: u32 = 1024;
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+fn normalised(a: [f32; 3]) -> [f32; 3] {
+    let l = dot(a, a).sqrt();
+    a.map(|v| v / l)
+}
+
+/// A plane's own frame (see the module): `p = origin + s_u u + s_v v` for in-plane
+/// coordinates (s_u, s_v), metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneFrame {
+    /// A point on the plane, metres.
+    pub origin_m: [f32; 3],
+    /// First in-plane axis, unit.
+    pub u_axis: [f32; 3],
+    /// Second in-plane axis, `normal × u_axis`.
+    pub v_axis: [f32; 3],
+    /// Unit normal.
+    pub normal: [f32; 3],
+}
+
+impl PlaneFrame {
+    /// The frame of plane `normal·p + offset_m = 0` with its origin at `near_m` moved onto the
+    /// plane and its `u` axis along `tangent` made orthogonal to the normal.
+    pub fn new(normal: [f32; 3], offset_m: f32, near_m: [f32; 3], tangent: [f32; 3]) -> Self {
+        let n = normalised(normal);
+        let off = dot(n, near_m) + offset_m;
+        let origin_m = [near_m[0] - off * n[0], near_m[1] - off * n[1], near_m[2] - off * n[2]];
+        let tn = dot(tangent, n);
+        let mut u = [tangent[0] - tn * n[0], tangent[1] - tn * n[1], tangent[2] - tn * n[2]];
+        if dot(u, u) < 1e-12 {
+            // Any axis across the normal.
+            let a = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+            u = cross(a, n);
+        }
+        let u = normalised(u);
+        PlaneFrame { origin_m, u_axis: u, v_axis: cross(n, u), normal: n }
+    }
+
+    /// The frame of a segmented plane, at its centroid.
+    pub fn of_plane(plane: &Plane) -> Self {
+        Self::new(plane.normal, plane.offset_m, plane.centroid_m, plane.tangent)
+    }
+
+    /// Offset d of `normal·p + d = 0`.
+    pub fn offset_m(&self) -> f32 {
+        -dot(self.normal, self.origin_m)
+    }
+
+    /// In-plane coordinates of `p` (its orthogonal projection), metres.
+    pub fn to_plane(&self, p: [f32; 3]) -> [f32; 2] {
+        let r = [p[0] - self.origin_m[0], p[1] - self.origin_m[1], p[2] - self.origin_m[2]];
+        [dot(r, self.u_axis), dot(r, self.v_axis)]
+    }
+
+    /// The point at in-plane coordinates `s`.
+    pub fn point(&self, s: [f32; 2]) -> [f32; 3] {
+        std::array::from_fn(|i| self.origin_m[i] + s[0] * self.u_axis[i] + s[1] * self.v_axis[i])
+    }
+}
+
+/// A grid of square texels on a plane (see the module).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TexelGrid {
+    /// The plane.
+    pub frame: PlaneFrame,
+    /// Texels per metre, a power of two.
+    pub px_per_m: f32,
+    /// In-plane coordinates of texel (0, 0)'s corner, metres.
+    pub min_m: [f32; 2],
+    /// Texels along `u`.
+    pub width: u32,
+    /// Texels along `v`.
+    pub height: u32,
+}
+
+impl TexelGrid {
+    /// In-plane coordinates of texel (x, y)'s centre.
+    pub fn texel_centre(&self, x: u32, y: u32) -> [f32; 2] {
+        [self.min_m[0] + (x as f32 + 0.5) / self.px_per_m, self.min_m[1] + (y as f32 + 0.5) / self.px_per_m]
+    }
+
+    /// The texel (x, y) holding in-plane coordinates `s`, if inside the grid.
+    pub fn texel_of(&self, s: [f32; 2]) -> Option<[u32; 2]> {
+        let x = ((s[0] - self.min_m[0]) * self.px_per_m).floor();
+        let y = ((s[1] - self.min_m[1]) * self.px_per_m).floor();
+        (x >= 0.0 && y >= 0.0 && x < self.width as f32 && y < self.height as f32).then_some([x as u32, y as u32])
+    }
+}
+
+/// 003's texture resolution: the smallest power of two, in texels per metre, at least the
+/// densest pixel spacing of the projected bounding box `[min, max]` (in-plane, metres) of a
+/// plane seen with `k` (each box edge's length on screen over its length on the plane); then
+/// halved until the box fits [`MAX_TEXTURE_PX`]. `None` if a corner is behind the camera.
+pub fn texture_px_per_m(frame: &PlaneFrame, min_m: [f32; 2], max_m: [f32; 2], k: &PinholeIntrinsics) -> Option<f32> {
+    let corners = [[min_m[0], min_m[1]], [max_m[0], min_m[1]], [max_m[0], max_m[1]], [min_m[0], max_m[1]]];
+    let mut screen = [[0.0f32; 2]; 4];
+    for (c, s) in corners.iter().zip(&mut screen) {
+        let p = frame.point(*c);
+        if p[2] <= 1e-6 {
+            return None;
+        }
+        *s = [p[0] / p[2] * k.fx_px + k.cx_px, p[1] / p[2] * k.fy_px + k.cy_px];
+    }
+    let edge = |a: usize, b: usize| ((screen[a][0] - screen[b][0]).powi(2) + (screen[a][1] - screen[b][1]).powi(2)).sqrt();
+    let (w_m, h_m) = ((max_m[0] - min_m[0]).max(1e-6), (max_m[1] - min_m[1]).max(1e-6));
+    let density = (edge(0, 1).max(edge(3, 2)) / w_m).max(edge(1, 2).max(edge(0, 3)) / h_m).ceil().max(1.0);
+    let mut px_per_m = (density as u32).next_power_of_two() as f32;
+    while (w_m * px_per_m).ceil() > MAX_TEXTURE_PX as f32 || (h_m * px_per_m).ceil() > MAX_TEXTURE_PX as f32 {
+        px_per_m *= 0.5;
+    }
+    Some(px_per_m)
+}
+
+/// Degree of a texel that starts no quad.
+pub const NO_QUAD: i32 = -1;
+
+/// 003's parallel quadtree decimation (Algorithm 4) of a `width` x `height` texel grid whose
+/// covered texels are `covered`, row-major: per texel the side (texels) of the quad whose
+/// first (lowest x, lowest y) texel it is, [`NO_QUAD`] for a texel that starts none (not
+/// covered, or inside a larger quad). Quads have power-of-two sides up to
+/// [`MAX_QUAD_TEXELS`] and start at multiples of their side; each step reads every block's
+/// four quads, then writes (the order 003's code uses; its printed version races).
+///
+/// Unlike 003, a quad is made of texels: a covered texel is a unit quad, and the mesh spans
+/// the covered texels exactly. 003's quads spanned texel *centres* (a unit quad needed four
+/// covered texels), which drops half a texel along every border and every strip one texel
+/// wide; on the synthetic stairs that was a tenth of each riser.
+///
+/// # Panics
+/// If `covered` is not `width * height` long.
+pub fn quadtree_degrees(covered: &[bool], width: usize, height: usize) -> Vec<i32> {
+    assert_eq!(covered.len(), width * height, "one flag per texel");
+    let at = |d: &[i32], x: usize, y: usize| if x < width && y < height { d[y * width + x] } else { NO_QUAD };
+    let mut d: Vec<i32> = covered.iter().map(|&c| if c { 1 } else { NO_QUAD }).collect();
+    // Four quads of side `step` filling a 2·step block become one.
+    let mut step = 1usize;
+    while step < MAX_QUAD_TEXELS as usize {
+        let mut merge = Vec::new();
+        for y in (0..height).step_by(2 * step) {
+            for x in (0..width).step_by(2 * step) {
+                let s = step as i32;
+                if at(&d, x, y) == s && at(&d, x + step, y) == s && at(&d, x, y + step) == s && at(&d, x + step, y + step) == s {
+                    merge.push((x, y));
+                }
+            }
+        }
+        for (x, y) in merge {
+            d[y * width + x] = 2 * step as i32;
+            for (dx, dy) in [(step, 0), (0, step), (step, step)] {
+                d[(y + dy) * width + x + dx] = NO_QUAD;
+            }
+        }
+        step *= 2;
+    }
+    d
+}
+
+/// The mesh of a degree grid ([`quadtree_degrees`], `width` texels wide): each texel of
+/// degree s > 0 at (x, y) is a quad with corners 0 = (x, y), 1 = (x + s, y), 2 = (x, y + s),
+/// 3 = (x + s, y + s) on the lattice of texel corners ((width + 1) x (height + 1) points), as
+/// triangles 0-1-2 and 2-1-3 (counter-clockwise with x along u and y along v). The vertices
+/// are the lattice points that are some quad's corner, in row-major order (003's stream
+/// compaction, which also needed its hole patching to make every corner a vertex), each given
+/// as its lattice (x, y).
+pub fn quadtree_mesh(degrees: &[i32], width: usize) -> (Vec<[u32; 2]>, Vec<[u32; 3]>) {
+    let height = degrees.len() / width.max(1);
+    let lw = width + 1;
+    let mut used = vec![false; lw * (height + 1)];
+    for (i, &d) in degrees.iter().enumerate() {
+        if d > 0 {
+            let (x, y, s) = (i % width, i / width, d as usize);
+            for (cx, cy) in [(x, y), (x + s, y), (x, y + s), (x + s, y + s)] {
+                used[cy * lw + cx] = true;
+            }
+        }
+    }
+    let mut index = vec![u32::MAX; used.len()];
+    let mut vertices = Vec::new();
+    for (i, &u) in used.iter().enumerate() {
+        if u {
+            index[i] = vertices.len() as u32;
+            vertices.push([(i % lw) as u32, (i / lw) as u32]);
+        }
+    }
+    let mut triangles = Vec::new();
+    for (i, &d) in degrees.iter().enumerate() {
+        if d > 0 {
+            let (x, y, s) = (i % width, i / width, d as usize);
+            let corner = |cx: usize, cy: usize| index[cy * lw + cx];
+            let (c0, c1, c2, c3) = (corner(x, y), corner(x + s, y), corner(x, y + s), corner(x + s, y + s));
+            triangles.push([c0, c1, c2]);
+            triangles.push([c2, c1, c3]);
+        }
+    }
+    (vertices, triangles)
+}
+
+/// Per texel whether a quad of `degrees` covers it.
+pub fn quad_cells(degrees: &[i32], width: usize, height: usize) -> Vec<bool> {
+    let mut cells = vec![false; width * height];
+    for (i, &d) in degrees.iter().enumerate() {
+        if d > 0 {
+            let (x, y) = (i % width, i / width);
+            for cy in y..(y + d as usize).min(height) {
+                for cx in x..(x + d as usize).min(width) {
+                    cells[cy * width + cx] = true;
+                }
+            }
+        }
+    }
+    cells
+}
+
+/// A plane's textured quadtree mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlaneMesh {
+    /// The texel grid it was built on.
+    pub grid: TexelGrid,
+    /// Vertex positions, metres, in the frame the plane was given in.
+    pub positions_m: Vec<[f32; 3]>,
+    /// Texture coordinates of each vertex (glTF's convention: (0, 0) the texture's first
+    /// texel's corner, v down the rows).
+    pub uv: Vec<[f32; 2]>,
+    /// Counter-clockwise seen from the side the normal points to.
+    pub triangles: Vec<[u32; 3]>,
+    /// The texture: RGB, power-of-two sides at most [`MAX_TEXTURE_PX`], black where no texel
+    /// was observed; row 0 is texel row 0 (v = 0).
+    pub texture: ColorImage,
+    /// Quads (each two triangles).
+    pub quads: u32,
+    /// Area the quads cover, m².
+    pub area_m2: f32,
+    /// Per texel whether a quad covers it ([`quad_cells`]).
+    pub cells: Vec<bool>,
+}
+
+impl PlaneMesh {
+    /// Whether the mesh covers the plane point at in-plane coordinates `s` (of its grid's
+    /// frame).
+    pub fn covers(&self, s: [f32; 2]) -> bool {
+        let g = &self.grid;
+        g.texel_of(s).is_some_and(|[x, y]| self.cells[(y * g.width + x) as usize])
+    }
+}
+
+impl PlaneMesh {
+    /// The mesh of `grid` with its covered texels' colours `colours` (row-major, `None` where
+    /// not covered): the quadtree over the covered texels, and the texture, padded to power-of-two
+    /// sides and halved (2 x 2 means of the covered texels) until it fits
+    /// [`MAX_TEXTURE_PX`]; the texture coordinates map the same plane points either way.
+    ///
+    /// # Panics
+    /// If `colours` is not one per texel.
+    pub fn build(grid: TexelGrid, colours: &[Option<[u8; 3]>]) -> PlaneMesh {
+        let (w, h) = (grid.width as usize, grid.height as usize);
+        assert_eq!(colours.len(), w * h, "one colour per texel");
+        let covered: Vec<bool> = colours.iter().map(Option::is_some).collect();
+        let degrees = quadtree_degrees(&covered, w, h);
+        let (vertices, triangles) = quadtree_mesh(&degrees, w);
+        let (pw, ph) = (grid.width.next_power_of_two(), grid.height.next_power_of_two());
+        let positions_m = vertices.iter().map(|&[x, y]| grid.frame.point([grid.min_m[0] + x as f32 / grid.px_per_m, grid.min_m[1] + y as f32 / grid.px_per_m])).collect();
+        let uv = vertices.iter().map(|&[x, y]| [x as f32 / pw as f32, y as f32 / ph as f32]).collect();
+        let quads = degrees.iter().filter(|&&d| d > 0).count() as u32;
+        let cells = quad_cells(&degrees, w, h);
+        let texel_m2 = 1.0 / (grid.px_per_m * grid.px_per_m);
+        let area_m2 = degrees.iter().filter(|&&d| d > 0).map(|&d| (d * d) as f32 * texel_m2).sum();
+        // Texture at the grid's resolution, then halved to fit.
+        let mut tex: Vec<Option<[f32; 3]>> = vec![None; (pw * ph) as usize];
+        for y in 0..h {
+            for x in 0..w {
+                tex[y * pw as usize + x] = colours[y * w + x].map(|c| c.map(f32::from));
+            }
+        }
+        let (mut tw, mut th) = (pw as usize, ph as usize);
+        while tw > MAX_TEXTURE_PX as usize || th > MAX_TEXTURE_PX as usize {
+            let (nw, nh) = ((tw / 2).max(1), (th / 2).max(1));
+            let mut half = vec![None; nw * nh];
+            for y in 0..nh {
+                for x in 0..nw {
+                    let mut sum = [0.0f32; 3];
+                    let mut n = 0.0;
+                    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        let (sx, sy) = ((2 * x + dx).min(tw - 1), (2 * y + dy).min(th - 1));
+                        if let Some(c) = tex[sy * tw + sx] {
+                            (0..3).for_each(|i| sum[i] += c[i]);
+                            n += 1.0;
+                        }
+                    }
+                    half[y * nw + x] = (n > 0.0).then(|| sum.map(|s| s / n));
+                }
+            }
+            (tex, tw, th) = (half, nw, nh);
+        }
+        let rgb8 = tex.iter().flat_map(|c| c.map_or([0, 0, 0], |c| c.map(|v| v.round().clamp(0.0, 255.0) as u8))).collect();
+        let texture = ColorImage { width_px: tw as u32, height_px: th as u32, rgb8 };
+        PlaneMesh { grid, positions_m, uv, triangles, texture, quads, area_m2, cells }
+    }
+}
+
+/// The textured quadtree mesh of plane `index` of a frame's segmentation, in the camera frame
+/// (003's per-frame output): the bounding box, in the plane's frame, of where the rays through
+/// the corners of its labelled pixels (`labels`, e.g. [`complete_labels`]) meet it (003 boxed
+/// the points, which the edge-preserving filter pulls in at every border), the texture
+/// resolution for that box ([`texture_px_per_m`]), and each texel's colour from the pixel its
+/// centre projects to when that pixel carries the label ([`rectify`]). `None` for a plane
+/// with no labelled pixel or one reaching behind the camera.
+pub fn frame_plane_mesh(plane: &Plane, index: u32, labels: &[u32], k: &PinholeIntrinsics, colour: &ColorImage) -> Option<PlaneMesh> {
+    let frame = PlaneFrame::of_plane(plane);
+    let [min, max] = pixel_box(&frame, labels, index, k, &crate::Se3::IDENTITY)?;
+    let px_per_m = texture_px_per_m(&frame, min, max, k)?;
+    let width = (((max[0] - min[0]) * px_per_m).ceil() as u32).max(1);
+    let height = (((max[1] - min[1]) * px_per_m).ceil() as u32).max(1);
+    let grid = TexelGrid { frame, px_per_m, min_m: min, width, height };
+    let colours = rectify(&grid, k, |px| (labels[px] == index).then(|| colour_at(colour, px)));
+    Some(PlaneMesh::build(grid, &colours))
+}
+
+/// The box `[min, max]`, in the in-plane coordinates of `frame` (given in the world of
+/// `world_from_camera`), of the points where the rays through the corners of the pixels
+/// labelled `label` meet the plane; `None` if there are none or a ray misses the plane.
+pub fn pixel_box(frame: &PlaneFrame, labels: &[u32], label: u32, k: &PinholeIntrinsics, world_from_camera: &crate::Se3) -> Option<[[f32; 2]; 2]> {
+    // The plane in the camera frame: n_c·p + d_c = 0.
+    let r = world_from_camera.rotation.inverse();
+    let n_w = glam::DVec3::new(f64::from(frame.normal[0]), f64::from(frame.normal[1]), f64::from(frame.normal[2]));
+    let n_c = r * n_w;
+    let d_c = f64::from(frame.offset_m()) + n_w.dot(world_from_camera.translation_m);
+    let (mut min, mut max) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    let w = k.width_px as usize;
+    for (ix, &l) in labels.iter().enumerate() {
+        if l != label || l == NO_LABEL {
+            continue;
+        }
+        let (x, y) = ((ix % w) as f64, (ix / w) as f64);
+        for (dx, dy) in [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
+            let ray = glam::DVec3::new((x + dx - f64::from(k.cx_px)) / f64::from(k.fx_px), (y + dy - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
+            let t = -d_c / n_c.dot(ray);
+            if !(t.is_finite() && t > 0.0) {
+                return None;
+            }
+            let p = world_from_camera.transform_point(ray * t);
+            let s = frame.to_plane([p.x as f32, p.y as f32, p.z as f32]);
+            for a in 0..2 {
+                min[a] = min[a].min(s[a]);
+                max[a] = max[a].max(s[a]);
+            }
+        }
+    }
+    (min[0] <= max[0]).then_some([min, max])
+}
+
+/// How far (pixels) the preprocessor blends a border into the normals next to it: the
+/// bilateral window's radius plus the gradient smoothing's plus one for the central difference.
+pub fn blend_reach_px(preprocess: &crate::preprocess::PreprocessConfig) -> u32 {
+    preprocess.bilateral.map_or(0, |b| b.radius_px) + preprocess.gradient_smoothing.map_or(0, |g| g.radius_px) + 1
+}
+
+/// The labels a plane's surface is meshed and textured from: the segmentation's, plus each
+/// unlabelled pixel whose raw depth (`raw_depth_m`, before the edge-preserving filter) is
+/// within the labelling distance ([`PlaneConfig::label_distance_m`]) of the depth at which
+/// its ray meets a plane that labels a pixel within `reach_px` of it (the plane needing the
+/// smallest depth error, the sensor's noise being along the ray). Along a plane's border the
+/// filtered normals blend into the next surface's and fail the labelling's angle test, though
+/// the raw points there are still on the plane: on the synthetic stairs that border is a
+/// quarter of each tread. Where two planes meet, depth error rather than distance decides: a
+/// noisy point near a stair's inner corner is nearer the tread seen at a grazing angle, but
+/// needs less depth error to be on the riser that faces the camera. Farther out, and for
+/// pixels off every plane, nothing changes.
+pub fn complete_labels(seg: &Segmentation, raw_depth_m: &[f32], k: &PinholeIntrinsics, config: &PlaneConfig, reach_px: u32) -> Vec<u32> {
+    let (w, h) = (k.width_px as i64, k.height_px as i64);
+    let r = i64::from(reach_px);
+    let mut out = seg.labels.clone();
+    let mut near = Vec::with_capacity(seg.planes.len());
+    for (ix, &l) in seg.labels.iter().enumerate() {
+        let z = raw_depth_m[ix];
+        if l != NO_LABEL || !(z.is_finite() && z > 0.0) {
+            continue;
+        }
+        let (x, y) = (ix as i64 % w, ix as i64 / w);
+        near.clear();
+        for v in (y - r).max(0)..=(y + r).min(h - 1) {
+            for u in (x - r).max(0)..=(x + r).min(w - 1) {
+                let m = seg.labels[(v * w + u) as usize];
+                if m != NO_LABEL && !near.contains(&m) {
+                    near.push(m);
+                }
+            }
+        }
+        let p = [(x as f32 - k.cx_px) / k.fx_px * z, (y as f32 - k.cy_px) / k.fy_px * z, z];
+        let tol = config.label_distance_m(z);
+        out[ix] = near
+            .iter()
+            .filter_map(|&m| {
+                // The ray meets n·q + d = 0 at depth z* = −d z / (n·p): the depth error is
+                // z − z* = z (n·p + d) / (n·p).
+                let plane = &seg.planes[m as usize];
+                let np = dot(plane.normal, p);
+                (np < 0.0).then(|| (m, (z * (np + plane.offset_m) / np).abs()))
+            })
+            .filter(|&(_, e)| e <= tol)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or(NO_LABEL, |(m, _)| m);
+    }
+    out
+}
+
+/// The colour of pixel `px` of `colour`.
+pub fn colour_at(colour: &ColorImage, px: usize) -> [u8; 3] {
+    [colour.rgb8[3 * px], colour.rgb8[3 * px + 1], colour.rgb8[3 * px + 2]]
+}
+
+/// 003's texture rectification, per destination texel: the texel's centre (a point of the
+/// grid's plane, in the camera frame) projected with `k` to its nearest pixel, and that pixel's
+/// colour if `sample` gives one (the pixel belongs to the plane).
+pub fn rectify(grid: &TexelGrid, k: &PinholeIntrinsics, sample: impl Fn(usize) -> Option<[u8; 3]>) -> Vec<Option<[u8; 3]>> {
+    let mut out = vec![None; (grid.width * grid.height) as usize];
+    for y in 0..grid.height {
+        for x in 0..grid.width {
+            let p = grid.frame.point(grid.texel_centre(x, y));
+            if let Some(px) = pixel_of(k, p) {
+                out[(y * grid.width + x) as usize] = sample(px);
+            }
+        }
+    }
+    out
+}
+
+/// The nearest pixel (row-major index) of camera point `p`, if in the image.
+pub fn pixel_of(k: &PinholeIntrinsics, p: [f32; 3]) -> Option<usize> {
+    if p[2] <= 1e-6 {
+        return None;
+    }
+    let u = (p[0] / p[2] * k.fx_px + k.cx_px).round();
+    let v = (p[1] / p[2] * k.fy_px + k.cy_px).round();
+    (u >= 0.0 && v >= 0.0 && u < k.width_px as f32 && v < k.height_px as f32).then(|| v as usize * k.width_px as usize + u as usize)
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::planes::PlaneConfig;
+    use crate::planes::reference::segment;
+    use crate::cpu::preprocess::chain::preprocess;
+    use crate::preprocess::PreprocessConfig;
+    use crate::sim::plane_scenes::{NO_PLANE, PlaneScene, RenderedScene, ScenePlane, UNITS_PER_METRE};
+    use crate::{RgbdCalibration, Se3};
+
+    #[test]
+    fn a_full_grid_is_one_quad_per_256_block() {
+        let (w, h) = (256, 256);
+        let d = quadtree_degrees(&vec![true; w * h], w, h);
+        let (v, t) = quadtree_mesh(&d, w);
+        assert_eq!((v.len(), t.len()), (4, 2));
+        assert_eq!(v, vec![[0, 0], [256, 0], [0, 256], [256, 256]]);
+        // One more column: a second row of quads down its side, halving as they go.
+        let (w, h) = (257, 256);
+        let d = quadtree_degrees(&vec![true; w * h], w, h);
+        assert_eq!(d.iter().filter(|&&s| s > 0).count(), 1 + 256);
+    }
+
+    #[test]
+    fn quads_cover_exactly_the_covered_texels() {
+        // A disc with a hole and a ragged edge: every covered texel is in exactly one quad, no
+        // other texel is in any.
+        let (w, h) = (70, 50);
+        let covered: Vec<bool> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 - 33.0, (i / w) as f32 - 24.0);
+                let r = (x * x + y * y).sqrt();
+                r < 23.0 + 2.0 * (x * 0.7).sin() && r > 4.0
+            })
+            .collect();
+        let d = quadtree_degrees(&covered, w, h);
+        let mut times = vec![0u32; w * h];
+        for (i, &s) in d.iter().enumerate() {
+            if s > 0 {
+                let (x, y) = (i % w, i / w);
+                for cy in y..y + s as usize {
+                    for cx in x..x + s as usize {
+                        times[cy * w + cx] += 1;
+                    }
+                }
+            }
+        }
+        for i in 0..w * h {
+            assert_eq!(times[i], u32::from(covered[i]), "texel ({}, {})", i % w, i / w);
+        }
+        assert_eq!(quad_cells(&d, w, h), covered);
+        let (vertices, triangles) = quadtree_mesh(&d, w);
+        let texels = covered.iter().filter(|&&c| c).count();
+        assert!(triangles.len() * 3 < texels * 2, "{} triangles for {texels} texels: the quadtree did not decimate (unit quads would be two per texel)", triangles.len());
+        // Counter-clockwise in (x, y), and the area is the texels'.
+        let mut area = 0.0;
+        for t in &triangles {
+            let [a, b, c] = t.map(|i| vertices[i as usize].map(|v| v as f32));
+            let twice = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+            assert!(twice > 0.0);
+            area += 0.5 * twice;
+        }
+        assert_eq!(area as usize, texels);
+    }
+
+    /// A Kinect's resolution: at half of it a stair riser is 20 rows tall, and the one row at
+    /// each edge that noise makes a toss-up is a tenth of it.
+    const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 525.0, fy_px: 525.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 };
+
+    /// Of the pixels that see true plane `surface` (`truth` in the camera frame), the
+    /// footprint areas (m²) of those whose true point (moved by `world_from_camera`) the mesh
+    /// covers, and of all.
+    pub(crate) fn coverage(k: &PinholeIntrinsics, r: &RenderedScene, truth: &[Option<ScenePlane>], surface: usize, mesh: &PlaneMesh, world_from_camera: &Se3) -> (f64, f64) {
+        let (mut covered, mut total) = (0.0f64, 0.0f64);
+        for (ix, &l) in r.plane_of_pixel.iter().enumerate() {
+            if l != surface as u32 {
+                continue;
+            }
+            let t = truth[surface].expect("pixels of a plane");
+            let ray = crate::sim::room::camera_ray(k, (ix % k.width_px as usize) as u32, (ix / k.width_px as usize) as u32);
+            let p = ray * (-t.offset_m / t.normal.dot(ray));
+            let footprint = p.z.powi(3) / (f64::from(k.fx_px * k.fy_px) * t.normal.dot(p).abs());
+            total += footprint;
+            let q = world_from_camera.transform_point(p);
+            if mesh.covers(mesh.grid.frame.to_plane([q.x as f32, q.y as f32, q.z as f32])) {
+                covered += footprint;
+            }
+        }
+        (covered, total)
+    }
+
+    #[test]
+    fn synthetic_scene_meshes_lie_on_their_planes_and_cover_them() {
+        let mut failures = Vec::new();
+        for scene in PlaneScene::all() {
+            for noise in [None, Some(3)] {
+                let r = scene.render(&K, noise);
+                let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_METRE as f32 };
+                let pre = preprocess(&calibration, &PreprocessConfig::default(), &r.frame);
+                let config = PlaneConfig::default();
+                let seg = segment(&pre.levels, Some(&pre.depth_unfiltered_m), &config);
+                let labels = complete_labels(&seg, &pre.depth_unfiltered_m, &K, &config, blend_reach_px(&PreprocessConfig::default()));
+                let truth = scene.planes_in_camera();
+                for (k, plane) in seg.planes.iter().enumerate() {
+                    let mut votes = vec![0usize; truth.len()];
+                    for (ix, &l) in seg.labels.iter().enumerate() {
+                        if l == k as u32 && r.plane_of_pixel[ix] != NO_PLANE {
+                            votes[r.plane_of_pixel[ix] as usize] += 1;
+                        }
+                    }
+                    let s = (0..truth.len()).max_by_key(|&s| votes[s]).expect("surfaces");
+                    let t = truth[s].expect("a plane surface");
+                    let mesh = frame_plane_mesh(plane, k as u32, &labels, &K, &r.frame.color).expect("a mesh");
+                    let worst_m = mesh.positions_m.iter().map(|p| t.distance_m(glam::DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))).abs()).fold(0.0, f64::max);
+                    let (covered, total) = coverage(&K, &r, &truth, s, &mesh, &Se3::IDENTITY);
+                    let cover = covered / total;
+                    let texels = mesh.cells.iter().filter(|&&c| c).count();
+                    // The target's planes: those over 2 % of the image.
+                    let big = r.plane_of_pixel.iter().filter(|&&l| l == s as u32).count() * 50 > K.pixel_count();
+                    eprintln!(
+                        "{} ({}): plane {k} = surface {s}{}: {} quads ({} triangles) for {texels} texels, {} px/m, texture {}x{}, worst vertex {:.1} mm off the true plane, covers {:.1} %",
+                        scene.name,
+                        if noise.is_some() { "noisy" } else { "exact" },
+                        if big { "" } else { " (under 2 % of the image)" },
+                        mesh.quads,
+                        mesh.triangles.len(),
+                        mesh.grid.px_per_m,
+                        mesh.texture.width_px,
+                        mesh.texture.height_px,
+                        worst_m * 1e3,
+                        cover * 100.0
+                    );
+                    if worst_m >= 0.01 || (big && cover < 0.95) {
+                        failures.push(format!("{} {noise:?} surface {s}", scene.name));
+                    }
+                }
+            }
+        }
+        assert!(failures.is_empty(), "failed: {failures:?}");
+    }
+
+    #[test]
+    fn frame_axes_are_right_handed_and_on_the_plane() {
+        let f = PlaneFrame::new([0.0, -1.0, 0.0], 1.2, [0.3, 0.9, 2.0], [1.0, 0.2, 0.0]);
+        assert!((dot(cross(f.u_axis, f.v_axis), f.normal) - 1.0).abs() < 1e-6);
+        assert!((dot(f.normal, f.origin_m) + 1.2).abs() < 1e-6);
+        let p = f.point([0.4, -0.7]);
+        assert!((dot(f.normal, p) + f.offset_m()).abs() < 1e-6);
+        let s = f.to_plane(p);
+        assert!((s[0] - 0.4).abs() < 1e-6 && (s[1] + 0.7).abs() < 1e-6);
+    }
+}
