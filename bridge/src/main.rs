@@ -154,7 +154,7 @@ fn main() -> anyhow::Result<()> {
         Command::SynthRoom(args) => synth::run(&args),
         Command::Simulate(args) => simulate::run(&options, &args),
         Command::Compare(args) => compare::run(&args),
-        Command::Planes(args) => planes::run(&args),
+        Command::Planes(args) => planes::run(&options, &args),
         Command::Serve(args) => serve::run(args),
         #[cfg(feature = "openni2")]
         Command::Devices => {

@@ -1,12 +1,22 @@
 // SPDX-License-Identifier: MIT
-//! `webfusion planes`: seed 003's plane segmentation of every frame (`core::planes`), written
-//! as `DIR/frames.json` (per frame, its planes in that frame's camera coordinates: unit normal
-//! n facing the camera, n·p + d = 0 for points p on it, metres) and, with `--labels`, an image
-//! of each frame's plane labels. This runs the CPU reference of the pipeline
-//! (`core::planes::reference`) on the CPU twin of the preprocessor; the GPU kernels, the world
-//! model (planes merged across frames, `planes.json`) and the textured meshes (`scene.glb`) are
-//! not built yet.
+//! `webfusion planes`: seed 003's plane segmentation of every frame (`core::planes`), and the
+//! world model of planes built from them.
+//!
+//! - `DIR/frames.json`: per frame, its planes in that frame's camera coordinates (unit normal n
+//!   facing the camera, n·p + d = 0 for points p on it, metres); with `--labels`, an image of
+//!   each frame's plane labels.
+//! - The world model (unless `--no-world`): each frame's planes, at the frame's camera pose
+//!   (`--poses`, or tracked by KinectFusion, which also fuses the map), associated across
+//!   frames into world planes with growing textures (`core::planes::world`); written as
+//!   `DIR/planes.json`, and with the marching-cubes mesh of the fused map less what the planes
+//!   cover (the non-planar remainder) as `DIR/scene.glb` and `DIR/scene.obj` (+ `scene.mtl`,
+//!   `scene_textures/`).
+//!
+//! Segmentation and meshing run the CPU reference (`core::planes::reference`, `mesh`) on the
+//! CPU twin of the preprocessor; tracking and fusion run on the GPU. The GPU pipeline of the
+//! segmentation kernels is not assembled yet.
 
+use std::collections::HashMap;
 use std::path::PathBuf;
 
 use anyhow::Context as _;
@@ -14,7 +24,13 @@ use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::io::format_timestamp_s;
 use webfusion_core::planes::{NO_LABEL, PlaneConfig, reference};
 use webfusion_core::preprocess::PreprocessConfig;
-use webfusion_core::{ColorImage, codec::png};
+use webfusion_core::{ColorImage, GpuOptions, Se3, codec::png};
+use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, pose_driven::PoseDrivenMapper};
+use webfusion_core::io::trajectory::{PoseTimeline, read_tum_trajectory};
+use webfusion_core::mesh::Mesh;
+use webfusion_core::planes::export::{scene_obj, write_scene_glb};
+use webfusion_core::planes::mesh::{PlaneMesh, blend_reach_px, complete_labels};
+use webfusion_core::planes::world::{PlaneView, PlaneWorld, WorldConfig};
 
 use crate::calib::CalibrationArgs;
 use crate::timing::{StageTimes, Stopwatch};
@@ -39,6 +55,126 @@ pub(crate) struct PlanesArgs {
     /// Skip damaged frames of a recording (counted) instead of stopping at the first.
     #[arg(long)]
     skip_corrupt: bool,
+    /// Camera-to-world poses for the world model, a TUM trajectory file (`timestamp tx ty tz
+    /// qx qy qz qw`; each frame at the pose at its depth timestamp, interpolated when the
+    /// nearest is within 20 ms; frames without one are left out of the world). Without it the
+    /// frames are tracked by KinectFusion (the world is then the first camera's frame).
+    #[arg(long)]
+    poses: Option<PathBuf>,
+    /// Per-frame planes only: no world model, no tracking or fusion, no GPU.
+    #[arg(long)]
+    no_world: bool,
+    /// Texels per metre of the world planes' textures (a power of two).
+    #[arg(long, default_value_t = WorldConfig::default().px_per_m)]
+    texture_px_per_m: f32,
+}
+
+/// Maximum gap to a given pose, as `reconstruct --poses`.
+const MAX_POSE_GAP_NS: i64 = 20_000_000;
+
+/// The world model's inputs from the GPU pass: each frame's pose (by source index) and the
+/// fused map's mesh.
+struct WorldPoses {
+    poses: HashMap<u64, Se3>,
+    mesh: Mesh,
+    voxel_m: f32,
+    /// `"given"` or `"tracked"`.
+    origin: &'static str,
+    /// Frames left out: tracking lost, or no given pose.
+    left_out: Vec<u64>,
+}
+
+/// Tracks (or fuses at the given poses) every frame of `range` on the GPU.
+fn world_poses(options: &GpuOptions, args: &PlanesArgs, range: std::ops::Range<usize>) -> anyhow::Result<WorldPoses> {
+    let mut source = crate::open(&args.source, &args.calibration)?;
+    let gpu = crate::gpu(options)?;
+    let config = FusionConfig::default();
+    config.validate()?;
+    let voxel_m = config.tsdf.voxel_size_m;
+    let mut poses = HashMap::new();
+    let mut left_out = Vec::new();
+    let mut skipped = Vec::new();
+    if let Some(path) = &args.poses {
+        let given = read_tum_trajectory(path).with_context(|| format!("reading the given poses {}", path.display()))?;
+        let timeline = PoseTimeline::new(given).with_context(|| format!("the given poses {}", path.display()))?;
+        let mut mapper: Option<PoseDrivenMapper> = None;
+        for index in range {
+            let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
+            let Some(pose) = timeline.pose_at(frame.depth_timestamp_ns, MAX_POSE_GAP_NS) else {
+                left_out.push(index as u64);
+                continue;
+            };
+            let m = match &mut mapper {
+                Some(m) => m,
+                None => mapper.insert(PoseDrivenMapper::new(&gpu, source.calibration(), config.preprocess, config.tsdf, &pose, false)?),
+            };
+            pollster::block_on(m.submit_frame(&gpu, &frame, &pose)).with_context(|| format!("fusing frame {index}"))?;
+            poses.insert(frame.index, pose);
+            eprint!("\rframe {index}: fused at its given pose   ");
+        }
+        eprintln!();
+        let Some(mut mapper) = mapper else { anyhow::bail!("no frame of {} has a given pose (within 20 ms) in {}", source.name(), path.display()) };
+        pollster::block_on(mapper.flush(&gpu))?;
+        let mesh = pollster::block_on(mapper.extract_mesh(&gpu)).context("extracting the mesh")?;
+        return Ok(WorldPoses { poses, mesh, voxel_m, origin: "given", left_out });
+    }
+    let mut fusion = KinectFusion::new(&gpu, source.calibration(), config)?;
+    let on_report = |r: FrameReport, poses: &mut HashMap<u64, Se3>, left_out: &mut Vec<u64>| {
+        if r.state.is_lost() {
+            left_out.push(r.index);
+        } else {
+            poses.insert(r.index, r.world_from_camera);
+        }
+        eprint!("\rframe {}: tracking {}   ", r.index, r.state.name());
+    };
+    for index in range {
+        let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
+        pollster::block_on(fusion.submit_frame(&gpu, &frame)).with_context(|| format!("tracking frame {index}"))?;
+        for r in fusion.poll_reports(&gpu)? {
+            on_report(r, &mut poses, &mut left_out);
+        }
+    }
+    for r in pollster::block_on(fusion.flush(&gpu))? {
+        on_report(r, &mut poses, &mut left_out);
+    }
+    eprintln!();
+    let errors = gpu.take_errors();
+    anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
+    let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(&gpu)).context("extracting the mesh")?;
+    Ok(WorldPoses { poses, mesh, voxel_m, origin: "tracked", left_out })
+}
+
+/// The fused mesh less the triangles the planar meshes cover: those whose centroid lies within
+/// two voxels of a world plane and over one of its covered texels.
+fn remainder(mesh: &Mesh, planes: &[PlaneMesh], voxel_m: f32) -> Mesh {
+    let tol = 2.0 * voxel_m;
+    let keep: Vec<bool> = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let c: [f32; 3] = std::array::from_fn(|k| t.iter().map(|&i| mesh.positions_m[i as usize][k]).sum::<f32>() / 3.0);
+            !planes.iter().any(|p| {
+                let f = &p.grid.frame;
+                let e = f.normal[0] * c[0] + f.normal[1] * c[1] + f.normal[2] * c[2] + f.offset_m();
+                e.abs() <= tol && p.covers(f.to_plane(c))
+            })
+        })
+        .collect();
+    // Keep the vertices the kept triangles use, renumbered.
+    let mut index = vec![u32::MAX; mesh.positions_m.len()];
+    let mut out = Mesh::default();
+    for (t, _) in mesh.triangles.iter().zip(&keep).filter(|(_, k)| **k) {
+        out.triangles.push(t.map(|i| {
+            if index[i as usize] == u32::MAX {
+                index[i as usize] = out.positions_m.len() as u32;
+                out.positions_m.push(mesh.positions_m[i as usize]);
+                out.normals.push(mesh.normals[i as usize]);
+                out.colors_rgb8.push(mesh.colors_rgb8[i as usize]);
+            }
+            index[i as usize]
+        }));
+    }
+    out
 }
 
 /// A distinct colour for plane `i` (golden-angle hues).
@@ -56,12 +192,19 @@ fn label_colour(i: u32) -> [u8; 3] {
     [r, g, b].map(|c: f32| (40.0 + 215.0 * c) as u8)
 }
 
-pub(crate) fn run(args: &PlanesArgs) -> anyhow::Result<()> {
+pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()> {
     let mut source = crate::open(&args.source, &args.calibration)?;
     let range = crate::frame_range(args.frames.as_deref(), source.frame_count())?;
     let frames_json = args.out.join("frames.json");
     anyhow::ensure!(!frames_json.exists(), "{} exists already: choose another --out", frames_json.display());
+    let px = args.texture_px_per_m;
+    anyhow::ensure!(px.is_finite() && px >= 1.0 && (px as u32).is_power_of_two() && px.fract() == 0.0, "--texture-px-per-m {px}: a power of two, at least 1");
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let sw = Stopwatch::start();
+    let world_input = if args.no_world { None } else { Some(world_poses(options, args, range.clone())?) };
+    let gpu_pass_s = sw.ms() * 1e-3;
+    let mut world = PlaneWorld::new(WorldConfig { px_per_m: px, ..WorldConfig::default() });
+    let mut clipped_texels = 0u64;
     if args.labels {
         std::fs::create_dir_all(args.out.join("labels")).with_context(|| format!("creating {}", args.out.display()))?;
     }
@@ -87,6 +230,13 @@ pub(crate) fn run(args: &PlanesArgs) -> anyhow::Result<()> {
             times.record(stage, ms);
         }
         counts.push(seg.planes.len());
+        if let Some(pose) = world_input.as_ref().and_then(|w| w.poses.get(&frame.index)) {
+            let sw = Stopwatch::start();
+            let labels = complete_labels(&seg, &pre.depth_unfiltered_m, &k, &config, blend_reach_px(&pre_config));
+            let view = PlaneView { index: frame.index, world_from_camera: *pose, segmentation: &seg, labels: &labels, colour: &frame.color, intrinsics: k };
+            clipped_texels += world.add_frame(&view, &config).clipped_texels;
+            times.record("world model", sw.ms());
+        }
         if args.labels {
             let rgb: Vec<u8> = seg.labels.iter().flat_map(|&l| if l == NO_LABEL { [0, 0, 0] } else { label_colour(l) }).collect();
             let name = args.out.join(format!("labels/{}.png", format_timestamp_s(frame.depth_timestamp_ns)));
@@ -138,5 +288,87 @@ pub(crate) fn run(args: &PlanesArgs) -> anyhow::Result<()> {
     );
     times.print();
     println!("wrote {}", frames_json.display());
+    if let Some(input) = world_input {
+        write_world(args, &world, &input, clipped_texels, gpu_pass_s)?;
+    }
+    Ok(())
+}
+
+/// Writes the world model: `planes.json`, `scene.glb` and `scene.obj` (+ `.mtl`, textures).
+fn write_world(args: &PlanesArgs, world: &PlaneWorld, input: &WorldPoses, clipped_texels: u64, gpu_pass_s: f64) -> anyhow::Result<()> {
+    let sw = Stopwatch::start();
+    let meshes: Vec<Option<PlaneMesh>> = (0..world.planes.len()).map(|j| world.mesh(j)).collect();
+    let planar: Vec<PlaneMesh> = meshes.iter().flatten().cloned().collect();
+    let rest = remainder(&input.mesh, &planar, input.voxel_m);
+    let replaced = input.mesh.triangles.len() - rest.triangles.len();
+    let planar_triangles: usize = planar.iter().map(|m| m.triangles.len()).sum();
+    let mesh_ms = sw.ms();
+    let write = |name: &str, bytes: &[u8]| -> anyhow::Result<()> {
+        let path = args.out.join(name);
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+        std::fs::write(&path, bytes).with_context(|| format!("writing {}", path.display()))
+    };
+    let mut glb = Vec::new();
+    write_scene_glb(&planar, Some(&rest), &mut glb).context("encoding scene.glb")?;
+    write("scene.glb", &glb)?;
+    let obj = scene_obj("scene", &planar, Some(&rest)).context("encoding scene.obj")?;
+    write("scene.obj", obj.obj.as_bytes())?;
+    write("scene.mtl", obj.mtl.as_bytes())?;
+    for (name, bytes) in &obj.textures {
+        write(name, bytes)?;
+    }
+    let texture_bytes: usize = planar.iter().map(|m| m.texture.rgb8.len()).sum();
+    let planes: Vec<serde_json::Value> = world
+        .planes
+        .iter()
+        .zip(&meshes)
+        .enumerate()
+        .map(|(j, (w, m))| {
+            serde_json::json!({
+                "id": j,
+                "normal": w.normal,
+                "offset_m": w.offset_m,
+                "centroid_m": w.centroid_m,
+                "area_m2": m.as_ref().map_or(0.0, |m| m.area_m2),
+                "triangles": m.as_ref().map_or(0, |m| m.triangles.len()),
+                "quads": m.as_ref().map_or(0, |m| m.quads),
+                "texture_size": m.as_ref().map_or([0, 0], |m| [m.texture.width_px, m.texture.height_px]),
+                "texture_px_per_m": m.as_ref().map_or(0.0, |m| m.texture.width_px as f32 / m.grid.width.next_power_of_two() as f32 * m.grid.px_per_m),
+                "views": w.views,
+                "pixels": w.pixels,
+                "frames": w.frames,
+            })
+        })
+        .collect();
+    let json = serde_json::json!({
+        "source": args.source.display().to_string(),
+        "world_frame": if input.origin == "given" { "the given poses' frame" } else { "the first tracked camera's frame" },
+        "poses": input.origin,
+        "frames_with_pose": input.poses.len(),
+        "frames_left_out": input.left_out,
+        "texel_grid_px_per_m": world.config.px_per_m,
+        "clipped_texels": clipped_texels,
+        "planes": planes,
+        "remainder": {"voxel_m": input.voxel_m, "triangles": rest.triangles.len()},
+        "compactness": {
+            "planar_triangles": planar_triangles,
+            "marching_cubes_triangles_replaced": replaced,
+            "texture_bytes": texture_bytes,
+        },
+        "stages_s": {"gpu_pass": gpu_pass_s, "meshes_and_remainder": mesh_ms * 1e-3},
+    });
+    write("planes.json", serde_json::to_string_pretty(&json)?.as_bytes())?;
+    println!(
+        "world: {} planes from {} posed frames ({}); {planar_triangles} planar triangles replace {replaced} marching-cubes triangles ({:.0}x fewer), textures {:.1} MB, remainder {} triangles",
+        world.planes.len(),
+        input.poses.len(),
+        input.origin,
+        replaced as f64 / planar_triangles.max(1) as f64,
+        texture_bytes as f64 / 1e6,
+        rest.triangles.len()
+    );
+    println!("wrote {} (scene.glb, scene.obj, planes.json)", args.out.display());
     Ok(())
 }

@@ -47,7 +47,7 @@ fn synthetic_planes_come_back_exactly() {
     }
     writer.finish().expect("finish");
     let out = dir.join("out");
-    let o = webfusion(&["planes", recording.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--labels"]);
+    let o = webfusion(&["planes", recording.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--labels", "--no-world"]);
     assert!(o.status.success(), "planes failed: {}", String::from_utf8_lossy(&o.stderr));
     let json = frames_json(&out);
     let frames = json["frames"].as_array().expect("frames");
@@ -78,6 +78,103 @@ fn synthetic_planes_come_back_exactly() {
         let label_image = out.join(format!("labels/{}.png", webfusion_core::io::format_timestamp_s(i as i64 * 33_333_333)));
         assert!(label_image.is_file(), "{} written", label_image.display());
     }
+    assert!(!out.join("scene.glb").exists() && !out.join("planes.json").exists(), "--no-world writes no world model");
+}
+
+/// The parts of a `.glb` the checks need: its JSON and BIN chunks, each checked for length.
+fn read_glb(path: &Path) -> (serde_json::Value, Vec<u8>) {
+    let bytes = std::fs::read(path).expect("scene.glb");
+    let u32_at = |o: usize| u32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes")) as usize;
+    assert_eq!(&bytes[0..4], b"glTF", "glTF magic");
+    assert_eq!((u32_at(4), u32_at(8)), (2, bytes.len()), "version 2, total length");
+    let json_len = u32_at(12);
+    assert_eq!(&bytes[16..20], b"JSON", "the first chunk is JSON");
+    let json: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).expect("JSON chunk");
+    let bin_at = 20 + json_len;
+    assert_eq!(&bytes[bin_at + 4..bin_at + 8], b"BIN\0", "the second chunk is BIN");
+    let bin = bytes[bin_at + 8..bin_at + 8 + u32_at(bin_at)].to_vec();
+    (json, bin)
+}
+
+/// A room corner seen from six poses, with the poses given: `planes.json` holds its three
+/// planes in the poses' frame; `scene.glb` is valid glTF with a textured mesh per plane whose
+/// vertices lie on it, and the OBJ scene references textures that exist.
+#[test]
+fn a_posed_room_corner_becomes_three_textured_world_planes() {
+    use glam::{DQuat, DVec3};
+    use webfusion_core::Se3;
+    use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
+    let dir = scratch("world");
+    let base = PlaneScene::room_corner();
+    let recording = dir.join("corner.wfr");
+    let mut writer = RecordingWriter::create(&recording, RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_METRE as f32 }, RecordingOptions::default()).expect("recording");
+    let mut poses = Vec::new();
+    for i in 0..6 {
+        let t = f64::from(i) / 5.0 - 0.5;
+        let mut scene = base.clone();
+        scene.world_from_camera = Se3::new(DQuat::from_rotation_y((30.0 * t).to_radians()) * base.world_from_camera.rotation, DVec3::new(0.5 * t, 0.05 * t, 0.1 * t));
+        let mut frame = scene.render(&K, Some(i + 1)).frame;
+        frame.index = u64::from(i);
+        let t_ns = i64::from(i) * 33_333_333;
+        (frame.depth_timestamp_ns, frame.color_timestamp_ns) = (t_ns, t_ns);
+        writer.write_frame(&frame).expect("frame");
+        poses.push(TimedPose { timestamp_ns: t_ns, world_from_camera: scene.world_from_camera });
+    }
+    writer.finish().expect("finish");
+    let pose_file = dir.join("poses.txt");
+    write_tum_trajectory(&pose_file, &poses).expect("poses");
+    let out = dir.join("out");
+    let o = webfusion(&["planes", recording.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--poses", pose_file.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "planes failed: {}", String::from_utf8_lossy(&o.stderr));
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("planes.json")).expect("planes.json")).expect("json");
+    assert_eq!(json["poses"], "given");
+    let planes = json["planes"].as_array().expect("planes");
+    // In the world frame: the scene's planes as the first camera sees them, moved back.
+    let truth: Vec<_> = base.planes_in_camera().into_iter().flatten().map(|p| p.in_frame(&base.world_from_camera.inverse())).collect();
+    assert_eq!(planes.len(), truth.len(), "{planes:?}");
+    for p in planes {
+        let n = vec3(&p["normal"]);
+        let t = truth.iter().max_by(|a, b| (a.normal.x * n[0] + a.normal.y * n[1] + a.normal.z * n[2]).total_cmp(&(b.normal.x * n[0] + b.normal.y * n[1] + b.normal.z * n[2]))).expect("truth");
+        let cos = t.normal.x * n[0] + t.normal.y * n[1] + t.normal.z * n[2];
+        assert!(cos > 1f64.to_radians().cos() && (p["offset_m"].as_f64().expect("offset") - t.offset_m).abs() < 0.01, "{p} is not {t:?}");
+        assert!(p["triangles"].as_u64().expect("triangles") > 0 && p["area_m2"].as_f64().expect("area") > 0.5, "{p}");
+    }
+    let c = &json["compactness"];
+    assert!(c["planar_triangles"].as_u64().expect("count") * 10 < c["marching_cubes_triangles_replaced"].as_u64().expect("count"), "the quadtree is not compact: {c}");
+    // The glTF scene: a mesh per plane and the remainder, every accessor inside the BIN
+    // chunk, textures that decode, vertices on their planes.
+    let (gltf, bin) = read_glb(&out.join("scene.glb"));
+    let meshes = gltf["meshes"].as_array().expect("meshes");
+    assert_eq!(meshes.iter().filter(|m| m["name"].as_str().is_some_and(|n| n.starts_with("plane_"))).count(), planes.len());
+    let views = gltf["bufferViews"].as_array().expect("views");
+    for v in views {
+        assert!(v["byteOffset"].as_u64().expect("offset") + v["byteLength"].as_u64().expect("length") <= bin.len() as u64);
+    }
+    let view_bytes = |i: u64| {
+        let v = &views[i as usize];
+        let o = v["byteOffset"].as_u64().expect("offset") as usize;
+        &bin[o..o + v["byteLength"].as_u64().expect("length") as usize]
+    };
+    for image in gltf["images"].as_array().expect("images") {
+        let png = view_bytes(image["bufferView"].as_u64().expect("view"));
+        assert_eq!(&png[1..4], b"PNG");
+    }
+    let accessors = gltf["accessors"].as_array().expect("accessors");
+    for m in meshes.iter().filter(|m| m["name"].as_str().is_some_and(|n| n.starts_with("plane_"))) {
+        let prim = &m["primitives"][0];
+        let positions = &accessors[prim["attributes"]["POSITION"].as_u64().expect("POSITION") as usize];
+        let floats: Vec<f32> = view_bytes(positions["bufferView"].as_u64().expect("view")).chunks(4).map(|b| f32::from_le_bytes(b.try_into().expect("4"))).collect();
+        assert_eq!(floats.len() as u64, 3 * positions["count"].as_u64().expect("count"));
+        let worst = floats.chunks(3).map(|p| truth.iter().map(|t| (t.normal.x * f64::from(p[0]) + t.normal.y * f64::from(p[1]) + t.normal.z * f64::from(p[2]) + t.offset_m).abs()).fold(f64::INFINITY, f64::min)).fold(0.0, f64::max);
+        assert!(worst < 0.01, "{}: a vertex {worst} m off every true plane", m["name"]);
+        assert!(prim["material"].is_u64() && prim["attributes"]["TEXCOORD_0"].is_u64());
+    }
+    let obj = std::fs::read_to_string(out.join("scene.obj")).expect("scene.obj");
+    assert_eq!(obj.lines().filter(|l| l.starts_with("o plane_")).count(), planes.len());
+    let mtl = std::fs::read_to_string(out.join("scene.mtl")).expect("scene.mtl");
+    for line in mtl.lines().filter_map(|l| l.strip_prefix("map_Kd ")) {
+        assert!(out.join(line).is_file(), "{line} missing");
+    }
 }
 
 #[test]
@@ -103,6 +200,13 @@ fn real_frames_give_planes_facing_the_camera() {
             assert!(p["pixels"].as_u64().expect("pixels") > 3000 && p["area_m2"].as_f64().expect("area") > 0.0);
         }
     }
+    // The world model, tracked: the desk and the partition at least, in a scene that parses.
+    let world: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("planes.json")).expect("planes.json")).expect("json");
+    assert_eq!(world["poses"], "tracked");
+    assert_eq!(world["frames_with_pose"], 3);
+    assert!(world["planes"].as_array().expect("planes").len() >= 2, "{world}");
+    let (gltf, _) = read_glb(&out.join("scene.glb"));
+    assert!(gltf["meshes"].as_array().expect("meshes").iter().any(|m| m["name"] == "remainder"));
 }
 
 #[test]

@@ -35,6 +35,7 @@
 //! [`reference`] computes it on the CPU; every plane is reported as `n·p + d = 0` in the camera
 //! frame with the unit normal facing the camera (d > 0).
 
+pub mod export;
 pub mod mesh;
 pub mod reference;
 pub mod world;

@@ -280,8 +280,25 @@ impl PlaneWorld {
             return None;
         }
         let res = self.config.px_per_m;
-        let grid = TexelGrid { frame: w.frame, px_per_m: res, min_m: [w.texels.first[0] as f32 / res, w.texels.first[1] as f32 / res], width: w.texels.size[0], height: w.texels.size[1] };
-        let colours: Vec<Option<[u8; 3]>> = w.texels.sum.iter().zip(&w.texels.count).map(|(s, &n)| (n > 0).then(|| s.map(|v| (v / n as f32).round().clamp(0.0, 255.0) as u8))).collect();
+        // The box of the observed texels (the grid grew to each view's whole box).
+        let t = &w.texels;
+        let (mut lo, mut hi) = ([u32::MAX; 2], [0u32; 2]);
+        for (i, _) in t.count.iter().enumerate().filter(|(_, c)| **c > 0) {
+            let xy = [i as u32 % t.size[0], i as u32 / t.size[0]];
+            for a in 0..2 {
+                lo[a] = lo[a].min(xy[a]);
+                hi[a] = hi[a].max(xy[a] + 1);
+            }
+        }
+        let grid = TexelGrid { frame: w.frame, px_per_m: res, min_m: [(t.first[0] + lo[0] as i32) as f32 / res, (t.first[1] + lo[1] as i32) as f32 / res], width: hi[0] - lo[0], height: hi[1] - lo[1] };
+        let mut colours = Vec::with_capacity((grid.width * grid.height) as usize);
+        for y in lo[1]..hi[1] {
+            for x in lo[0]..hi[0] {
+                let i = (y * t.size[0] + x) as usize;
+                let n = t.count[i];
+                colours.push((n > 0).then(|| t.sum[i].map(|v| (v / n as f32).round().clamp(0.0, 255.0) as u8)));
+            }
+        }
         let mut mesh = PlaneMesh::build(grid, &colours);
         for p in &mut mesh.positions_m {
             *p = w.onto(*p);
