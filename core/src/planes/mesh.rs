@@ -283,25 +283,48 @@ impl PlaneMesh {
 
 impl PlaneMesh {
     /// The mesh of `grid` with its covered texels' colours `colours` (row-major, `None` where
-    /// not covered): the quadtree over the covered texels, and the texture, padded to power-of-two
-    /// sides and halved (2 x 2 means of the covered texels) until it fits
+    /// not covered): the quadtree over cells of 2^`geometry_shift` x 2^`geometry_shift`
+    /// texels, a cell covered when at least half of its texels are, and the texture, padded
+    /// to power-of-two sides and halved (2 x 2 means of the covered texels) until it fits
     /// [`MAX_TEXTURE_PX`]; the texture coordinates map the same plane points either way.
+    ///
+    /// Coarser geometry than texture: a plane's outline is known only to about a pixel's
+    /// footprint (the label of a pixel straddling the border decides it), so texels finer than
+    /// that only trace each pixel's staircase along the border, a quad or two per texel of
+    /// outline; the majority rule keeps the outline where it was on average.
     ///
     /// # Panics
     /// If `colours` is not one per texel.
-    pub fn build(grid: TexelGrid, colours: &[Option<[u8; 3]>]) -> PlaneMesh {
+    pub fn build(grid: TexelGrid, colours: &[Option<[u8; 3]>], geometry_shift: u32) -> PlaneMesh {
         let (w, h) = (grid.width as usize, grid.height as usize);
         assert_eq!(colours.len(), w * h, "one colour per texel");
-        let covered: Vec<bool> = colours.iter().map(Option::is_some).collect();
-        let degrees = quadtree_degrees(&covered, w, h);
-        let (vertices, triangles) = quadtree_mesh(&degrees, w);
+        let step = 1usize << geometry_shift;
+        let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
+        let mut votes = vec![[0u32; 2]; gw * gh];
+        for (i, c) in colours.iter().enumerate() {
+            let v = &mut votes[(i / w) / step * gw + (i % w) / step];
+            v[0] += u32::from(c.is_some());
+            v[1] += 1;
+        }
+        let covered: Vec<bool> = votes.iter().map(|v| v[0] > 0 && 2 * v[0] >= v[1]).collect();
+        let degrees = quadtree_degrees(&covered, gw, gh);
+        let (vertices, triangles) = quadtree_mesh(&degrees, gw);
+        // Lattice points in texels, the last row and column clamped to the grid's edge.
+        let texel = |[x, y]: [u32; 2]| [((x as usize) * step).min(w) as f32, ((y as usize) * step).min(h) as f32];
         let (pw, ph) = (grid.width.next_power_of_two(), grid.height.next_power_of_two());
-        let positions_m = vertices.iter().map(|&[x, y]| grid.frame.point([grid.min_m[0] + x as f32 / grid.px_per_m, grid.min_m[1] + y as f32 / grid.px_per_m])).collect();
-        let uv = vertices.iter().map(|&[x, y]| [x as f32 / pw as f32, y as f32 / ph as f32]).collect();
+        let positions_m = vertices.iter().map(|&v| {
+            let [x, y] = texel(v);
+            grid.frame.point([grid.min_m[0] + x / grid.px_per_m, grid.min_m[1] + y / grid.px_per_m])
+        }).collect();
+        let uv = vertices.iter().map(|&v| {
+            let [x, y] = texel(v);
+            [x / pw as f32, y / ph as f32]
+        }).collect();
         let quads = degrees.iter().filter(|&&d| d > 0).count() as u32;
-        let cells = quad_cells(&degrees, w, h);
+        let geometry_cells = quad_cells(&degrees, gw, gh);
+        let cells: Vec<bool> = (0..w * h).map(|i| geometry_cells[(i / w) / step * gw + (i % w) / step]).collect();
         let texel_m2 = 1.0 / (grid.px_per_m * grid.px_per_m);
-        let area_m2 = degrees.iter().filter(|&&d| d > 0).map(|&d| (d * d) as f32 * texel_m2).sum();
+        let area_m2 = cells.iter().filter(|&&c| c).count() as f32 * texel_m2;
         // Texture at the grid's resolution, then halved to fit.
         let mut tex: Vec<Option<[f32; 3]>> = vec![None; (pw * ph) as usize];
         for y in 0..h {
@@ -350,7 +373,18 @@ pub fn frame_plane_mesh(plane: &Plane, index: u32, labels: &[u32], k: &PinholeIn
     let height = (((max[1] - min[1]) * px_per_m).ceil() as u32).max(1);
     let grid = TexelGrid { frame, px_per_m, min_m: min, width, height };
     let colours = rectify(&grid, k, |px| (labels[px] == index).then(|| colour_at(colour, px)));
-    Some(PlaneMesh::build(grid, &colours))
+    // Geometry cells about a pixel's footprint on the plane (its mean: area over pixels).
+    let footprint_m = (plane.area_m2 / plane.pixels.max(1) as f32).sqrt();
+    Some(PlaneMesh::build(grid, &colours, geometry_shift_for(px_per_m, footprint_m)))
+}
+
+/// The largest shift whose cells (2^shift texels of 1 / `px_per_m`) are at most `cell_m`.
+pub fn geometry_shift_for(px_per_m: f32, cell_m: f32) -> u32 {
+    let mut shift = 0;
+    while shift < 8 && ((2u32 << shift) as f32) / px_per_m <= cell_m {
+        shift += 1;
+    }
+    shift
 }
 
 /// The box `[min, max]`, in the in-plane coordinates of `frame` (given in the world of
