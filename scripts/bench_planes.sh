@@ -11,6 +11,8 @@
 #
 # webfusion's stages: preprocess (depth to vertex and normal maps) and segment (the whole
 # segmentation), from frames.json; Open3D's: cloud (depth to points) and segment (RANSAC).
+# Then the world model of the same run (frames tracked by KinectFusion on the GPU): its
+# per-frame cost, planes and compactness against marching cubes, from planes.json.
 # Env: WEBFUSION_BIN (default target/release/webfusion, built when missing).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -20,7 +22,7 @@ while [ $# -gt 0 ]; do
     --data) data="${2:?$1 needs a value}"; shift 2 ;;
     --frames) frames="${2:?$1 needs a value}"; shift 2 ;;
     --out) out="${2:?$1 needs a value}"; shift 2 ;;
-    -h|--help) sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "unknown argument: $1" >&2; exit 2 ;;
   esac
 done
@@ -48,4 +50,16 @@ print(f"{'':24}{'depth to points':>16}{'segmentation':>14}{'total':>10}")
 print(f"{'webfusion (CPU reference)':24}{wp:16.1f}{ws:14.1f}{wp + ws:10.1f}")
 print(f"{'Open3D segment_plane':24}{oc:16.1f}{os_:14.1f}{oc + os_:10.1f}")
 print(f"ratio webfusion / Open3D: segmentation {ws / os_:.2f}, total {(wp + ws) / (oc + os_):.2f} (below 1: webfusion faster)")
+PYEOF
+# The world model of the same run (planes.json): per-frame cost, planes, compactness.
+"$PY" - "$out/webfusion/frames.json" "$out/webfusion/planes.json" <<'PYEOF'
+import json, statistics, sys
+wf = json.load(open(sys.argv[1]))["frames"]
+w = json.load(open(sys.argv[2]))
+world = [f["stages_ms"]["world"] for f in wf if f["stages_ms"].get("world") is not None]
+c = w["compactness"]
+print(f"world model ({w['poses']} poses, {w['frames_with_pose']} frames): {statistics.median(world) if world else float('nan'):.1f} ms per frame (label completion, association, texels)")
+print(f"  {len(w['planes'])} world planes, {sum(p['area_m2'] for p in w['planes']):.2f} m2 meshed")
+print(f"  compactness: {c['planar_triangles']} planar quadtree triangles replace {c['marching_cubes_triangles_replaced']} marching-cubes triangles "
+      f"({c['marching_cubes_triangles_replaced'] / max(c['planar_triangles'], 1):.1f}x fewer; voxel {w['remainder']['voxel_m'] * 100:.2f} cm); textures {c['texture_bytes'] / 1e6:.1f} MB")
 PYEOF

@@ -230,12 +230,18 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
             times.record(stage, ms);
         }
         counts.push(seg.planes.len());
+        let mut world_ids = None;
+        let mut world_ms = None;
         if let Some(pose) = world_input.as_ref().and_then(|w| w.poses.get(&frame.index)) {
             let sw = Stopwatch::start();
             let labels = complete_labels(&seg, &pre.depth_unfiltered_m, &k, &config, blend_reach_px(&pre_config));
             let view = PlaneView { index: frame.index, world_from_camera: *pose, segmentation: &seg, labels: &labels, colour: &frame.color, intrinsics: k };
-            clipped_texels += world.add_frame(&view, &config).clipped_texels;
-            times.record("world model", sw.ms());
+            let association = world.add_frame(&view, &config);
+            clipped_texels += association.clipped_texels;
+            world_ids = Some(association.world_plane);
+            let ms = sw.ms();
+            times.record("world model", ms);
+            world_ms = Some(ms);
         }
         if args.labels {
             let rgb: Vec<u8> = seg.labels.iter().flat_map(|&l| if l == NO_LABEL { [0, 0, 0] } else { label_colour(l) }).collect();
@@ -245,8 +251,10 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         let planes: Vec<serde_json::Value> = seg
             .planes
             .iter()
-            .map(|p| {
+            .enumerate()
+            .map(|(i, p)| {
                 serde_json::json!({
+                    "world_plane": world_ids.as_ref().map(|ids| ids[i]),
                     "normal": p.normal,
                     "offset_m": p.offset_m,
                     "pixels": p.pixels,
@@ -264,7 +272,7 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
             "timestamp": frame.depth_timestamp_ns as f64 * 1e-9,
             "planes": planes,
             "curved_rejected": seg.curved_rejected,
-            "stages_ms": {"preprocess": preprocess_ms, "segment": segment_ms},
+            "stages_ms": {"preprocess": preprocess_ms, "segment": segment_ms, "world": world_ms},
         }));
         eprint!("\rframe {index}: {} planes", seg.planes.len());
     }

@@ -139,6 +139,12 @@ fn a_posed_room_corner_becomes_three_textured_world_planes() {
         assert!(cos > 1f64.to_radians().cos() && (p["offset_m"].as_f64().expect("offset") - t.offset_m).abs() < 0.01, "{p} is not {t:?}");
         assert!(p["triangles"].as_u64().expect("triangles") > 0 && p["area_m2"].as_f64().expect("area") > 0.5, "{p}");
     }
+    // Every frame's planes name the world plane they joined.
+    for frame in frames_json(&out)["frames"].as_array().expect("frames") {
+        for p in frame["planes"].as_array().expect("planes") {
+            assert!(p["world_plane"].as_u64().is_some_and(|j| (j as usize) < planes.len()), "{p}");
+        }
+    }
     let c = &json["compactness"];
     assert!(c["planar_triangles"].as_u64().expect("count") * 10 < c["marching_cubes_triangles_replaced"].as_u64().expect("count"), "the quadtree is not compact: {c}");
     // The glTF scene: a mesh per plane and the remainder, every accessor inside the BIN

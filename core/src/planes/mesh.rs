@@ -438,40 +438,20 @@ pub fn blend_reach_px(preprocess: &crate::preprocess::PreprocessConfig) -> u32 {
 /// needs less depth error to be on the riser that faces the camera. Farther out, and for
 /// pixels off every plane, nothing changes.
 pub fn complete_labels(seg: &Segmentation, raw_depth_m: &[f32], k: &PinholeIntrinsics, config: &PlaneConfig, reach_px: u32) -> Vec<u32> {
-    let (w, h) = (k.width_px as i64, k.height_px as i64);
-    let r = i64::from(reach_px);
-    let mut out = seg.labels.clone();
-    let mut near = Vec::with_capacity(seg.planes.len());
-    for (ix, &l) in seg.labels.iter().enumerate() {
-        let z = raw_depth_m[ix];
-        if l != NO_LABEL || !(z.is_finite() && z > 0.0) {
-            continue;
-        }
-        let (x, y) = (ix as i64 % w, ix as i64 / w);
-        near.clear();
-        for v in (y - r).max(0)..=(y + r).min(h - 1) {
-            for u in (x - r).max(0)..=(x + r).min(w - 1) {
-                let m = seg.labels[(v * w + u) as usize];
-                if m != NO_LABEL && !near.contains(&m) {
-                    near.push(m);
-                }
-            }
-        }
-        let p = [(x as f32 - k.cx_px) / k.fx_px * z, (y as f32 - k.cy_px) / k.fy_px * z, z];
-        let tol = config.label_distance_m(z);
-        out[ix] = near
-            .iter()
-            .filter_map(|&m| {
-                // The ray meets n·q + d = 0 at depth z* = −d z / (n·p): the depth error is
-                // z − z* = z (n·p + d) / (n·p).
-                let plane = &seg.planes[m as usize];
-                let np = dot(plane.normal, p);
-                (np < 0.0).then(|| (m, (z * (np + plane.offset_m) / np).abs()))
-            })
-            .filter(|&(_, e)| e <= tol)
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map_or(NO_LABEL, |(m, _)| m);
-    }
+    // Kernel `plane_complete`.
+    let params = crate::kernels::plane_complete::PlaneCompleteParams {
+        width_px: k.width_px,
+        height_px: k.height_px,
+        reach_px,
+        min_distance_m: config.label_min_distance_m,
+        fx_px: k.fx_px,
+        fy_px: k.fy_px,
+        cx_px: k.cx_px,
+        cy_px: k.cy_px,
+    };
+    let planes: Vec<[f32; 4]> = seg.planes.iter().map(|p| [p.normal[0], p.normal[1], p.normal[2], p.offset_m]).collect();
+    let mut out = vec![NO_LABEL; seg.labels.len()];
+    crate::cpu::plane_complete(&params, raw_depth_m, &seg.labels, &planes, &[planes.len() as u32], &mut out);
     out
 }
 
