@@ -157,7 +157,8 @@ pub const NO_QUAD: i32 = -1;
 /// first (lowest x, lowest y) texel it is, [`NO_QUAD`] for a texel that starts none (not
 /// covered, or inside a larger quad). Quads have power-of-two sides up to
 /// [`MAX_QUAD_TEXELS`] and start at multiples of their side; each step reads every block's
-/// four quads, then writes (the order 003's code uses; its printed version races).
+/// four quads, then writes (the order 003's code uses; its printed version races). The work is
+/// 003's two phases of 16 x 16 tiles, kernel `quadtree_decimate`.
 ///
 /// Unlike 003, a quad is made of texels: a covered texel is a unit quad, and the mesh spans
 /// the covered texels exactly. 003's quads spanned texel *centres* (a unit quad needed four
@@ -168,29 +169,14 @@ pub const NO_QUAD: i32 = -1;
 /// If `covered` is not `width * height` long.
 pub fn quadtree_degrees(covered: &[bool], width: usize, height: usize) -> Vec<i32> {
     assert_eq!(covered.len(), width * height, "one flag per texel");
-    let at = |d: &[i32], x: usize, y: usize| if x < width && y < height { d[y * width + x] } else { NO_QUAD };
-    let mut d: Vec<i32> = covered.iter().map(|&c| if c { 1 } else { NO_QUAD }).collect();
-    // Four quads of side `step` filling a 2·step block become one.
-    let mut step = 1usize;
-    while step < MAX_QUAD_TEXELS as usize {
-        let mut merge = Vec::new();
-        for y in (0..height).step_by(2 * step) {
-            for x in (0..width).step_by(2 * step) {
-                let s = step as i32;
-                if at(&d, x, y) == s && at(&d, x + step, y) == s && at(&d, x, y + step) == s && at(&d, x + step, y + step) == s {
-                    merge.push((x, y));
-                }
-            }
-        }
-        for (x, y) in merge {
-            d[y * width + x] = 2 * step as i32;
-            for (dx, dy) in [(step, 0), (0, step), (step, step)] {
-                d[(y + dy) * width + x + dx] = NO_QUAD;
-            }
-        }
-        step *= 2;
+    // Kernel `quadtree_decimate`, both phases.
+    let flags: Vec<u32> = covered.iter().map(|&c| u32::from(c)).collect();
+    let mut degrees = vec![NO_QUAD; covered.len()];
+    for phase in 0..2 {
+        let params = crate::kernels::quadtree_decimate::QuadtreeDecimateParams { width: width as u32, height: height as u32, phase, ..Default::default() };
+        crate::cpu::quadtree_decimate(&params, &flags, &mut degrees);
     }
-    d
+    degrees
 }
 
 /// The mesh of a degree grid ([`quadtree_degrees`], `width` texels wide): each texel of
