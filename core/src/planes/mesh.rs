@@ -352,13 +352,9 @@ impl PlaneMesh {
 /// centre projects to when that pixel carries the label ([`rectify`]). `None` for a plane
 /// with no labelled pixel or one reaching behind the camera.
 pub fn frame_plane_mesh(plane: &Plane, index: u32, labels: &[u32], k: &PinholeIntrinsics, colour: &ColorImage) -> Option<PlaneMesh> {
-    let frame = PlaneFrame::of_plane(plane);
-    let [min, max] = pixel_box(&frame, labels, index, k, &crate::Se3::IDENTITY)?;
-    let px_per_m = texture_px_per_m(&frame, min, max, k)?;
-    let width = (((max[0] - min[0]) * px_per_m).ceil() as u32).max(1);
-    let height = (((max[1] - min[1]) * px_per_m).ceil() as u32).max(1);
-    let grid = TexelGrid { frame, px_per_m, min_m: min, width, height };
-    let colours = rectify(&grid, k, |px| (labels[px] == index).then(|| colour_at(colour, px)));
+    let grid = frame_plane_grid(plane, index, labels, k)?;
+    let px_per_m = grid.px_per_m;
+    let colours = rectify(&grid, k, labels, index, colour);
     // Geometry cells about a pixel's footprint on the plane (its mean: area over pixels).
     let footprint_m = (plane.area_m2 / plane.pixels.max(1) as f32).sqrt();
     Some(PlaneMesh::build(grid, &colours, geometry_shift_for(px_per_m, footprint_m)))
@@ -374,8 +370,10 @@ pub fn geometry_shift_for(px_per_m: f32, cell_m: f32) -> u32 {
 }
 
 /// The box `[min, max]`, in the in-plane coordinates of `frame` (given in the world of
-/// `world_from_camera`), of the points where the rays through the corners of the pixels
-/// labelled `label` meet the plane; `None` if there are none or a ray misses the plane.
+/// `world_from_camera`), of the points where the rays through the centres and corners of the
+/// pixels labelled `label` meet the plane (a corner only where it meets the plane within
+/// twice the centre's depth); `None` if no labelled pixel's ray meets it in front of the
+/// camera.
 pub fn pixel_box(frame: &PlaneFrame, labels: &[u32], label: u32, k: &PinholeIntrinsics, world_from_camera: &crate::Se3) -> Option<[[f32; 2]; 2]> {
     // The plane in the camera frame: n_c·p + d_c = 0.
     let r = world_from_camera.rotation.inverse();
@@ -389,11 +387,20 @@ pub fn pixel_box(frame: &PlaneFrame, labels: &[u32], label: u32, k: &PinholeIntr
             continue;
         }
         let (x, y) = ((ix % w) as f64, (ix / w) as f64);
-        for (dx, dy) in [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
+        let depth_at = |dx: f64, dy: f64| {
             let ray = glam::DVec3::new((x + dx - f64::from(k.cx_px)) / f64::from(k.fx_px), (y + dy - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
-            let t = -d_c / n_c.dot(ray);
-            if !(t.is_finite() && t > 0.0) {
-                return None;
+            (ray, -d_c / n_c.dot(ray))
+        };
+        let (_, t_centre) = depth_at(0.0, 0.0);
+        if !(t_centre.is_finite() && t_centre > 0.0) {
+            continue;
+        }
+        for (dx, dy) in [(0.0, 0.0), (-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
+            let (ray, t) = depth_at(dx, dy);
+            // A pixel seen at a grazing angle reaches far along the plane: its corners are
+            // kept only within twice its centre's depth (or half).
+            if !(t >= 0.5 * t_centre && t <= 2.0 * t_centre) {
+                continue;
             }
             let p = world_from_camera.transform_point(ray * t);
             let s = frame.to_plane([p.x as f32, p.y as f32, p.z as f32]);
@@ -404,6 +411,16 @@ pub fn pixel_box(frame: &PlaneFrame, labels: &[u32], label: u32, k: &PinholeIntr
         }
     }
     (min[0] <= max[0]).then_some([min, max])
+}
+
+/// The texel grid of plane `index` of a frame (see [`frame_plane_mesh`]).
+pub fn frame_plane_grid(plane: &Plane, index: u32, labels: &[u32], k: &PinholeIntrinsics) -> Option<TexelGrid> {
+    let frame = PlaneFrame::of_plane(plane);
+    let [min, max] = pixel_box(&frame, labels, index, k, &crate::Se3::IDENTITY)?;
+    let px_per_m = texture_px_per_m(&frame, min, max, k)?;
+    let width = (((max[0] - min[0]) * px_per_m).ceil() as u32).max(1);
+    let height = (((max[1] - min[1]) * px_per_m).ceil() as u32).max(1);
+    Some(TexelGrid { frame, px_per_m, min_m: min, width, height })
 }
 
 /// How far (pixels) the preprocessor blends a border into the normals next to it: the
@@ -441,25 +458,50 @@ pub fn complete_labels(seg: &Segmentation, raw_depth_m: &[f32], k: &PinholeIntri
     out
 }
 
-/// The colour of pixel `px` of `colour`.
-pub fn colour_at(colour: &ColorImage, px: usize) -> [u8; 3] {
-    [colour.rgb8[3 * px], colour.rgb8[3 * px + 1], colour.rgb8[3 * px + 2]]
+/// 003's texture rectification, per destination texel (kernel `plane_rectify`): the texel's
+/// centre (a point of the grid's plane, in the camera frame) projected with `k` to its nearest
+/// pixel, and that pixel's colour if it carries `label`.
+pub fn rectify(grid: &TexelGrid, k: &PinholeIntrinsics, labels: &[u32], label: u32, colour: &ColorImage) -> Vec<Option<[u8; 3]>> {
+    let params = rectify_params(grid, k, label);
+    let packed = pack_rgba8(colour);
+    let mut texels = vec![0u32; (grid.width * grid.height) as usize];
+    crate::cpu::plane_rectify(&params, labels, &packed, &mut texels);
+    texels.iter().map(|&t| (t >> 24 != 0).then_some([t as u8, (t >> 8) as u8, (t >> 16) as u8])).collect()
 }
 
-/// 003's texture rectification, per destination texel: the texel's centre (a point of the
-/// grid's plane, in the camera frame) projected with `k` to its nearest pixel, and that pixel's
-/// colour if `sample` gives one (the pixel belongs to the plane).
-pub fn rectify(grid: &TexelGrid, k: &PinholeIntrinsics, sample: impl Fn(usize) -> Option<[u8; 3]>) -> Vec<Option<[u8; 3]>> {
-    let mut out = vec![None; (grid.width * grid.height) as usize];
-    for y in 0..grid.height {
-        for x in 0..grid.width {
-            let p = grid.frame.point(grid.texel_centre(x, y));
-            if let Some(px) = pixel_of(k, p) {
-                out[(y * grid.width + x) as usize] = sample(px);
-            }
-        }
+/// The parameters of kernel `plane_rectify` for `grid` (camera frame), seen with `k`, and the
+/// plane's `label`.
+pub fn rectify_params(grid: &TexelGrid, k: &PinholeIntrinsics, label: u32) -> crate::kernels::plane_rectify::PlaneRectifyParams {
+    let f = &grid.frame;
+    crate::kernels::plane_rectify::PlaneRectifyParams {
+        origin_x: f.origin_m[0],
+        origin_y: f.origin_m[1],
+        origin_z: f.origin_m[2],
+        u_x: f.u_axis[0],
+        u_y: f.u_axis[1],
+        u_z: f.u_axis[2],
+        v_x: f.v_axis[0],
+        v_y: f.v_axis[1],
+        v_z: f.v_axis[2],
+        min_u_m: grid.min_m[0],
+        min_v_m: grid.min_m[1],
+        px_per_m: grid.px_per_m,
+        width: grid.width,
+        height: grid.height,
+        label,
+        image_width_px: k.width_px,
+        image_height_px: k.height_px,
+        fx_px: k.fx_px,
+        fy_px: k.fy_px,
+        cx_px: k.cx_px,
+        cy_px: k.cy_px,
+        ..Default::default()
     }
-    out
+}
+
+/// A colour image packed one pixel per u32, RGBA8 little-endian (R in the low byte, alpha 255).
+pub fn pack_rgba8(colour: &ColorImage) -> Vec<u32> {
+    colour.rgb8.chunks_exact(3).map(|c| u32::from_le_bytes([c[0], c[1], c[2], 255])).collect()
 }
 
 /// The nearest pixel (row-major index) of camera point `p`, if in the image.
@@ -467,8 +509,8 @@ pub fn pixel_of(k: &PinholeIntrinsics, p: [f32; 3]) -> Option<usize> {
     if p[2] <= 1e-6 {
         return None;
     }
-    let u = (p[0] / p[2] * k.fx_px + k.cx_px).round();
-    let v = (p[1] / p[2] * k.fy_px + k.cy_px).round();
+    let u = (p[0] / p[2] * k.fx_px + k.cx_px + 0.5).floor();
+    let v = (p[1] / p[2] * k.fy_px + k.cy_px + 0.5).floor();
     (u >= 0.0 && v >= 0.0 && u < k.width_px as f32 && v < k.height_px as f32).then(|| v as usize * k.width_px as usize + u as usize)
 }
 
