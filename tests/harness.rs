@@ -298,6 +298,20 @@ macro_rules! check_layout {
 }
 
 
+/// Compares two arrays of integer results (labels, ids) element by element: equal lengths and
+/// at most `max_differ_per_mille` ‰ of the elements different (results at a threshold may fall
+/// either way when WGSL fuses a multiply-add); returns how many differ.
+pub fn compare_u32_mostly(what: &str, gpu: &[u32], cpu: &[u32], max_differ_per_mille: usize) -> Result<usize, String> {
+    if gpu.len() != cpu.len() {
+        return Err(format!("{what}: {} GPU values vs {} CPU", gpu.len(), cpu.len()));
+    }
+    let differ = gpu.iter().zip(cpu).filter(|(a, b)| a != b).count();
+    if differ * 1000 > gpu.len() * max_differ_per_mille {
+        return Err(format!("{what}: {differ} of {} values differ (allowed {max_differ_per_mille} per mille)", gpu.len()));
+    }
+    Ok(differ)
+}
+
 /// Compares RGBA8 images (red in the low byte) pixel by pixel: every channel within
 /// `max_channel_diff` and at least `min_exact_fraction` of the pixels identical. Pixels the
 /// CPU left at [`SENTINEL_F32`] (padding) must be the sentinel on the GPU too.

@@ -219,20 +219,21 @@ pub fn quadtree_mesh(degrees: &[i32], width: usize) -> (Vec<[u32; 2]>, Vec<[u32;
     (vertices, triangles)
 }
 
-/// Per texel whether a quad of `degrees` covers it.
-pub fn quad_cells(degrees: &[i32], width: usize, height: usize) -> Vec<bool> {
-    let mut cells = vec![false; width * height];
+/// Per cell the number of quads of `degrees` covering it (1 inside a quad, 0 outside: more
+/// would be a bug).
+pub fn quad_cover_counts(degrees: &[i32], width: usize, height: usize) -> Vec<u32> {
+    let mut counts = vec![0u32; width * height];
     for (i, &d) in degrees.iter().enumerate() {
         if d > 0 {
             let (x, y) = (i % width, i / width);
             for cy in y..(y + d as usize).min(height) {
                 for cx in x..(x + d as usize).min(width) {
-                    cells[cy * width + cx] = true;
+                    counts[cy * width + cx] += 1;
                 }
             }
         }
     }
-    cells
+    counts
 }
 
 /// A plane's textured quadtree mesh.
@@ -254,7 +255,7 @@ pub struct PlaneMesh {
     pub quads: u32,
     /// Area the quads cover, m².
     pub area_m2: f32,
-    /// Per texel whether a quad covers it ([`quad_cells`]).
+    /// Per texel whether a quad covers it ([`quad_cover_counts`]).
     pub cells: Vec<bool>,
 }
 
@@ -307,7 +308,7 @@ impl PlaneMesh {
             [x / pw as f32, y / ph as f32]
         }).collect();
         let quads = degrees.iter().filter(|&&d| d > 0).count() as u32;
-        let geometry_cells = quad_cells(&degrees, gw, gh);
+        let geometry_cells: Vec<bool> = quad_cover_counts(&degrees, gw, gh).iter().map(|&c| c > 0).collect();
         let cells: Vec<bool> = (0..w * h).map(|i| geometry_cells[(i / w) / step * gw + (i % w) / step]).collect();
         let texel_m2 = 1.0 / (grid.px_per_m * grid.px_per_m);
         let area_m2 = cells.iter().filter(|&&c| c).count() as f32 * texel_m2;
@@ -550,21 +551,10 @@ pub(crate) mod tests {
             })
             .collect();
         let d = quadtree_degrees(&covered, w, h);
-        let mut times = vec![0u32; w * h];
-        for (i, &s) in d.iter().enumerate() {
-            if s > 0 {
-                let (x, y) = (i % w, i / w);
-                for cy in y..y + s as usize {
-                    for cx in x..x + s as usize {
-                        times[cy * w + cx] += 1;
-                    }
-                }
-            }
-        }
+        let times = quad_cover_counts(&d, w, h);
         for i in 0..w * h {
             assert_eq!(times[i], u32::from(covered[i]), "texel ({}, {})", i % w, i / w);
         }
-        assert_eq!(quad_cells(&d, w, h), covered);
         let (vertices, triangles) = quadtree_mesh(&d, w);
         let texels = covered.iter().filter(|&&c| c).count();
         assert!(triangles.len() * 3 < texels * 2, "{} triangles for {texels} texels: the quadtree did not decimate (unit quads would be two per texel)", triangles.len());

@@ -47,15 +47,9 @@ fn run(k: &PinholeIntrinsics, seg: &Segmentation, depth_m: &[f32]) -> (Vec<u32>,
     (cast(&out[0]), c)
 }
 
+/// At most 1 ‰ of the labels different.
 fn compare(what: &str, g: &[u32], c: &[u32]) -> Result<usize, String> {
-    if g.len() != c.len() {
-        return Err(format!("{what}: {} GPU labels vs {} CPU", g.len(), c.len()));
-    }
-    let differ = g.iter().zip(c).filter(|(a, b)| a != b).count();
-    if differ * 1000 > g.len() {
-        return Err(format!("{what}: {differ} of {} labels differ", g.len()));
-    }
-    Ok(differ)
+    webfusion_tests::compare_u32_mostly(what, g, c, 1)
 }
 
 /// Compares, then four negative controls on the pixels the completion labelled: left

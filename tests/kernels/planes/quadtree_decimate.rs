@@ -60,16 +60,7 @@ fn check(what: &str, covered: &[bool], w: usize, h: usize) -> Vec<i32> {
     cpu::quadtree_decimate(&params(w, h, 1), &flags, &mut c);
     compare(&format!("{what}, phase 1"), &g1, &c).unwrap();
     // Each covered cell in exactly one quad, no other cell in any.
-    let mut times = vec![0u32; w * h];
-    for (i, &s) in c.iter().enumerate() {
-        if s > 0 {
-            for y in i / w..i / w + s as usize {
-                for x in i % w..i % w + s as usize {
-                    times[y * w + x] += 1;
-                }
-            }
-        }
-    }
+    let times = webfusion_core::planes::mesh::quad_cover_counts(&c, w, h);
     assert!(times.iter().zip(covered).all(|(&t, &cov)| t == u32::from(cov)), "{what}: quads do not tile the covered cells");
     let largest = c.iter().copied().max().unwrap_or(0);
     eprintln!("{what}: {} quads for {} covered cells, the largest {largest} cells wide", c.iter().filter(|&&s| s > 0).count(), covered.iter().filter(|&&x| x).count());
