@@ -505,15 +505,6 @@ pub fn pack_rgba8(colour: &ColorImage) -> Vec<u32> {
     colour.rgb8.chunks_exact(3).map(|c| u32::from_le_bytes([c[0], c[1], c[2], 255])).collect()
 }
 
-/// The nearest pixel (row-major index) of camera point `p`, if in the image.
-pub fn pixel_of(k: &PinholeIntrinsics, p: [f32; 3]) -> Option<usize> {
-    if p[2] <= 1e-6 {
-        return None;
-    }
-    let u = (p[0] / p[2] * k.fx_px + k.cx_px + 0.5).floor();
-    let v = (p[1] / p[2] * k.fy_px + k.cy_px + 0.5).floor();
-    (u >= 0.0 && v >= 0.0 && u < k.width_px as f32 && v < k.height_px as f32).then(|| v as usize * k.width_px as usize + u as usize)
-}
 
 #[cfg(test)]
 pub(crate) mod tests {

@@ -16,10 +16,11 @@
 //! - **Texels**: a world plane's frame is fixed when it is created (origin at its first view's
 //!   centroid, `u` along that view's tangent) and its texels are [`WorldConfig::px_per_m`]
 //!   apart. For each view, every texel within the box of the view's pixels is projected into
-//!   the frame (003's destination-driven rectification: no gaps whatever the view's distance)
-//!   and takes the colour of the pixel it lands on when that pixel carries the view's label.
+//!   the frame (003's destination-driven rectification, [`super::mesh::rectify`]: no gaps
+//!   whatever the view's distance) and takes the colour of the pixel it lands on when that
+//!   pixel carries the view's label.
 
-use super::mesh::{PlaneFrame, PlaneMesh, TexelGrid, geometry_shift_for, pixel_box, pixel_of};
+use super::mesh::{PlaneFrame, PlaneMesh, TexelGrid, geometry_shift_for, pixel_box, rectify};
 use super::{PlaneConfig, Segmentation};
 use crate::{ColorImage, PinholeIntrinsics, Se3};
 use glam::DVec3;
@@ -256,22 +257,31 @@ impl PlaneWorld {
         let want = i64::from(hi[0] - lo[0]) * i64::from(hi[1] - lo[1]);
         let (lo, hi) = w.texels.grow(lo, hi, config.max_grid_texels);
         let held = i64::from((hi[0] - lo[0]).max(0)) * i64::from((hi[1] - lo[1]).max(0));
+        if lo[0] >= hi[0] || lo[1] >= hi[1] {
+            return (want - held).max(0) as u64;
+        }
+        // The held part of the box as a texel grid on the plane as it now is (the frame's
+        // origin and axes moved onto it), in the camera frame: then 003's rectification
+        // (kernel `plane_rectify`) gives each texel its pixel's colour.
+        let now = PlaneFrame::new(w.normal, w.offset_m, w.frame.origin_m, w.frame.u_axis);
+        let r = camera_from_world.rotation;
+        let in_camera = PlaneFrame {
+            origin_m: to_f32(camera_from_world.transform_point(to_dvec(now.origin_m))),
+            u_axis: to_f32(r * to_dvec(now.u_axis)),
+            v_axis: to_f32(r * to_dvec(now.v_axis)),
+            normal: to_f32(r * to_dvec(now.normal)),
+        };
+        let grid = TexelGrid { frame: in_camera, px_per_m: res, min_m: [lo[0] as f32 / res, lo[1] as f32 / res], width: (hi[0] - lo[0]) as u32, height: (hi[1] - lo[1]) as u32 };
+        let colours = rectify(&grid, &view.intrinsics, view.labels, label, view.colour);
         let stride = w.texels.size[0] as i32;
-        for j in lo[1]..hi[1] {
-            for i in lo[0]..hi[0] {
-                let s = [(i as f32 + 0.5) / res, (j as f32 + 0.5) / res];
-                let p_w = w.onto(w.frame.point(s));
-                let p_c = camera_from_world.transform_point(to_dvec(p_w));
-                let Some(px) = pixel_of(&view.intrinsics, to_f32(p_c)) else { continue };
-                if view.labels[px] != label {
-                    continue;
-                }
-                let t = ((j - w.texels.first[1]) * stride + (i - w.texels.first[0])) as usize;
-                for c in 0..3 {
-                    w.texels.sum[t][c] += f32::from(view.colour.rgb8[3 * px + c]);
-                }
-                w.texels.count[t] += 1;
+        for (k, c) in colours.iter().enumerate() {
+            let Some(c) = c else { continue };
+            let (i, j) = (lo[0] + (k as u32 % grid.width) as i32, lo[1] + (k as u32 / grid.width) as i32);
+            let t = ((j - w.texels.first[1]) * stride + (i - w.texels.first[0])) as usize;
+            for ch in 0..3 {
+                w.texels.sum[t][ch] += f32::from(c[ch]);
             }
+            w.texels.count[t] += 1;
         }
         (want - held).max(0) as u64
     }
