@@ -278,8 +278,8 @@ impl PlaneWorld {
             let Some(c) = c else { continue };
             let (i, j) = (lo[0] + (k as u32 % grid.width) as i32, lo[1] + (k as u32 / grid.width) as i32);
             let t = ((j - w.texels.first[1]) * stride + (i - w.texels.first[0])) as usize;
-            for ch in 0..3 {
-                w.texels.sum[t][ch] += f32::from(c[ch]);
+            for (sum, &v) in w.texels.sum[t].iter_mut().zip(c) {
+                *sum += f32::from(v);
             }
             w.texels.count[t] += 1;
         }
