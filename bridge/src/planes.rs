@@ -8,7 +8,7 @@
 //! - The world model (unless `--no-world`): each frame's planes, at the frame's camera pose
 //!   (`--poses`, or tracked by KinectFusion, which also fuses the map), associated across
 //!   frames into world planes with growing textures (`core::planes::world`); written as
-//!   `DIR/planes.json`, and with the marching-cubes mesh of the fused map less what the planes
+//!   `DIR/planes.json` (the poses used: `DIR/trajectory.txt`, TUM format), and with the marching-cubes mesh of the fused map less what the planes
 //!   cover (the non-planar remainder) as `DIR/scene.glb` and `DIR/scene.obj` (+ `scene.mtl`,
 //!   `scene_textures/`).
 //!
@@ -26,7 +26,7 @@ use webfusion_core::planes::{NO_LABEL, PlaneConfig, reference};
 use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_core::{ColorImage, GpuOptions, Se3, codec::png};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, pose_driven::PoseDrivenMapper};
-use webfusion_core::io::trajectory::{PoseTimeline, read_tum_trajectory};
+use webfusion_core::io::trajectory::{PoseTimeline, TimedPose, read_tum_trajectory, write_tum_trajectory};
 use webfusion_core::mesh::Mesh;
 use webfusion_core::planes::export::{scene_obj, write_scene_glb};
 use webfusion_core::planes::mesh::{PlaneMesh, blend_reach_px, complete_labels};
@@ -205,6 +205,8 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
     let gpu_pass_s = sw.ms() * 1e-3;
     let mut world = PlaneWorld::new(WorldConfig { px_per_m: px, ..WorldConfig::default() });
     let mut clipped_texels = 0u64;
+    // The pose of each frame added to the world, at its depth timestamp.
+    let mut trajectory = Vec::new();
     if args.labels {
         std::fs::create_dir_all(args.out.join("labels")).with_context(|| format!("creating {}", args.out.display()))?;
     }
@@ -233,6 +235,7 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         let mut world_ids = None;
         let mut world_ms = None;
         if let Some(pose) = world_input.as_ref().and_then(|w| w.poses.get(&frame.index)) {
+            trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: *pose });
             let sw = Stopwatch::start();
             let labels = complete_labels(&seg, &pre.depth_unfiltered_m, &k, &config, blend_reach_px(&pre_config));
             let view = PlaneView { index: frame.index, world_from_camera: *pose, segmentation: &seg, labels: &labels, colour: &frame.color, intrinsics: k };
@@ -297,6 +300,8 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
     times.print();
     println!("wrote {}", frames_json.display());
     if let Some(input) = world_input {
+        let path = args.out.join("trajectory.txt");
+        write_tum_trajectory(&path, &trajectory).with_context(|| format!("writing {}", path.display()))?;
         write_world(args, &world, &input, clipped_texels, gpu_pass_s)?;
     }
     Ok(())

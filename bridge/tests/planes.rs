@@ -139,6 +139,13 @@ fn a_posed_room_corner_becomes_three_textured_world_planes() {
         assert!(cos > 1f64.to_radians().cos() && (p["offset_m"].as_f64().expect("offset") - t.offset_m).abs() < 0.01, "{p} is not {t:?}");
         assert!(p["triangles"].as_u64().expect("triangles") > 0 && p["area_m2"].as_f64().expect("area") > 0.5, "{p}");
     }
+    // The poses used, one per frame, as given.
+    let used = webfusion_core::io::trajectory::read_tum_trajectory(&out.join("trajectory.txt")).expect("trajectory.txt");
+    assert_eq!(used.len(), poses.len());
+    for (u, p) in used.iter().zip(&poses) {
+        assert_eq!(u.timestamp_ns, p.timestamp_ns);
+        assert!((u.world_from_camera.translation_m - p.world_from_camera.translation_m).length() < 1e-4);
+    }
     // Every frame's planes name the world plane they joined.
     for frame in frames_json(&out)["frames"].as_array().expect("frames") {
         for p in frame["planes"].as_array().expect("planes") {
