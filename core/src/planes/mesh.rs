@@ -112,11 +112,6 @@ pub struct TexelGrid {
 }
 
 impl TexelGrid {
-    /// In-plane coordinates of texel (x, y)'s centre.
-    pub fn texel_centre(&self, x: u32, y: u32) -> [f32; 2] {
-        [self.min_m[0] + (x as f32 + 0.5) / self.px_per_m, self.min_m[1] + (y as f32 + 0.5) / self.px_per_m]
-    }
-
     /// The texel (x, y) holding in-plane coordinates `s`, if inside the grid.
     pub fn texel_of(&self, s: [f32; 2]) -> Option<[u32; 2]> {
         let x = ((s[0] - self.min_m[0]) * self.px_per_m).floor();
