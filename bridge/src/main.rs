@@ -8,6 +8,7 @@ mod compare;
 mod eval;
 #[cfg(feature = "openni2")]
 mod openni;
+mod odometry;
 mod planes;
 mod plot;
 mod pose_args;
@@ -87,6 +88,10 @@ enum Command {
     /// Seed 003's plane segmentation of every frame: each frame's planes (normal, offset,
     /// area, extent) in its camera frame as `frames.json`, and optionally label images.
     Planes(planes::PlanesArgs),
+    /// Seed 002's feature-based visual odometry, frame to frame: keypoints, descriptors and
+    /// matching on the GPU, RANSAC on 3D-3D pairs; `trajectory.txt` (TUM) and `stats.json`
+    /// (per-stage times, keypoint/match/inlier counts).
+    Odometry(odometry::OdometryArgs),
 }
 
 #[derive(clap::Args)]
@@ -155,6 +160,7 @@ fn main() -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(&options, &args),
         Command::Compare(args) => compare::run(&args),
         Command::Planes(args) => planes::run(&options, &args),
+        Command::Odometry(args) => odometry::run(&options, &args),
         Command::Serve(args) => serve::run(args),
         #[cfg(feature = "openni2")]
         Command::Devices => {

@@ -20,6 +20,7 @@ pub mod io;
 pub mod kernels;
 pub mod map;
 pub mod mesh;
+pub mod odometry;
 pub mod planes;
 pub mod pose;
 pub mod preprocess;

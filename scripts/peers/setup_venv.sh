@@ -5,6 +5,7 @@
 # installs, only when missing or at the wrong version:
 #   open3d-cpu  (pinned, see O3D_VERSION)  -- the peer RGB-D pipeline (tensor dense SLAM)
 #   evo         (pinned, see EVO_VERSION)  -- trajectory ATE/RPE, the community's reference tool
+#   opencv-python-headless (pinned, see CV_VERSION) -- the peer feature odometry (ORB + PnP)
 #   numpy       (whatever open3d/evo pull in; installed explicitly if absent)
 # Installs python3-venv via apt-get when the venv module is missing.
 # Safe to run again (a second run only checks versions) and tolerant of a `.venv-peers/`
@@ -18,6 +19,7 @@ VENV="${PEERS_VENV:-$ROOT/.venv-peers}"
 PYTHON="${PYTHON:-python3}"
 O3D_VERSION="0.20.0"
 EVO_VERSION="1.38.1"
+CV_VERSION="4.10.0.84"
 
 log() { echo "[setup_venv] $*"; }
 
@@ -71,6 +73,13 @@ if [ -n "$evo_have" ] && [ -x "$VENV/bin/evo_ape" ]; then
 else
     log "evo: missing, want evo==$EVO_VERSION"
     want+=("evo==$EVO_VERSION")
+fi
+cv_have="$(dist_version opencv-python-headless)"
+if [ "$cv_have" = "$CV_VERSION" ] && "$PY" -c 'import cv2' >/dev/null 2>&1; then
+    log "opencv $cv_have present"
+else
+    log "opencv: have '${cv_have:-none}', want opencv-python-headless==$CV_VERSION"
+    want+=("opencv-python-headless==$CV_VERSION")
 fi
 np_have="$(dist_version numpy)"
 if [ -n "$np_have" ]; then

@@ -549,3 +549,19 @@ pub fn normal_colour(n: [f32; 4]) -> u32 {
     }
     pack_rgba8([0.5 - 0.5 * n[0], 0.5 - 0.5 * n[1], 0.5 - 0.5 * n[2], 1.0])
 }
+
+/// Twin of `FAST_ARC` in `shared/features.wgsl`: FAST-9's arc length.
+pub const FAST_ARC: u32 = 9;
+/// Twin of `DESCRIPTOR_WORDS`: 32-bit words per binary descriptor.
+pub const DESCRIPTOR_WORDS: usize = 8;
+/// Twin of `DESCRIPTOR_BITS`: binary tests per descriptor.
+pub const DESCRIPTOR_BITS: u32 = 256;
+/// Twin of `NO_MATCH`: an unmatched query's index.
+pub const NO_MATCH: u32 = u32::MAX;
+
+/// Twin of `fast_circle_offset()`: pixel `k` (0..16) of the radius-3 Bresenham circle,
+/// clockwise from the top (x right, y down).
+pub fn fast_circle_offset(k: u32) -> [i32; 2] {
+    const CIRCLE: [[i32; 2]; 16] = [[0, -3], [1, -3], [2, -2], [3, -1], [3, 0], [3, 1], [2, 2], [1, 3], [0, 3], [-1, 3], [-2, 2], [-3, 1], [-3, 0], [-3, -1], [-2, -2], [-1, -3]];
+    CIRCLE[k as usize]
+}

@@ -1,0 +1,216 @@
+// SPDX-License-Identifier: MIT
+//! `webfusion odometry`: seed 002's feature-based visual odometry, frame to frame
+//! (`core::odometry`): keypoints, descriptors and matching on the GPU, RANSAC and the rigid
+//! fit on the host.
+//!
+//! - `DIR/trajectory.txt`: the camera-to-world pose of every frame at its depth timestamp (TUM
+//!   format; the world is the first frame's camera). A frame whose motion is rejected keeps
+//!   the last tracked pose and the next frame is matched against the last tracked one.
+//! - `DIR/stats.json`: per-stage times (002's: update, detection, description, matching,
+//!   estimation, total; median and p95) and per frame the keypoint, match and inlier counts.
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use webfusion_core::GpuOptions;
+use webfusion_core::Se3;
+use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
+use webfusion_core::odometry::gpu::{FeatureExtractor, STAGES};
+use webfusion_core::odometry::matching::MatchConfig;
+use webfusion_core::odometry::tracker::{OdometryConfig, estimate_motion};
+use webfusion_core::odometry::{FeatureConfig, Features};
+use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
+
+use crate::calib::CalibrationArgs;
+use crate::timing::{StageTimes, Stopwatch, summarize};
+
+#[derive(clap::Args)]
+pub(crate) struct OdometryArgs {
+    /// TUM RGB-D directory or `.wfr` recording.
+    #[arg(default_value = crate::DEFAULT_SAMPLE)]
+    source: PathBuf,
+    /// Output directory (created; `trajectory.txt` in it must not exist yet).
+    #[arg(long)]
+    out: PathBuf,
+    /// Frames to track, `A..B` (end exclusive); default all.
+    #[arg(long)]
+    frames: Option<String>,
+    /// Keep only every N-th frame of the range (fast motion as a slower camera would see it).
+    #[arg(long, default_value_t = 1)]
+    every: usize,
+    /// Leave out the frames `A..B` (a gap in the stream).
+    #[arg(long)]
+    drop: Option<String>,
+    #[command(flatten)]
+    calibration: CalibrationArgs,
+    /// Keypoints wanted per frame.
+    #[arg(long, default_value_t = FeatureConfig::default().target_keypoints)]
+    keypoints: u32,
+    /// Lowe's ratio for the match filter.
+    #[arg(long, default_value_t = MatchConfig::default().ratio)]
+    ratio: f32,
+    /// Keep matches that are not mutual nearest neighbours.
+    #[arg(long)]
+    no_mutual: bool,
+    /// Seed 002's "outstanding" filter: second-nearest − nearest ≥ this many bits (002's 100
+    /// L2 on SIFT is about 28 bits here).
+    #[arg(long)]
+    margin_bits: Option<u32>,
+    /// Seed 002's keep-best fraction of the matches (002: 0.2).
+    #[arg(long)]
+    keep_best: Option<f32>,
+    /// Match against a keyframe while it keeps at least this fraction of the inliers its
+    /// first tracked frame had; below it the frame becomes the next keyframe. 0: frame to
+    /// frame (each tracked frame is the next one's reference).
+    #[arg(long, default_value_t = 0.0)]
+    keyframe_overlap: f64,
+    /// Skip damaged frames of a recording (counted) instead of stopping at the first.
+    #[arg(long)]
+    skip_corrupt: bool,
+}
+
+/// `A..B` as a range (end exclusive).
+fn parse_range(spec: &str, what: &str) -> anyhow::Result<std::ops::Range<usize>> {
+    let (a, b) = spec.split_once("..").with_context(|| format!("{what} {spec:?}: expected A..B"))?;
+    let start: usize = a.parse().with_context(|| format!("{what} start {a:?}"))?;
+    let end: usize = b.parse().with_context(|| format!("{what} end {b:?}"))?;
+    anyhow::ensure!(start < end, "{what} {spec}: empty");
+    Ok(start..end)
+}
+
+pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.every >= 1, "--every must be at least 1");
+    let config = OdometryConfig {
+        features: FeatureConfig { target_keypoints: args.keypoints, ..FeatureConfig::default() },
+        matching: MatchConfig { ratio: args.ratio, mutual: !args.no_mutual, margin_bits: args.margin_bits, keep_best_fraction: args.keep_best, ..MatchConfig::default() },
+        ..OdometryConfig::default()
+    };
+    config.validate()?;
+    let drop = args.drop.as_deref().map(|d| parse_range(d, "--drop")).transpose()?;
+    let mut source = crate::open(&args.source, &args.calibration)?;
+    let range = crate::frame_range(args.frames.as_deref(), source.frame_count())?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let trajectory_path = args.out.join("trajectory.txt");
+    anyhow::ensure!(!trajectory_path.exists(), "{} exists: choose another --out", trajectory_path.display());
+    let gpu = crate::gpu(options)?;
+    let calibration = source.calibration();
+    let k0 = calibration.intrinsics;
+    let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig::default())?;
+    let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config.features)?;
+    anyhow::ensure!((0.0..1.0).contains(&args.keyframe_overlap), "--keyframe-overlap must be in [0, 1), got {}", args.keyframe_overlap);
+    // The keyframe and the previous tracked frame: features and camera-to-world pose; and the
+    // inliers of the keyframe's first tracked frame.
+    let mut keyframe: Option<(Features, Se3)> = None;
+    let mut previous: Option<(Features, Se3)> = None;
+    let mut first_inliers: Option<usize> = None;
+    let mut trajectory = Vec::new();
+    let mut times = StageTimes::default();
+    let mut frames_json = Vec::new();
+    let mut skipped = Vec::new();
+    let (mut tracked, mut lost, mut via_previous) = (0usize, 0usize, 0usize);
+    let (mut keypoint_counts, mut match_counts, mut inlier_counts) = (Vec::new(), Vec::new(), Vec::new());
+    for index in range.clone().step_by(args.every) {
+        if drop.as_ref().is_some_and(|d| d.contains(&index)) {
+            continue;
+        }
+        let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
+        let total = Stopwatch::start();
+        let result = pollster::block_on(extractor.process(&gpu, &preprocessor, &frame)).with_context(|| format!("features of frame {index}"))?;
+        let estimation = Stopwatch::start();
+        let mut entry = serde_json::json!({ "index": index, "keypoints": result.features.keypoint_count() });
+        let pose = match (&keyframe, &previous) {
+            (Some((kf_features, world_from_kf)), Some((prev_features, world_from_prev))) => {
+                let seed = index as u32;
+                let mut e = estimate_motion(&config, &k0, &result.features, kf_features, &result.forward, &result.backward, seed);
+                let mut base = (*world_from_kf, "keyframe");
+                if e.rigid.is_none()
+                    && let Some((forward, backward)) = pollster::block_on(extractor.rematch_previous(&gpu))?
+                {
+                    // The keyframe failed: the previous tracked frame, nearer in time, may not.
+                    let again = estimate_motion(&config, &k0, &result.features, prev_features, &forward, &backward, seed);
+                    if again.rigid.is_some() {
+                        (e, base) = (again, (*world_from_prev, "previous"));
+                        via_previous += 1;
+                    }
+                }
+                entry["matches"] = e.matches.into();
+                entry["inliers"] = e.inliers().into();
+                entry["rmse_mm"] = e.rigid.as_ref().map(|r| r.rmse_m * 1e3).into();
+                entry["tracked"] = e.rigid.is_some().into();
+                entry["against"] = base.1.into();
+                match_counts.push(e.matches as f64);
+                inlier_counts.push(e.inliers() as f64);
+                match e.reference_from_current() {
+                    Some(ref_from_cur) => {
+                        tracked += 1;
+                        let pose = base.0.compose(&ref_from_cur);
+                        let first = *first_inliers.get_or_insert(e.inliers());
+                        let new_keyframe = base.1 == "previous" || args.keyframe_overlap == 0.0 || (e.inliers() as f64) < args.keyframe_overlap * first as f64;
+                        extractor.accept(new_keyframe);
+                        previous = Some((result.features.clone(), pose));
+                        if new_keyframe {
+                            keyframe = Some((result.features.clone(), pose));
+                            first_inliers = None;
+                        }
+                        pose
+                    }
+                    None => {
+                        lost += 1;
+                        *world_from_prev
+                    }
+                }
+            }
+            _ => {
+                extractor.accept(true);
+                keyframe = Some((result.features.clone(), Se3::IDENTITY));
+                previous = keyframe.clone();
+                Se3::IDENTITY
+            }
+        };
+        let estimation_ms = estimation.ms();
+        keypoint_counts.push(result.features.keypoint_count() as f64);
+        match result.gpu_ms {
+            Some(ms) => STAGES.iter().zip(ms).for_each(|(name, ms)| times.record(name, ms)),
+            // Without timestamp queries only the whole submission can be timed.
+            None => times.record("update..matching (wall)", result.wall_ms),
+        }
+        times.record("estimation", estimation_ms);
+        times.record("total", total.ms());
+        trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: pose });
+        frames_json.push(entry);
+        eprint!("\rframe {index}: {} keypoints, {tracked} tracked, {lost} rejected   ", result.features.keypoint_count());
+    }
+    eprintln!();
+    anyhow::ensure!(!trajectory.is_empty(), "no frame of {} was read", source.name());
+    write_tum_trajectory(&trajectory_path, &trajectory)?;
+    let median = |v: &[f64]| if v.is_empty() { 0.0 } else { summarize(v).median_ms };
+    let stats = serde_json::json!({
+        "source": source.name(),
+        "frames": trajectory.len(),
+        "tracked": tracked,
+        "rejected": lost,
+        "tracked_against_previous": via_previous,
+        "keyframe_overlap": args.keyframe_overlap,
+        "every": args.every,
+        "gpu_timestamps": gpu.has_timestamps,
+        "stages_ms": times.to_json(),
+        "median_keypoints": median(&keypoint_counts),
+        "median_matches": median(&match_counts),
+        "median_inliers": median(&inlier_counts),
+        "slots": extractor.slots(),
+        "per_frame": frames_json,
+    });
+    let stats_path = args.out.join("stats.json");
+    std::fs::write(&stats_path, serde_json::to_string_pretty(&stats)?).with_context(|| format!("writing {}", stats_path.display()))?;
+    times.print();
+    println!(
+        "{} frames: {tracked} tracked, {lost} rejected; median {:.0} keypoints, {:.0} matches, {:.0} inliers{}",
+        trajectory.len(),
+        median(&keypoint_counts),
+        median(&match_counts),
+        median(&inlier_counts),
+        crate::skipped_note(&skipped)
+    );
+    println!("wrote {} and {}", trajectory_path.display(), stats_path.display());
+    Ok(())
+}

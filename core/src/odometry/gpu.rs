@@ -1,0 +1,284 @@
+// SPDX-License-Identifier: MIT
+//! The feature chain on the GPU, recorded after the preprocessor in one submission:
+//! detection (`fast_score`, `keypoint_select` per level), description (`feature_smooth`,
+//! `orb_describe` per level) and matching against the reference frame (`hamming_match`,
+//! current → reference and back). Three keypoint sets rotate through three roles: the
+//! reference (a keyframe, or the last tracked frame), the previous tracked frame (matched on
+//! request when the reference fails, [`FeatureExtractor::rematch_previous`]) and the frame
+//! being written; [`FeatureExtractor::accept`] promotes the current frame.
+//!
+//! The host reads each frame's keypoints, points and matches back (one readback of
+//! 80 bytes per slot) and estimates the motion on the CPU; moving RANSAC onto the GPU, so that
+//! no frame waits for the host, is the next step of issue 14.
+
+use web_time::Instant;
+
+use super::{FeatureConfig, Features, LevelLayout, descriptor_pattern, slot_count};
+use crate::cpu::shared::DESCRIPTOR_WORDS;
+use crate::engine::{FrameEncoder, ReadbackRing, StageTimer};
+use crate::kernels::{fast_score, feature_smooth, hamming_match, keypoint_select, orb_describe};
+use crate::preprocess::DepthPreprocessor;
+use crate::{Error, Gpu, Result, RgbdFrame};
+
+/// The stages a frame is timed by, in order.
+pub const STAGES: [&str; 4] = ["update", "detection", "description", "matching"];
+
+/// Keypoint sets on the GPU: reference, previous, current.
+const SETS: usize = 3;
+
+/// Bytes read back per slot: keypoint, feature, point, forward and backward match.
+const SLOT_BYTES: u64 = 5 * 16;
+
+struct Set {
+    keypoints: wgpu::Buffer,
+    points: wgpu::Buffer,
+    descriptors: wgpu::Buffer,
+    features: wgpu::Buffer,
+}
+
+struct Level {
+    layout: LevelLayout,
+    _params: Vec<wgpu::Buffer>,
+    fast: wgpu::BindGroup,
+    smooth: wgpu::BindGroup,
+    /// Per set written.
+    select: [wgpu::BindGroup; SETS],
+    describe: [wgpu::BindGroup; SETS],
+}
+
+/// One frame's features and matches against the reference, as read back.
+#[derive(Clone, Debug)]
+pub struct FrameFeatures {
+    /// Keypoints, features and points (descriptors stay on the GPU).
+    pub features: Features,
+    /// Per current slot: (reference slot, distance, second distance, 0); empty without a
+    /// reference.
+    pub forward: Vec<[u32; 4]>,
+    /// Per reference slot: (current slot, distance, second distance, 0).
+    pub backward: Vec<[u32; 4]>,
+    /// GPU milliseconds per stage of [`STAGES`] (`None` without timestamp queries).
+    pub gpu_ms: Option<[f64; 4]>,
+    /// Host milliseconds from upload to the readback's arrival.
+    pub wall_ms: f64,
+}
+
+/// Detects, describes and matches keypoints on the GPU.
+pub struct FeatureExtractor {
+    config: FeatureConfig,
+    slots: usize,
+    levels: Vec<Level>,
+    sets: [Set; SETS],
+    forward: wgpu::Buffer,
+    backward: wgpu::Buffer,
+    /// At `current * SETS + reference`: (forward, backward) matching of two different sets.
+    matching: Vec<Option<[wgpu::BindGroup; 2]>>,
+    _match_params: wgpu::Buffer,
+    _pattern: wgpu::Buffer,
+    readback: ReadbackRing<()>,
+    timer: Option<StageTimer>,
+    /// The set the last frame was written to.
+    current: usize,
+    /// The reference's set.
+    reference: Option<usize>,
+    /// The previous tracked frame's set.
+    previous: Option<usize>,
+}
+
+impl std::fmt::Debug for FeatureExtractor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FeatureExtractor").field("config", &self.config).field("slots", &self.slots).field("reference", &self.reference).field("previous", &self.previous).finish_non_exhaustive()
+    }
+}
+
+impl FeatureExtractor {
+    /// An extractor reading `preprocessor`'s intensity pyramid and level-0 depth.
+    pub fn new(gpu: &Gpu, preprocessor: &DepthPreprocessor, config: FeatureConfig) -> Result<Self> {
+        config.validate()?;
+        let k0 = preprocessor.levels[0].intrinsics;
+        let layout = config.layout(&k0);
+        if layout.is_empty() {
+            return Err(Error::InvalidConfig(format!("features: a {}x{} image has no room for keypoints", k0.width_px, k0.height_px)));
+        }
+        if layout.len() > preprocessor.levels.len() {
+            return Err(Error::InvalidConfig(format!("features: {} levels wanted, the preprocessor has {}", layout.len(), preprocessor.levels.len())));
+        }
+        let slots = slot_count(&layout);
+        let set = |i: usize| Set {
+            keypoints: gpu.storage_buffer::<[f32; 4]>(&format!("core.features[{i}].keypoints"), slots),
+            points: gpu.storage_buffer::<[f32; 4]>(&format!("core.features[{i}].points"), slots),
+            descriptors: gpu.storage_buffer::<u32>(&format!("core.features[{i}].descriptors"), slots * DESCRIPTOR_WORDS),
+            features: gpu.storage_buffer::<[f32; 4]>(&format!("core.features[{i}].features"), slots),
+        };
+        let sets = [set(0), set(1), set(2)];
+        let pattern = gpu.storage_buffer::<[f32; 4]>("core.orb_describe.pattern", 256);
+        gpu.write_buffer(&pattern, &descriptor_pattern());
+        let depth_m = &preprocessor.levels[0].depth_m;
+        let levels = layout
+            .iter()
+            .map(|l| {
+                let n = (l.width_px * l.height_px) as usize;
+                let image = &preprocessor.levels[l.level as usize].intensity;
+                let score = gpu.storage_buffer::<f32>(&format!("core.fast_score.score[{}]", l.level), n);
+                let smoothed = gpu.storage_buffer::<f32>(&format!("core.feature_smooth.smoothed[{}]", l.level), n);
+                let fast_p = gpu.uniform_buffer("core.fast_score.params", &l.fast_params(&config));
+                let smooth_p = gpu.uniform_buffer("core.feature_smooth.params", &feature_smooth::FeatureSmoothParams { width_px: l.width_px, height_px: l.height_px });
+                let select_p = gpu.uniform_buffer("core.keypoint_select.params", &l.select_params(&config, &k0));
+                let describe_p = gpu.uniform_buffer("core.orb_describe.params", &l.describe_params(&config));
+                let fast = fast_score::Bindings { params: &fast_p, intensity: image, score: &score }.bind_group(gpu);
+                let smooth = feature_smooth::Bindings { params: &smooth_p, intensity: image, smoothed: &smoothed }.bind_group(gpu);
+                let select = [0, 1, 2].map(|s: usize| keypoint_select::Bindings { params: &select_p, score: &score, depth_m, keypoints: &sets[s].keypoints, points: &sets[s].points }.bind_group(gpu));
+                let describe = [0, 1, 2].map(|s: usize| {
+                    orb_describe::Bindings { params: &describe_p, smoothed: &smoothed, keypoints: &sets[s].keypoints, pattern: &pattern, descriptors: &sets[s].descriptors, features: &sets[s].features }.bind_group(gpu)
+                });
+                Level { layout: *l, _params: vec![fast_p, smooth_p, select_p, describe_p, score, smoothed], fast, smooth, select, describe }
+            })
+            .collect();
+        let forward = gpu.storage_buffer::<[u32; 4]>("core.hamming_match.forward", slots);
+        let backward = gpu.storage_buffer::<[u32; 4]>("core.hamming_match.backward", slots);
+        let match_params = gpu.uniform_buffer("core.hamming_match.params", &hamming_match::HammingMatchParams { query_count: slots as u32, train_count: slots as u32 });
+        let matching = (0..SETS * SETS)
+            .map(|i| {
+                let (cur, reference) = (i / SETS, i % SETS);
+                (cur != reference).then(|| {
+            let (c, r) = (&sets[cur], &sets[reference]);
+            let fwd = hamming_match::Bindings { params: &match_params, query_keypoints: &c.keypoints, query_descriptors: &c.descriptors, train_keypoints: &r.keypoints, train_descriptors: &r.descriptors, matches: &forward }.bind_group(gpu);
+            let bwd = hamming_match::Bindings { params: &match_params, query_keypoints: &r.keypoints, query_descriptors: &r.descriptors, train_keypoints: &c.keypoints, train_descriptors: &c.descriptors, matches: &backward }.bind_group(gpu);
+            [fwd, bwd]
+                })
+            })
+            .collect();
+        let readback = ReadbackRing::new(gpu, "core.features", SLOT_BYTES * slots as u64 + StageTimer::BYTES, 1);
+        let timer = StageTimer::new(gpu, "core.features");
+        Ok(Self { config, slots, levels, sets, forward, backward, matching, _match_params: match_params, _pattern: pattern, readback, timer, current: 0, reference: None, previous: None })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &FeatureConfig {
+        &self.config
+    }
+
+    /// Keypoint slots per frame.
+    pub fn slots(&self) -> usize {
+        self.slots
+    }
+
+    /// Whether a reference frame is held (the next frame is matched against it).
+    pub fn has_reference(&self) -> bool {
+        self.reference.is_some()
+    }
+
+    /// The last processed frame was tracked: it becomes the previous tracked frame, and the
+    /// reference too when `as_reference` (a new keyframe; in frame-to-frame odometry always).
+    pub fn accept(&mut self, as_reference: bool) {
+        self.previous = Some(self.current);
+        if as_reference || self.reference.is_none() {
+            self.reference = Some(self.current);
+        }
+    }
+
+    /// Forgets the reference and the previous frame.
+    pub fn reset(&mut self) {
+        self.reference = None;
+        self.previous = None;
+    }
+
+    /// The set the next frame writes: one neither the reference nor the previous frame holds.
+    fn free_set(&self) -> usize {
+        (0..SETS).find(|s| Some(*s) != self.reference && Some(*s) != self.previous).expect("three sets, two roles")
+    }
+
+    /// Chooses the set the next frame is written to; [`Self::encode`] records into it.
+    pub fn begin_frame(&mut self) {
+        self.current = self.free_set();
+    }
+
+    /// Records, after [`Self::begin_frame`], detection and description of the frame in the
+    /// preprocessor's buffers, and its matching against the reference when there is one.
+    pub fn encode(&self, gpu: &Gpu, fe: &mut FrameEncoder<'_>) {
+        let s = self.current;
+        {
+            let mut pass = fe.stage("detection");
+            for l in &self.levels {
+                gpu.kernels.fast_score.dispatch_in(&mut pass, &l.fast, [l.layout.width_px, l.layout.height_px, 1]);
+                gpu.kernels.keypoint_select.dispatch_in(&mut pass, &l.select[s], [l.layout.cells_x * l.layout.cells_y, 1, 1]);
+            }
+        }
+        {
+            let mut pass = fe.stage("description");
+            for l in &self.levels {
+                gpu.kernels.feature_smooth.dispatch_in(&mut pass, &l.smooth, [l.layout.width_px, l.layout.height_px, 1]);
+                gpu.kernels.orb_describe.dispatch_in(&mut pass, &l.describe[s], [l.layout.slot_count(), 1, 1]);
+            }
+        }
+        let mut pass = fe.stage("matching");
+        if let Some(r) = self.reference {
+            self.encode_matching(gpu, &mut pass, r);
+        }
+    }
+
+    fn encode_matching(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, reference: usize) {
+        let n = self.slots as u32;
+        let groups = self.matching[self.current * SETS + reference].as_ref().expect("the current set is never a reference");
+        gpu.kernels.hamming_match.dispatch_in(pass, &groups[0], [n, 1, 1]);
+        gpu.kernels.hamming_match.dispatch_in(pass, &groups[1], [n, 1, 1]);
+    }
+
+    /// Matches the last processed frame against the previous tracked frame (when there is one
+    /// other than the reference) and waits: (forward, backward) as in [`FrameFeatures`].
+    pub async fn rematch_previous(&mut self, gpu: &Gpu) -> Result<Option<(Vec<[u32; 4]>, Vec<[u32; 4]>)>> {
+        let Some(p) = self.previous.filter(|p| Some(*p) != self.reference) else { return Ok(None) };
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.features.rematch") });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("matching"), timestamp_writes: None });
+            self.encode_matching(gpu, &mut pass, p);
+        }
+        let (slot, buffer) = self.readback.free_slot().ok_or_else(|| Error::Poll("the feature readback is still in flight".into()))?;
+        let n = self.slots as u64 * 16;
+        encoder.copy_buffer_to_buffer(&self.forward, 0, buffer, 0, n);
+        encoder.copy_buffer_to_buffer(&self.backward, 0, buffer, n, n);
+        let submission = gpu.submit([encoder.finish()]);
+        self.readback.start(gpu, slot, submission, ());
+        let done = self.readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the feature readback vanished".into()))?;
+        let bytes = &done.bytes;
+        Ok(Some((bytemuck::pod_collect_to_vec(&bytes[..n as usize]), bytemuck::pod_collect_to_vec(&bytes[n as usize..2 * n as usize]))))
+    }
+
+    /// Uploads and preprocesses `frame`, extracts its features and matches them against the
+    /// reference, and waits for the result.
+    pub async fn process(&mut self, gpu: &Gpu, preprocessor: &DepthPreprocessor, frame: &RgbdFrame) -> Result<FrameFeatures> {
+        gpu.check_lost()?;
+        let started = Instant::now();
+        preprocessor.upload(gpu, frame)?;
+        self.begin_frame();
+        let mut fe = FrameEncoder::new(gpu, "core.features.frame", self.timer.as_ref());
+        preprocessor.encode_in(gpu, &mut fe.stage("update"));
+        self.encode(gpu, &mut fe);
+        let (slot, buffer) = self.readback.free_slot().ok_or_else(|| Error::Poll("the feature readback is still in flight".into()))?;
+        let n = self.slots as u64 * 16;
+        let has_reference = self.reference.is_some();
+        let set = &self.sets[self.current];
+        for (i, b) in [&set.keypoints, &set.features, &set.points, &self.forward, &self.backward].into_iter().enumerate() {
+            fe.encoder().copy_buffer_to_buffer(b, 0, buffer, i as u64 * n, n);
+        }
+        let (commands, stages) = fe.finish(Some((buffer, 5 * n)));
+        let submission = gpu.submit([commands]);
+        self.readback.start(gpu, slot, submission, ());
+        let done = self.readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the feature readback vanished".into()))?;
+        let bytes = &done.bytes;
+        let part = |i: usize| &bytes[i * n as usize..(i + 1) * n as usize];
+        let features = Features { keypoints: bytemuck::pod_collect_to_vec(part(0)), features: bytemuck::pod_collect_to_vec(part(1)), points: bytemuck::pod_collect_to_vec(part(2)), descriptors: Vec::new() };
+        let (forward, backward) = if has_reference { (bytemuck::pod_collect_to_vec(part(3)), bytemuck::pod_collect_to_vec(part(4))) } else { (Vec::new(), Vec::new()) };
+        let gpu_ms = self.timer.as_ref().map(|timer| {
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[5 * n as usize..][..16 * stages.len()]);
+            let times = timer.stage_times(&stages, &ticks);
+            let mut out = [0.0; 4];
+            for t in times {
+                if let Some(i) = STAGES.iter().position(|s| *s == t.name) {
+                    out[i] += t.gpu_ms;
+                }
+            }
+            out
+        });
+        Ok(FrameFeatures { features, forward, backward, gpu_ms, wall_ms: started.elapsed().as_secs_f64() * 1e3 })
+    }
+}

@@ -1,0 +1,29 @@
+// SPDX-License-Identifier: MIT
+//! The feature chain on the CPU: the kernels' twins in the GPU's order.
+
+use super::{FeatureConfig, Features, descriptor_pattern, slot_count};
+use crate::PinholeIntrinsics;
+use crate::cpu;
+use crate::kernels::feature_smooth::FeatureSmoothParams;
+
+/// Keypoints, points and descriptors of one frame: `intensity[l]` is pyramid level l's
+/// intensity (level 0 at `k0`'s size) and `depth_m` the full-resolution depth.
+///
+/// # Panics
+/// If fewer intensity levels are given than the layout uses (a caller's bug).
+pub fn extract(config: &FeatureConfig, k0: &PinholeIntrinsics, intensity: &[&[f32]], depth_m: &[f32]) -> Features {
+    let layout = config.layout(k0);
+    let pattern = descriptor_pattern();
+    let mut out = Features::with_slots(slot_count(&layout));
+    for level in &layout {
+        let n = (level.width_px * level.height_px) as usize;
+        let image = intensity[level.level as usize];
+        let mut score = vec![0.0; n];
+        cpu::fast_score(&level.fast_params(config), image, &mut score);
+        cpu::keypoint_select(&level.select_params(config, k0), &score, depth_m, &mut out.keypoints, &mut out.points);
+        let mut smoothed = vec![0.0; n];
+        cpu::feature_smooth(&FeatureSmoothParams { width_px: level.width_px, height_px: level.height_px }, image, &mut smoothed);
+        cpu::orb_describe(&level.describe_params(config), &smoothed, &out.keypoints, &pattern, &mut out.descriptors, &mut out.features);
+    }
+    out
+}

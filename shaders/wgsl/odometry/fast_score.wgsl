@@ -1,0 +1,59 @@
+// SPDX-License-Identifier: MIT
+//! Each invocation scores one pixel of an intensity image as a FAST-9 corner (Rosten and
+//! Drummond 2006): on the 16-pixel Bresenham circle of radius 3, the largest threshold t for
+//! which 9 contiguous circle pixels are all brighter than the centre by more than t, or all
+//! darker by more than t (FAST's own score, exact: the best arc's smallest difference). The
+//! output is that score where it exceeds `threshold`, else 0; pixels within `border_px` of the
+//! image's edge (the descriptor's patch would leave the image) score 0. Mirrors
+//! core/src/cpu/odometry/fast_score.rs.
+#import features
+
+struct FastScoreParams {
+    width_px: u32,
+    height_px: u32,
+    // Pixels this close to an edge get no score.
+    border_px: u32,
+    // The smallest corner score kept, intensity units ([0, 1]).
+    threshold: f32,
+}
+
+@group(0) @binding(0) var<uniform> params: FastScoreParams;
+// Intensity, row-major, [0, 1].
+@group(0) @binding(1) var<storage, read> intensity: array<f32>;
+// Out: the corner score, 0 where there is no corner.
+@group(0) @binding(2) var<storage, read_write> score: array<f32>;
+
+@compute @workgroup_size(16, 16, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let w = params.width_px;
+    let h = params.height_px;
+    if gid.x >= w || gid.y >= h {
+        return;
+    }
+    let ix = gid.y * w + gid.x;
+    let b = params.border_px;
+    if gid.x < b || gid.y < b || gid.x + b >= w || gid.y + b >= h {
+        score[ix] = 0.0;
+        return;
+    }
+    let centre = intensity[ix];
+    // The circle's differences, brighter minus centre.
+    var ring: array<f32, 16>;
+    for (var k = 0u; k < 16u; k++) {
+        let o = fast_circle_offset(k);
+        let q = u32(i32(gid.y) + o.y) * w + u32(i32(gid.x) + o.x);
+        ring[k] = intensity[q] - centre;
+    }
+    var best = 0.0;
+    for (var start = 0u; start < 16u; start++) {
+        var brighter = 1.0e9;
+        var darker = 1.0e9;
+        for (var j = 0u; j < FAST_ARC; j++) {
+            let d = ring[(start + j) & 15u];
+            brighter = min(brighter, d);
+            darker = min(darker, -d);
+        }
+        best = max(best, max(brighter, darker));
+    }
+    score[ix] = select(0.0, best, best > params.threshold);
+}
