@@ -1,0 +1,47 @@
+// SPDX-License-Identifier: MIT
+//! `feature_smooth`: the 5x5 binomial smoothing against the CPU twin (1e-6 relative: the sums
+//! may be reassociated), on an impulse (whose answer is the kernel itself) and a real frame.
+
+use webfusion_core::cpu;
+use webfusion_core::kernels::feature_smooth::FeatureSmoothParams;
+use webfusion_tests::{Slot, Tolerance, assert_negative_control, cast, compare_f32, finish, gpu, run_kernel_slots, sample_frame};
+
+const TOL: Tolerance = Tolerance { absolute: 1e-7, relative: 1e-6 };
+
+fn run(p: &FeatureSmoothParams, intensity: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let gpu = gpu();
+    let out = run_kernel_slots(&gpu, &gpu.kernels.feature_smooth, p, &[Slot::In(bytemuck::cast_slice(intensity)), Slot::Out(4 * intensity.len())], [p.width_px, p.height_px, 1]);
+    finish(&gpu);
+    let mut c = vec![0.0; intensity.len()];
+    cpu::feature_smooth(p, intensity, &mut c);
+    (cast(&out[0]), c)
+}
+
+#[test]
+fn an_impulse_spreads_into_the_binomial_kernel() {
+    let (w, h) = (16u32, 12u32);
+    let mut image = vec![0.0f32; (w * h) as usize];
+    image[(6 * w + 8) as usize] = 256.0;
+    let p = FeatureSmoothParams { width_px: w, height_px: h };
+    let (g, c) = run(&p, &image);
+    compare_f32("impulse", &g, &c, TOL).unwrap();
+    assert_negative_control("impulse", &g, &c, TOL);
+    let b = [1.0, 4.0, 6.0, 4.0, 1.0];
+    for dy in -2i32..=2 {
+        for dx in -2i32..=2 {
+            let at = ((6 + dy) as u32 * w + (8 + dx) as u32) as usize;
+            assert_eq!(g[at], b[(dy + 2) as usize] * b[(dx + 2) as usize], "({dx}, {dy})");
+        }
+    }
+    assert_eq!(g.iter().sum::<f32>(), 256.0);
+}
+
+#[test]
+fn a_real_frame_smooths_like_the_twin() {
+    let (calibration, frame) = sample_frame(0);
+    let pre = webfusion_core::cpu::preprocess::chain::preprocess(&calibration, &Default::default(), &frame);
+    let k = calibration.intrinsics;
+    let (g, c) = run(&FeatureSmoothParams { width_px: k.width_px, height_px: k.height_px }, &pre.intensity);
+    compare_f32("real frame", &g, &c, TOL).unwrap();
+    assert_negative_control("real frame", &g, &c, TOL);
+}
