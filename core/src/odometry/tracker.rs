@@ -74,3 +74,55 @@ pub fn estimate_motion(config: &OdometryConfig, k0: &PinholeIntrinsics, current:
     let rigid = ransac(&corr, &config.ransac, seed);
     MotionEstimate { keypoints: current.keypoint_count(), matches: matched.len(), matched, rigid }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cpu;
+    use crate::cpu::preprocess::chain::preprocess;
+    use crate::kernels::hamming_match::HammingMatchParams;
+    use crate::odometry::reference::extract;
+    use crate::preprocess::PreprocessConfig;
+    use crate::sim::room::SyntheticRoom;
+    use crate::{PinholeIntrinsics, RgbdCalibration};
+
+    fn matches(query: &Features, train: &Features) -> Vec<[u32; 4]> {
+        let p = HammingMatchParams { query_count: query.slots() as u32, train_count: train.slots() as u32 };
+        let mut out = vec![[0; 4]; query.slots()];
+        cpu::hamming_match(&p, &query.keypoints, &query.descriptors, &train.keypoints, &train.descriptors, &mut out);
+        out
+    }
+
+    /// The synthetic room (exact depth and a view-independent texture) at consecutive poses of
+    /// its loop: the whole CPU chain (twins of every kernel, then RANSAC and the refinement)
+    /// recovers each motion within 2.5 mm and 0.2°. Measured: 1.4-2.3 mm, 0.04-0.07°; issue
+    /// 14's target is 2 mm. Keypoints sit on whole level pixels: a parabola fit on the FAST
+    /// score reached 0.8-1.9 mm here but made the real sequences worse (FAST's score is too
+    /// rough to interpolate), so it is not used.
+    #[test]
+    fn exact_synthetic_motions_are_recovered_within_2_5_mm_and_0_2_degrees() {
+        let k = PinholeIntrinsics { fx_px: 525.0, fy_px: 525.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 };
+        let calibration = RgbdCalibration { intrinsics: k, depth_units_per_metre: 5000.0 };
+        let room = SyntheticRoom::new(6.0, 3.0, 6.0);
+        let path = room.path(90);
+        let config = OdometryConfig::default();
+        let features = |i: usize| {
+            let pre = preprocess(&calibration, &PreprocessConfig::default(), &room.frame(&k, &path, i));
+            let levels: Vec<&[f32]> = pre.levels.iter().map(|l| l.intensity.as_slice()).collect();
+            extract(&config.features, &k, &levels, &pre.levels[0].depth_m)
+        };
+        let mut previous = features(0);
+        for i in 1..4 {
+            let current = features(i);
+            let (forward, backward) = (matches(&current, &previous), matches(&previous, &current));
+            let e = estimate_motion(&config, &k, &current, &previous, &forward, &backward, i as u32);
+            let got = e.reference_from_current().unwrap_or_else(|| panic!("frame {i}: rejected ({} matches)", e.matches));
+            let truth = path[i - 1].inverse().compose(&path[i]);
+            let error = truth.inverse().compose(&got);
+            let (t_mm, r_deg) = (error.translation_m.length() * 1e3, error.rotation_angle_rad().to_degrees());
+            eprintln!("frame {i}: {} keypoints, {} matches, {} inliers, error {t_mm:.3} mm {r_deg:.4}°", e.keypoints, e.matches, e.inliers());
+            assert!(t_mm < 2.5 && r_deg < 0.2, "frame {i}: error {t_mm} mm, {r_deg}°");
+            previous = current;
+        }
+    }
+}
