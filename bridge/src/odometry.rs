@@ -5,7 +5,9 @@
 //!
 //! - `DIR/trajectory.txt`: the camera-to-world pose of every frame at its depth timestamp (TUM
 //!   format; the world is the first frame's camera). A frame whose motion is rejected keeps
-//!   the last tracked pose and the next frame is matched against the last tracked one.
+//!   the last tracked pose and the next frame is matched against the last tracked one; after
+//!   two rejected in a row, the second becomes the reference at that pose (a restart: the
+//!   motion missed is lost, counted as `reanchored`).
 //! - `DIR/stats.json`: per-stage times (002's: update, detection, description, matching,
 //!   estimation, total; median and p95) and per frame the keypoint, match and inlier counts.
 
@@ -69,6 +71,11 @@ pub(crate) struct OdometryArgs {
     skip_corrupt: bool,
 }
 
+/// Consecutive rejected frames after which the last one becomes the reference, at the last
+/// tracked pose: one bad frame (blur) is skipped and the next is matched to the same reference;
+/// two in a row mean the stream has moved on.
+const REANCHOR_AFTER: usize = 2;
+
 /// `A..B` as a range (end exclusive).
 fn parse_range(spec: &str, what: &str) -> anyhow::Result<std::ops::Range<usize>> {
     let (a, b) = spec.split_once("..").with_context(|| format!("{what} {spec:?}: expected A..B"))?;
@@ -107,7 +114,8 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     let mut times = StageTimes::default();
     let mut frames_json = Vec::new();
     let mut skipped = Vec::new();
-    let (mut tracked, mut lost, mut via_previous) = (0usize, 0usize, 0usize);
+    let (mut tracked, mut lost, mut via_previous, mut reanchored) = (0usize, 0usize, 0usize, 0usize);
+    let mut consecutive_rejected = 0usize;
     let (mut keypoint_counts, mut match_counts, mut inlier_counts) = (Vec::new(), Vec::new(), Vec::new());
     for index in range.clone().step_by(args.every) {
         if drop.as_ref().is_some_and(|d| d.contains(&index)) {
@@ -136,6 +144,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                 entry["matches"] = e.matches.into();
                 entry["inliers"] = e.inliers().into();
                 entry["rmse_mm"] = e.rigid.as_ref().map(|r| r.rmse_m * 1e3).into();
+                entry["noise_scale"] = e.rigid.as_ref().map(|r| r.noise_scale).into();
                 entry["tracked"] = e.rigid.is_some().into();
                 entry["against"] = base.1.into();
                 match_counts.push(e.matches as f64);
@@ -143,6 +152,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                 match e.reference_from_current() {
                     Some(ref_from_cur) => {
                         tracked += 1;
+                        consecutive_rejected = 0;
                         let pose = base.0.compose(&ref_from_cur);
                         let first = *first_inliers.get_or_insert(e.inliers());
                         let new_keyframe = base.1 == "previous" || args.keyframe_overlap == 0.0 || (e.inliers() as f64) < args.keyframe_overlap * first as f64;
@@ -156,7 +166,20 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                     }
                     None => {
                         lost += 1;
-                        *world_from_prev
+                        consecutive_rejected += 1;
+                        let pose = *world_from_prev;
+                        if consecutive_rejected >= REANCHOR_AFTER {
+                            // The stream has moved on from the reference (a gap, a cut): restart
+                            // from this frame at the last pose; the motion missed is lost.
+                            extractor.accept(true);
+                            keyframe = Some((result.features.clone(), pose));
+                            previous = keyframe.clone();
+                            first_inliers = None;
+                            consecutive_rejected = 0;
+                            reanchored += 1;
+                            entry["reanchored"] = true.into();
+                        }
+                        pose
                     }
                 }
             }
@@ -190,6 +213,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
         "tracked": tracked,
         "rejected": lost,
         "tracked_against_previous": via_previous,
+        "reanchored": reanchored,
         "keyframe_overlap": args.keyframe_overlap,
         "every": args.every,
         "gpu_timestamps": gpu.has_timestamps,
@@ -204,7 +228,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     std::fs::write(&stats_path, serde_json::to_string_pretty(&stats)?).with_context(|| format!("writing {}", stats_path.display()))?;
     times.print();
     println!(
-        "{} frames: {tracked} tracked, {lost} rejected; median {:.0} keypoints, {:.0} matches, {:.0} inliers{}",
+        "{} frames: {tracked} tracked, {lost} rejected ({reanchored} restarts); median {:.0} keypoints, {:.0} matches, {:.0} inliers{}",
         trajectory.len(),
         median(&keypoint_counts),
         median(&match_counts),

@@ -6,7 +6,12 @@
 //! against the Kinect noise model: each point's covariance is its axial σ_z(z)² (Nguyen et
 //! al. 2012) along its ray and its lateral (z · 2^level / f)² across it (one pixel of its
 //! pyramid level); a pair's residual dst − T src has covariance R Σ_src Rᵀ + Σ_dst, and the pair
-//! is an inlier when its squared Mahalanobis norm is within χ²(3 dof, 95 %). 002 instead fitted an
+//! is an inlier when its squared Mahalanobis norm is within χ²(3 dof, 95 %) times the frame's
+//! noise scale². The model is a floor, not the truth: in fast motion the colour image and the
+//! depth are taken at different instants (TUM's fr1 streams are not synchronised) and blur
+//! moves the keypoints, so every point of the frame is off by more than the sensor's noise. The
+//! scale is estimated from the data (MSAC on a bound of `max_noise_scale`² χ², then the median
+//! normalised residual of the best hypothesis against χ²₃'s median), never below 1. 002 instead fitted an
 //! unconstrained 4×4 matrix by least squares on 80 % random subsets (§4.5.3), which is neither
 //! a rotation nor robust.
 
@@ -18,6 +23,8 @@ use crate::cpu::shared::{kinect_sigma_m, pcg_hash};
 
 /// χ²(3 degrees of freedom) at 95 %.
 pub const CHI2_3DOF_95: f64 = 7.815;
+/// The median of χ²(3 degrees of freedom).
+pub const CHI2_3DOF_MEDIAN: f64 = 2.366;
 
 /// One pair of points: `src` in the current camera, `dst` in the reference camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -63,11 +70,13 @@ pub struct RansacConfig {
     pub min_inliers: usize,
     /// Refits on the inliers after the best hypothesis.
     pub refits: u32,
+    /// The largest noise scale (times the sensor model's σ) a frame may show.
+    pub max_noise_scale: f64,
 }
 
 impl Default for RansacConfig {
     fn default() -> Self {
-        Self { hypotheses: 256, min_inliers: 20, refits: 3 }
+        Self { hypotheses: 256, min_inliers: 20, refits: 3, max_noise_scale: 4.0 }
     }
 }
 
@@ -80,6 +89,8 @@ pub struct RigidEstimate {
     pub inliers: Vec<usize>,
     /// Root mean square residual of the inliers, metres.
     pub rmse_m: f64,
+    /// The frame's noise relative to the sensor model (≥ 1).
+    pub noise_scale: f64,
 }
 
 /// The rigid motion minimising Σ wᵢ |dstᵢ − (R srcᵢ + t)|² over `pairs` (indices into
@@ -129,11 +140,12 @@ fn normalised_residual(t: &Se3, c: &Correspondence) -> f64 {
 }
 
 /// Gauss-Newton on Σ ρ(rᵢᵀ Ωᵢ rᵢ) over the pairs `inliers` from `t` (Ω recomputed at each
-/// step; ρ Huber at the χ² bound's square root, as a few inliers are still wrong). `None` when
+/// step; ρ Huber at the χ² bound's square root times the noise `scale`, as a few inliers are
+/// still wrong). `None` when
 /// the system is singular.
-pub fn refine_mahalanobis(corr: &[Correspondence], inliers: &[usize], t: &Se3, iterations: u32) -> Option<Se3> {
+pub fn refine_mahalanobis(corr: &[Correspondence], inliers: &[usize], t: &Se3, iterations: u32, scale: f64) -> Option<Se3> {
     let mut t = *t;
-    let huber = CHI2_3DOF_95.sqrt();
+    let huber = CHI2_3DOF_95.sqrt() * scale;
     for _ in 0..iterations {
         let mut h = nalgebra::Matrix6::<f64>::zeros();
         let mut g = nalgebra::Vector6::<f64>::zeros();
@@ -169,9 +181,9 @@ pub fn refine_mahalanobis(corr: &[Correspondence], inliers: &[usize], t: &Se3, i
     Some(t)
 }
 
-/// The inliers of `t`, and its MSAC cost (Σ min(r²/σ², bound)).
-fn classify(t: &Se3, corr: &[Correspondence]) -> (Vec<usize>, f64) {
-    let bound = CHI2_3DOF_95;
+/// The inliers of `t` within `bound` (squared Mahalanobis), and its MSAC cost
+/// (Σ min(r²/σ², bound)).
+fn classify(t: &Se3, corr: &[Correspondence], bound: f64) -> (Vec<usize>, f64) {
     let mut inliers = Vec::new();
     let mut cost = 0.0;
     for (i, c) in corr.iter().enumerate() {
@@ -193,6 +205,7 @@ pub fn ransac(corr: &[Correspondence], config: &RansacConfig, seed: u32) -> Opti
     if n < config.min_inliers.max(3) {
         return None;
     }
+    let loose = CHI2_3DOF_95 * config.max_noise_scale * config.max_noise_scale;
     let mut best: Option<(f64, Se3)> = None;
     let mut state = pcg_hash(seed);
     let next = |state: &mut u32| {
@@ -214,19 +227,32 @@ pub fn ransac(corr: &[Correspondence], config: &RansacConfig, seed: u32) -> Opti
             continue;
         }
         let Some(t) = weighted_kabsch(corr, &[i, j, k], None) else { continue };
-        let (_, cost) = classify(&t, corr);
+        let (_, cost) = classify(&t, corr, loose);
         if best.as_ref().is_none_or(|(c, _)| cost < *c) {
             best = Some((cost, t));
         }
     }
     let (_, mut t) = best?;
-    let (mut inliers, _) = classify(&t, corr);
+    // The noise scale: the median normalised residual of the pairs within the loose bound,
+    // against χ²₃'s median.
+    let scale_of = |t: &Se3| {
+        let mut e: Vec<f64> = corr.iter().map(|c| normalised_residual(t, c)).filter(|&e| e <= loose).collect();
+        if e.is_empty() {
+            return 1.0;
+        }
+        let mid = e.len() / 2;
+        let (_, median, _) = e.select_nth_unstable_by(mid, f64::total_cmp);
+        (*median / CHI2_3DOF_MEDIAN).sqrt().clamp(1.0, config.max_noise_scale)
+    };
+    let mut scale = scale_of(&t);
+    let (mut inliers, _) = classify(&t, corr, CHI2_3DOF_95 * scale * scale);
     for _ in 0..config.refits {
         if inliers.len() < config.min_inliers {
             return None;
         }
-        let refit = refine_mahalanobis(corr, &inliers, &t, 5)?;
-        let (next_inliers, _) = classify(&refit, corr);
+        let refit = refine_mahalanobis(corr, &inliers, &t, 5, scale)?;
+        scale = scale_of(&refit);
+        let (next_inliers, _) = classify(&refit, corr, CHI2_3DOF_95 * scale * scale);
         let unchanged = next_inliers == inliers;
         t = refit;
         inliers = next_inliers;
@@ -238,7 +264,7 @@ pub fn ransac(corr: &[Correspondence], config: &RansacConfig, seed: u32) -> Opti
         return None;
     }
     let rmse_m = (inliers.iter().map(|&i| (corr[i].dst - t.transform_point(corr[i].src)).length_squared()).sum::<f64>() / inliers.len() as f64).sqrt();
-    Some(RigidEstimate { dst_from_src: t, inliers, rmse_m })
+    Some(RigidEstimate { dst_from_src: t, inliers, rmse_m, noise_scale: scale })
 }
 
 #[cfg(test)]
