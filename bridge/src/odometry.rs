@@ -102,7 +102,9 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     let gpu = crate::gpu(options)?;
     let calibration = source.calibration();
     let k0 = calibration.intrinsics;
-    let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig::default())?;
+    // Odometry reads the intensity pyramid and the filtered depth, not the normals: their
+    // gradient smoothing is left out.
+    let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig { gradient_smoothing: None, ..PreprocessConfig::default() })?;
     let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config.features)?;
     anyhow::ensure!((0.0..1.0).contains(&args.keyframe_overlap), "--keyframe-overlap must be in [0, 1), got {}", args.keyframe_overlap);
     // The keyframe and the previous tracked frame: features and camera-to-world pose; and the

@@ -4,7 +4,10 @@
 //! which 9 contiguous circle pixels are all brighter than the centre by more than t, or all
 //! darker by more than t (FAST's own score, exact: the best arc's smallest difference). The
 //! output is that score where it exceeds `threshold`, else 0; pixels within `border_px` of the
-//! image's edge (the descriptor's patch would leave the image) score 0. Mirrors
+//! image's edge (the descriptor's patch would leave the image) score 0. Any 9 contiguous pixels
+//! of the 16 include at least 2 of the 4 compass pixels (0, 4, 8, 12), so a pixel with fewer
+//! than 2 compass pixels beyond the threshold on either side cannot score above it and is
+//! rejected after 4 reads (FAST's high-speed test, exact). Mirrors
 //! core/src/cpu/odometry/fast_score.rs.
 #import features
 
@@ -37,6 +40,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let centre = intensity[ix];
+    var brighter_compass = 0u;
+    var darker_compass = 0u;
+    for (var k = 0u; k < 16u; k += 4u) {
+        let o = fast_circle_offset(k);
+        let d = intensity[u32(i32(gid.y) + o.y) * w + u32(i32(gid.x) + o.x)] - centre;
+        brighter_compass += select(0u, 1u, d > params.threshold);
+        darker_compass += select(0u, 1u, -d > params.threshold);
+    }
+    if brighter_compass < 2u && darker_compass < 2u {
+        score[ix] = 0.0;
+        return;
+    }
     // The circle's differences, brighter minus centre.
     var ring: array<f32, 16>;
     for (var k = 0u; k < 16u; k++) {

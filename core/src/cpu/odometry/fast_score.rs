@@ -15,6 +15,17 @@ pub fn fast_score(params: &FastScoreParams, intensity: &[f32], score: &mut [f32]
                 continue;
             }
             let centre = intensity[ix];
+            let (mut brighter_compass, mut darker_compass) = (0u32, 0u32);
+            for k in (0..16).step_by(4) {
+                let o = fast_circle_offset(k);
+                let d = intensity[((y as i32 + o[1]) as u32 * w + (x as i32 + o[0]) as u32) as usize] - centre;
+                brighter_compass += u32::from(d > params.threshold);
+                darker_compass += u32::from(-d > params.threshold);
+            }
+            if brighter_compass < 2 && darker_compass < 2 {
+                score[ix] = 0.0;
+                continue;
+            }
             let mut ring = [0.0f32; 16];
             for (k, r) in ring.iter_mut().enumerate() {
                 let o = fast_circle_offset(k as u32);
