@@ -77,7 +77,7 @@ pub(crate) struct OdometryArgs {
 const REANCHOR_AFTER: usize = 2;
 
 /// `A..B` as a range (end exclusive).
-fn parse_range(spec: &str, what: &str) -> anyhow::Result<std::ops::Range<usize>> {
+pub(crate) fn parse_range(spec: &str, what: &str) -> anyhow::Result<std::ops::Range<usize>> {
     let (a, b) = spec.split_once("..").with_context(|| format!("{what} {spec:?}: expected A..B"))?;
     let start: usize = a.parse().with_context(|| format!("{what} start {a:?}"))?;
     let end: usize = b.parse().with_context(|| format!("{what} end {b:?}"))?;
@@ -239,4 +239,66 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     );
     println!("wrote {} and {}", trajectory_path.display(), stats_path.display());
     Ok(())
+}
+
+/// Feature odometry beside ICP (`reconstruct --features`): each frame's features are matched
+/// against the last frame ICP tracked, and the motion they give (RANSAC-verified) seeds ICP as
+/// its initial guess, in place of the constant-velocity model. After a lost frame the
+/// reference stays the last tracked one, so the frames after a gap or a fast stretch are
+/// matched against it and ICP, seeded there, can take up tracking again (it still has to
+/// converge with its own inlier checks: a wrong guess is rejected, not fused).
+pub(crate) struct FeatureAssist {
+    preprocessor: DepthPreprocessor,
+    extractor: FeatureExtractor,
+    config: OdometryConfig,
+    k0: webfusion_core::PinholeIntrinsics,
+    /// The last frame ICP tracked (features, ICP's pose) and the frame just processed.
+    reference: Option<(Features, Se3)>,
+    pending: Option<Features>,
+    /// Frames given a feature guess, and of those the ones ICP tracked after a lost frame.
+    pub(crate) guesses: usize,
+    pub(crate) recoveries: usize,
+    last_lost: bool,
+    had_guess: bool,
+    /// Host milliseconds per frame (features, matching, estimation).
+    pub(crate) ms: Vec<f64>,
+}
+
+impl FeatureAssist {
+    pub(crate) fn new(gpu: &webfusion_core::Gpu, calibration: webfusion_core::RgbdCalibration) -> anyhow::Result<Self> {
+        let config = OdometryConfig::default();
+        let preprocessor = DepthPreprocessor::new(gpu, calibration, PreprocessConfig { gradient_smoothing: None, ..PreprocessConfig::default() })?;
+        let extractor = FeatureExtractor::new(gpu, &preprocessor, config.features)?;
+        Ok(Self { preprocessor, extractor, config, k0: calibration.intrinsics, reference: None, pending: None, guesses: 0, recoveries: 0, last_lost: false, had_guess: false, ms: Vec::new() })
+    }
+
+    /// The frame's camera-to-world pose from its features against the last tracked frame, when
+    /// RANSAC accepts one.
+    pub(crate) fn guess(&mut self, gpu: &webfusion_core::Gpu, frame: &webfusion_core::RgbdFrame) -> anyhow::Result<Option<Se3>> {
+        let sw = Stopwatch::start();
+        let result = pollster::block_on(self.extractor.process(gpu, &self.preprocessor, frame)).with_context(|| format!("features of frame {}", frame.index))?;
+        let guess = self.reference.as_ref().and_then(|(features, world_from_ref)| {
+            let e = estimate_motion(&self.config, &self.k0, &result.features, features, &result.forward, &result.backward, frame.index as u32);
+            e.reference_from_current().map(|ref_from_cur| world_from_ref.compose(&ref_from_cur))
+        });
+        self.pending = Some(result.features);
+        self.had_guess = guess.is_some();
+        self.guesses += usize::from(self.had_guess);
+        self.ms.push(sw.ms());
+        Ok(guess)
+    }
+
+    /// ICP's outcome for the frame last given to [`Self::guess`]: tracked at `world_from_camera`
+    /// (it becomes the reference) or lost (the reference stays).
+    pub(crate) fn verdict(&mut self, tracked: bool, world_from_camera: &Se3) {
+        let Some(features) = self.pending.take() else { return };
+        if tracked {
+            if self.last_lost && self.had_guess {
+                self.recoveries += 1;
+            }
+            self.extractor.accept(true);
+            self.reference = Some((features, *world_from_camera));
+        }
+        self.last_lost = !tracked;
+    }
 }

@@ -93,6 +93,17 @@ pub(crate) struct ReconstructArgs {
     /// far tracking moved each one (`refine.txt`, stats.json).
     #[arg(long)]
     refine: bool,
+    /// Seed 002's feature odometry beside ICP: each frame's features, matched against the last
+    /// tracked frame, give ICP its initial guess, and let it take up tracking again after lost
+    /// frames (one host wait per frame: frames are processed one at a time).
+    #[arg(long)]
+    features: bool,
+    /// Keep only every N-th frame of the range (fast motion as a slower camera would see it).
+    #[arg(long, default_value_t = 1)]
+    every: usize,
+    /// Leave out the frames `A..B` of the source (a gap in the stream).
+    #[arg(long)]
+    drop: Option<String>,
     /// Save the fused map (`.wfm`: every block, on the GPU and swapped out, in the map's frame,
     /// with a CRC per block; see ARCHITECTURE.md).
     #[arg(long)]
@@ -264,7 +275,9 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let mut times = StageTimes::default();
     let mut trajectory = Vec::with_capacity(range.len());
     let mut lost = Vec::new();
-    let n_frames = range.len();
+    anyhow::ensure!(args.every >= 1, "--every must be at least 1");
+    let drop = args.drop.as_deref().map(|d| crate::odometry::parse_range(d, "--drop")).transpose()?;
+    let n_frames = range.clone().step_by(args.every).filter(|i| drop.as_ref().is_none_or(|d| !d.contains(i))).count();
     let mut timestamps = std::collections::HashMap::new();
     let mut iterations = [0u64; 4];
     let mut tracked_frames = 0u64;
@@ -318,7 +331,11 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     };
     let mut skipped = Vec::new();
     let start = range.start;
-    for index in range {
+    let mut assist = if args.features { Some(crate::odometry::FeatureAssist::new(&gpu, source.calibration())?) } else { None };
+    for index in range.step_by(args.every) {
+        if drop.as_ref().is_some_and(|d| d.contains(&index)) {
+            continue;
+        }
         let sw = crate::timing::Stopwatch::start();
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         times.record("read", sw.ms());
@@ -331,9 +348,22 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             fusion.set_initial_guess(&gpu, &pose);
             guess = Some(pose);
         }
+        if let Some(assist) = &mut assist
+            && given.is_none()
+            && let Some(pose) = assist.guess(&gpu, &frame)?
+        {
+            fusion.set_initial_guess(&gpu, &pose);
+        }
         timestamps.insert(frame.index, (frame.depth_timestamp_ns, guess));
         pollster::block_on(fusion.submit_frame(&gpu, &frame)).with_context(|| format!("processing frame {index}"))?;
-        for report in fusion.poll_reports(&gpu)? {
+        // With features, the frame's outcome is needed before the next one's guess.
+        let reports = if assist.is_some() { pollster::block_on(fusion.flush(&gpu))? } else { fusion.poll_reports(&gpu)? };
+        for report in reports {
+            if let Some(assist) = &mut assist
+                && report.index == frame.index
+            {
+                assist.verdict(!report.state.is_lost(), &report.world_from_camera);
+            }
             on_report(report, &mut times, &mut trajectory, &mut timestamps);
         }
     }
@@ -417,6 +447,9 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         },
         "stages_ms": times.to_json(),
         "given_poses": given_json,
+        "features": assist.as_ref().map(|a| serde_json::json!({ "guesses": a.guesses, "recoveries": a.recoveries, "ms_median": if a.ms.is_empty() { 0.0 } else { crate::timing::summarize(&a.ms).median_ms } })),
+        "every": args.every,
+        "dropped": args.drop,
     });
     let stats_path = args.out.join("stats.json");
     std::fs::write(&stats_path, serde_json::to_string_pretty(&stats)?).with_context(|| format!("writing {}", stats_path.display()))?;
