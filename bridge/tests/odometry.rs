@@ -71,3 +71,19 @@ fn bad_options_are_refused_with_a_reason() {
     let o = webfusion(&["odometry", "/nonexistent/recording.wfr", "--out", out_s]);
     assert!(!o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("panicked"));
 }
+
+/// Every third frame of the sample's first 60 (fast motion as a 10 Hz camera would see it):
+/// ICP seeded by feature odometry tracks every frame and stays near the ground truth.
+#[test]
+fn reconstruct_with_features_tracks_every_third_frame() {
+    let out = scratch("every3");
+    let o = webfusion(&["reconstruct", SAMPLE, "--out", out.to_str().expect("utf-8"), "--frames", "0..60", "--every", "3", "--features", "--no-mesh"]);
+    assert!(o.status.success(), "reconstruct failed: {}", String::from_utf8_lossy(&o.stderr));
+    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).expect("stats.json")).expect("json");
+    assert_eq!(stats["frames"], 20);
+    assert_eq!(stats["lost_frames"].as_array().map(Vec::len), Some(0), "{}", stats["lost_frames"]);
+    assert!(stats["features"]["guesses"].as_u64().is_some_and(|n| n >= 17), "{}", stats["features"]);
+    let ate_m = stats["ate"]["rmse_m"].as_f64().expect("the sample has ground truth");
+    eprintln!("ATE {:.2} cm", ate_m * 100.0);
+    assert!(ate_m < 0.05, "ATE {ate_m} m");
+}
