@@ -53,7 +53,7 @@ fn the_composed_pipeline_matches_the_twins_through_its_set_rotation() {
     let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig::default()).expect("preprocessor");
     let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, FeatureConfig::default()).expect("extractor");
     let c: Vec<Features> = (0..4).map(cpu_features).collect();
-    let mut process = |extractor: &mut FeatureExtractor, index: usize| pollster::block_on(extractor.process(&gpu, &preprocessor, &sample_frame(index).1)).expect("process");
+    let process = |extractor: &mut FeatureExtractor, index: usize| pollster::block_on(extractor.process(&gpu, &preprocessor, &sample_frame(index).1)).expect("process");
 
     // Frame 0: no reference, no matches.
     let f0 = process(&mut extractor, 0);
