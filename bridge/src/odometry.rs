@@ -248,7 +248,6 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
 /// matched against it and ICP, seeded there, can take up tracking again (it still has to
 /// converge with its own inlier checks: a wrong guess is rejected, not fused).
 pub(crate) struct FeatureAssist {
-    preprocessor: DepthPreprocessor,
     extractor: FeatureExtractor,
     config: OdometryConfig,
     k0: webfusion_core::PinholeIntrinsics,
@@ -265,18 +264,19 @@ pub(crate) struct FeatureAssist {
 }
 
 impl FeatureAssist {
-    pub(crate) fn new(gpu: &webfusion_core::Gpu, calibration: webfusion_core::RgbdCalibration) -> anyhow::Result<Self> {
+    /// Feature odometry reading `preprocessor` (the fusion pipeline's: the feature pass uploads
+    /// and preprocesses each frame, and fusion then skips both).
+    pub(crate) fn new(gpu: &webfusion_core::Gpu, preprocessor: &DepthPreprocessor) -> anyhow::Result<Self> {
         let config = OdometryConfig::default();
-        let preprocessor = DepthPreprocessor::new(gpu, calibration, PreprocessConfig { gradient_smoothing: None, ..PreprocessConfig::default() })?;
-        let extractor = FeatureExtractor::new(gpu, &preprocessor, config.features)?;
-        Ok(Self { preprocessor, extractor, config, k0: calibration.intrinsics, reference: None, pending: None, guesses: 0, recoveries: 0, last_lost: false, had_guess: false, ms: Vec::new() })
+        let extractor = FeatureExtractor::new(gpu, preprocessor, config.features)?;
+        Ok(Self { extractor, config, k0: preprocessor.levels[0].intrinsics, reference: None, pending: None, guesses: 0, recoveries: 0, last_lost: false, had_guess: false, ms: Vec::new() })
     }
 
     /// The frame's camera-to-world pose from its features against the last tracked frame, when
     /// RANSAC accepts one.
-    pub(crate) fn guess(&mut self, gpu: &webfusion_core::Gpu, frame: &webfusion_core::RgbdFrame) -> anyhow::Result<Option<Se3>> {
+    pub(crate) fn guess(&mut self, gpu: &webfusion_core::Gpu, preprocessor: &DepthPreprocessor, frame: &webfusion_core::RgbdFrame) -> anyhow::Result<Option<Se3>> {
         let sw = Stopwatch::start();
-        let result = pollster::block_on(self.extractor.process(gpu, &self.preprocessor, frame)).with_context(|| format!("features of frame {}", frame.index))?;
+        let result = pollster::block_on(self.extractor.process(gpu, preprocessor, frame)).with_context(|| format!("features of frame {}", frame.index))?;
         let guess = self.reference.as_ref().and_then(|(features, world_from_ref)| {
             let e = estimate_motion(&self.config, &self.k0, &result.features, features, &result.forward, &result.backward, frame.index as u32);
             e.reference_from_current().map(|ref_from_cur| world_from_ref.compose(&ref_from_cur))

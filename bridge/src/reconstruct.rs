@@ -331,7 +331,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     };
     let mut skipped = Vec::new();
     let start = range.start;
-    let mut assist = if args.features { Some(crate::odometry::FeatureAssist::new(&gpu, source.calibration())?) } else { None };
+    let mut assist = if args.features && given.is_none() { Some(crate::odometry::FeatureAssist::new(&gpu, fusion.preprocessor())?) } else { None };
     for index in range.step_by(args.every) {
         if drop.as_ref().is_some_and(|d| d.contains(&index)) {
             continue;
@@ -349,13 +349,14 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             guess = Some(pose);
         }
         if let Some(assist) = &mut assist
-            && given.is_none()
-            && let Some(pose) = assist.guess(&gpu, &frame)?
+            && let Some(pose) = assist.guess(&gpu, fusion.preprocessor(), &frame)?
         {
             fusion.set_initial_guess(&gpu, &pose);
         }
         timestamps.insert(frame.index, (frame.depth_timestamp_ns, guess));
-        pollster::block_on(fusion.submit_frame(&gpu, &frame)).with_context(|| format!("processing frame {index}"))?;
+        // With features, their pass has uploaded and preprocessed the frame already.
+        let submitted = if assist.is_some() { pollster::block_on(fusion.submit_preprocessed_frame(&gpu, &frame)) } else { pollster::block_on(fusion.submit_frame(&gpu, &frame)) };
+        submitted.with_context(|| format!("processing frame {index}"))?;
         // With features, the frame's outcome is needed before the next one's guess.
         let reports = if assist.is_some() { pollster::block_on(fusion.flush(&gpu))? } else { fusion.poll_reports(&gpu)? };
         for report in reports {

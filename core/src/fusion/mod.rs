@@ -503,6 +503,17 @@ impl KinectFusion {
     /// the GPU unless [`MAX_FRAMES_IN_FLIGHT`] readbacks are pending (then for the oldest).
     /// Reports arrive through [`Self::poll_reports`] or [`Self::flush`].
     pub async fn submit_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<()> {
+        self.submit(gpu, frame, true).await
+    }
+
+    /// [`Self::submit_frame`] for a frame that a pass sharing this pipeline's preprocessor
+    /// ([`Self::preprocessor`]; feature extraction) already uploaded and preprocessed in an
+    /// earlier submission: the frame skips both.
+    pub async fn submit_preprocessed_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<()> {
+        self.submit(gpu, frame, false).await
+    }
+
+    async fn submit(&mut self, gpu: &Gpu, frame: &RgbdFrame, preprocess: bool) -> Result<()> {
         gpu.check_lost()?;
         let started = Instant::now();
         let before = gpu.counters.snapshot();
@@ -511,11 +522,15 @@ impl KinectFusion {
                 self.finish_report(done.tag, &done.bytes)?;
             }
         }
-        self.preprocessor.upload(gpu, frame)?;
+        if preprocess {
+            self.preprocessor.upload(gpu, frame)?;
+        }
         self.mapper.poll(gpu)?;
         self.mapper.prepare_frame(gpu, Some(&self.last_pose));
         let mut fe = FrameEncoder::new(gpu, "core.fusion.frame", self.timer.as_ref());
-        self.preprocessor.encode_in(gpu, &mut fe.stage("preprocess"));
+        if preprocess {
+            self.preprocessor.encode_in(gpu, &mut fe.stage("preprocess"));
+        }
         {
             // Tracking, then the tracker keeps this frame as the next one's reference.
             let mut pass = fe.stage("track");
