@@ -316,6 +316,14 @@ fn info(options: &GpuOptions) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The frames of `range` kept by `--every N` (every N-th from its start) and `--drop A..B`
+/// (a stretch left out), in order.
+pub(crate) fn selected_frames(range: std::ops::Range<usize>, every: usize, drop: Option<&str>) -> anyhow::Result<Vec<usize>> {
+    anyhow::ensure!(every >= 1, "--every must be at least 1");
+    let drop = drop.map(|d| odometry::parse_range(d, "--drop")).transpose()?;
+    Ok(range.step_by(every).filter(|i| drop.as_ref().is_none_or(|d| !d.contains(i))).collect())
+}
+
 fn frame_range(spec: Option<&str>, count: usize) -> anyhow::Result<std::ops::Range<usize>> {
     let Some(spec) = spec else { return Ok(0..count) };
     let (a, b) = spec.split_once("..").with_context(|| format!("--frames {spec:?}: expected A..B"))?;

@@ -86,16 +86,15 @@ pub(crate) fn parse_range(spec: &str, what: &str) -> anyhow::Result<std::ops::Ra
 }
 
 pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(args.every >= 1, "--every must be at least 1");
+    anyhow::ensure!((0.0..1.0).contains(&args.keyframe_overlap), "--keyframe-overlap must be in [0, 1), got {}", args.keyframe_overlap);
     let config = OdometryConfig {
         features: FeatureConfig { target_keypoints: args.keypoints, ..FeatureConfig::default() },
         matching: MatchConfig { ratio: args.ratio, mutual: !args.no_mutual, margin_bits: args.margin_bits, keep_best_fraction: args.keep_best, ..MatchConfig::default() },
         ..OdometryConfig::default()
     };
     config.validate()?;
-    let drop = args.drop.as_deref().map(|d| parse_range(d, "--drop")).transpose()?;
     let mut source = crate::open(&args.source, &args.calibration)?;
-    let range = crate::frame_range(args.frames.as_deref(), source.frame_count())?;
+    let frames = crate::selected_frames(crate::frame_range(args.frames.as_deref(), source.frame_count())?, args.every, args.drop.as_deref())?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let trajectory_path = args.out.join("trajectory.txt");
     anyhow::ensure!(!trajectory_path.exists(), "{} exists: choose another --out", trajectory_path.display());
@@ -106,7 +105,6 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     // gradient smoothing is left out.
     let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig { gradient_smoothing: None, ..PreprocessConfig::default() })?;
     let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config.features)?;
-    anyhow::ensure!((0.0..1.0).contains(&args.keyframe_overlap), "--keyframe-overlap must be in [0, 1), got {}", args.keyframe_overlap);
     // The keyframe and the previous tracked frame: features and camera-to-world pose; and the
     // inliers of the keyframe's first tracked frame.
     let mut keyframe: Option<(Features, Se3)> = None;
@@ -119,15 +117,13 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     let (mut tracked, mut lost, mut via_previous, mut reanchored) = (0usize, 0usize, 0usize, 0usize);
     let mut consecutive_rejected = 0usize;
     let (mut keypoint_counts, mut match_counts, mut inlier_counts) = (Vec::new(), Vec::new(), Vec::new());
-    for index in range.clone().step_by(args.every) {
-        if drop.as_ref().is_some_and(|d| d.contains(&index)) {
-            continue;
-        }
+    for index in frames {
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         let total = Stopwatch::start();
         let result = pollster::block_on(extractor.process(&gpu, &preprocessor, &frame)).with_context(|| format!("features of frame {index}"))?;
         let estimation = Stopwatch::start();
-        let mut entry = serde_json::json!({ "index": index, "keypoints": result.features.keypoint_count() });
+        let keypoints = result.features.keypoint_count();
+        let mut entry = serde_json::json!({ "index": index, "keypoints": keypoints });
         let pose = match (&keyframe, &previous) {
             (Some((kf_features, world_from_kf)), Some((prev_features, world_from_prev))) => {
                 let seed = index as u32;
@@ -193,7 +189,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
             }
         };
         let estimation_ms = estimation.ms();
-        keypoint_counts.push(result.features.keypoint_count() as f64);
+        keypoint_counts.push(keypoints as f64);
         match result.gpu_ms {
             Some(ms) => STAGES.iter().zip(ms).for_each(|(name, ms)| times.record(name, ms)),
             // Without timestamp queries only the whole submission can be timed.
@@ -203,7 +199,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
         times.record("total", total.ms());
         trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: pose });
         frames_json.push(entry);
-        eprint!("\rframe {index}: {} keypoints, {tracked} tracked, {lost} rejected   ", result.features.keypoint_count());
+        eprint!("\rframe {index}: {keypoints} keypoints, {tracked} tracked, {lost} rejected   ");
     }
     eprintln!();
     anyhow::ensure!(!trajectory.is_empty(), "no frame of {} was read", source.name());

@@ -275,9 +275,9 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let mut times = StageTimes::default();
     let mut trajectory = Vec::with_capacity(range.len());
     let mut lost = Vec::new();
-    anyhow::ensure!(args.every >= 1, "--every must be at least 1");
-    let drop = args.drop.as_deref().map(|d| crate::odometry::parse_range(d, "--drop")).transpose()?;
-    let n_frames = range.clone().step_by(args.every).filter(|i| drop.as_ref().is_none_or(|d| !d.contains(i))).count();
+    let start = range.start;
+    let frames = crate::selected_frames(range, args.every, args.drop.as_deref())?;
+    let n_frames = frames.len();
     let mut timestamps = std::collections::HashMap::new();
     let mut iterations = [0u64; 4];
     let mut tracked_frames = 0u64;
@@ -330,12 +330,8 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         eprint!("\rframe {}/{} [{}], ICP inliers {inliers}   ", trajectory.len(), n_frames, report.state.name());
     };
     let mut skipped = Vec::new();
-    let start = range.start;
     let mut assist = if args.features && given.is_none() { Some(crate::odometry::FeatureAssist::new(&gpu, fusion.preprocessor())?) } else { None };
-    for index in range.step_by(args.every) {
-        if drop.as_ref().is_some_and(|d| d.contains(&index)) {
-            continue;
-        }
+    for index in frames {
         let sw = crate::timing::Stopwatch::start();
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         times.record("read", sw.ms());

@@ -8,8 +8,8 @@
 //! then brute-force Hamming matching against the reference frame in both directions
 //! (`hamming_match`). The host filters the matches (Lowe's ratio, the mutual check, 002's
 //! margin and keep-best percentage as options; [`matching`]) and estimates the rigid motion
-//! from the 3D-3D pairs with RANSAC on 3-point samples and a weighted Kabsch refit under the
-//! Kinect noise model ([`rigid`]).
+//! from the 3D-3D pairs with RANSAC on 3-point Kabsch samples, then Gauss-Newton refits of the
+//! Mahalanobis cost under the Kinect noise model ([`rigid`]).
 //!
 //! [`reference::extract`] is the CPU chain of the kernels' twins; [`gpu::FeatureExtractor`]
 //! records the same chain on the GPU.
@@ -223,10 +223,5 @@ impl Features {
     /// Keypoints held.
     pub fn keypoint_count(&self) -> usize {
         (0..self.slots()).filter(|&i| self.is_keypoint(i)).count()
-    }
-
-    /// Slot `i`'s descriptor.
-    pub fn descriptor(&self, i: usize) -> &[u32] {
-        &self.descriptors[i * DESCRIPTOR_WORDS..(i + 1) * DESCRIPTOR_WORDS]
     }
 }

@@ -5,6 +5,7 @@ use super::{FeatureConfig, Features, descriptor_pattern, slot_count};
 use crate::PinholeIntrinsics;
 use crate::cpu;
 use crate::kernels::feature_smooth::FeatureSmoothParams;
+use crate::kernels::hamming_match::HammingMatchParams;
 
 /// Keypoints, points and descriptors of one frame: `intensity[l]` is pyramid level l's
 /// intensity (level 0 at `k0`'s size) and `depth_m` the full-resolution depth.
@@ -25,5 +26,14 @@ pub fn extract(config: &FeatureConfig, k0: &PinholeIntrinsics, intensity: &[&[f3
         cpu::feature_smooth(&FeatureSmoothParams { width_px: level.width_px, height_px: level.height_px }, image, &mut smoothed);
         cpu::orb_describe(&level.describe_params(config), &smoothed, &out.keypoints, &pattern, &mut out.descriptors, &mut out.features);
     }
+    out
+}
+
+/// The matching stage on the CPU: per slot of `query`, its nearest slot of `train` (the twin of
+/// `hamming_match`).
+pub fn matches(query: &Features, train: &Features) -> Vec<[u32; 4]> {
+    let p = HammingMatchParams { query_count: query.slots() as u32, train_count: train.slots() as u32 };
+    let mut out = vec![[0; 4]; query.slots()];
+    cpu::hamming_match(&p, &query.keypoints, &query.descriptors, &train.keypoints, &train.descriptors, &mut out);
     out
 }

@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: MIT
-//! Rigid motion from 3D-3D correspondences: weighted Kabsch (the rotation from the SVD of the
-//! weighted cross-covariance, with the reflection fixed; Kabsch 1976, Umeyama 1991) inside
-//! RANSAC on 3-point samples scored by MSAC (Torr and Zisserman 2000), then refits on the
-//! inliers, and a Gauss-Newton refinement of the Mahalanobis cost. Residuals are measured
+//! Rigid motion from 3D-3D correspondences: Kabsch (the rotation from the SVD of the
+//! cross-covariance, with the reflection fixed; Kabsch 1976, Umeyama 1991) on 3-point samples
+//! inside RANSAC scored by MSAC (Torr and Zisserman 2000), then Gauss-Newton refits of the
+//! Mahalanobis cost on the inliers until they settle. Residuals are measured
 //! against the Kinect noise model: each point's covariance is its axial σ_z(z)² (Nguyen et
 //! al. 2012) along its ray and its lateral (z · 2^level / f)² across it (one pixel of its
 //! pyramid level); a pair's residual dst − T src has covariance R Σ_src Rᵀ + Σ_dst, and the pair
@@ -93,23 +93,19 @@ pub struct RigidEstimate {
     pub noise_scale: f64,
 }
 
-/// The rigid motion minimising Σ wᵢ |dstᵢ − (R srcᵢ + t)|² over `pairs` (indices into
-/// `corr`), or `None` when the points are degenerate (collinear or fewer than 3).
-pub fn weighted_kabsch(corr: &[Correspondence], pairs: &[usize], weights: Option<&[f64]>) -> Option<Se3> {
+/// The rigid motion minimising Σ |dstᵢ − (R srcᵢ + t)|² over `pairs` (indices into `corr`),
+/// or `None` when the points are degenerate (collinear or fewer than 3).
+pub fn kabsch(corr: &[Correspondence], pairs: &[usize]) -> Option<Se3> {
     if pairs.len() < 3 {
         return None;
     }
-    let w = |i: usize| weights.map_or(1.0, |w| w[i]);
-    let total: f64 = pairs.iter().map(|&i| w(i)).sum();
-    if !(total > 0.0) {
-        return None;
-    }
-    let cs = pairs.iter().map(|&i| w(i) * corr[i].src).sum::<DVec3>() / total;
-    let cd = pairs.iter().map(|&i| w(i) * corr[i].dst).sum::<DVec3>() / total;
+    let n = pairs.len() as f64;
+    let cs = pairs.iter().map(|&i| corr[i].src).sum::<DVec3>() / n;
+    let cd = pairs.iter().map(|&i| corr[i].dst).sum::<DVec3>() / n;
     let mut h = Matrix3::<f64>::zeros();
     for &i in pairs {
         let (a, b) = (corr[i].src - cs, corr[i].dst - cd);
-        h += w(i) * Matrix3::new(a.x * b.x, a.x * b.y, a.x * b.z, a.y * b.x, a.y * b.y, a.y * b.z, a.z * b.x, a.z * b.y, a.z * b.z);
+        h += Matrix3::new(a.x * b.x, a.x * b.y, a.x * b.z, a.y * b.x, a.y * b.y, a.y * b.z, a.z * b.x, a.z * b.y, a.z * b.z);
     }
     let svd = SVD::new(h, true, true);
     let (u, v_t) = (svd.u?, svd.v_t?);
@@ -226,7 +222,7 @@ pub fn ransac(corr: &[Correspondence], config: &RansacConfig, seed: u32) -> Opti
         if (b - a).cross(c - a).length() < 0.0025 {
             continue;
         }
-        let Some(t) = weighted_kabsch(corr, &[i, j, k], None) else { continue };
+        let Some(t) = kabsch(corr, &[i, j, k]) else { continue };
         let (_, cost) = classify(&t, corr, loose);
         if best.as_ref().is_none_or(|(c, _)| cost < *c) {
             best = Some((cost, t));
@@ -291,11 +287,11 @@ mod tests {
         let truth = Se3::new(DQuat::from_euler(glam::EulerRot::XYZ, 0.1, -0.2, 0.05), DVec3::new(0.1, -0.05, 0.2));
         let corr = scene(50, &truth, 0);
         let all: Vec<usize> = (0..corr.len()).collect();
-        let t = weighted_kabsch(&corr, &all, None).unwrap();
+        let t = kabsch(&corr, &all).unwrap();
         assert!((t.translation_m - truth.translation_m).length() < 1e-9);
         assert!(t.compose(&truth.inverse()).rotation_angle_rad() < 1e-9);
         let line: Vec<Correspondence> = (0..5).map(|i| Correspondence::new(DVec3::new(i as f64, 0.0, 1.0), 0, DVec3::new(i as f64, 0.0, 1.0), 0, 525.0)).collect();
-        assert!(weighted_kabsch(&line, &[0, 1, 2, 3, 4], None).is_none());
+        assert!(kabsch(&line, &[0, 1, 2, 3, 4]).is_none());
     }
 
     #[test]

@@ -78,20 +78,11 @@ pub fn estimate_motion(config: &OdometryConfig, k0: &PinholeIntrinsics, current:
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cpu;
     use crate::cpu::preprocess::chain::preprocess;
-    use crate::kernels::hamming_match::HammingMatchParams;
-    use crate::odometry::reference::extract;
+    use crate::odometry::reference::{extract, matches};
     use crate::preprocess::PreprocessConfig;
     use crate::sim::room::SyntheticRoom;
     use crate::{PinholeIntrinsics, RgbdCalibration};
-
-    fn matches(query: &Features, train: &Features) -> Vec<[u32; 4]> {
-        let p = HammingMatchParams { query_count: query.slots() as u32, train_count: train.slots() as u32 };
-        let mut out = vec![[0; 4]; query.slots()];
-        cpu::hamming_match(&p, &query.keypoints, &query.descriptors, &train.keypoints, &train.descriptors, &mut out);
-        out
-    }
 
     /// The synthetic room (exact depth and a view-independent texture) at consecutive poses of
     /// its loop: the whole CPU chain (twins of every kernel, then RANSAC and the refinement)

@@ -4,12 +4,12 @@
 //! keypoints.
 
 use webfusion_core::cpu;
-use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::cpu::shared::NO_MATCH;
 use webfusion_core::kernels::hamming_match::HammingMatchParams;
-use webfusion_core::odometry::{FeatureConfig, Features, reference};
-use webfusion_core::preprocess::PreprocessConfig;
-use webfusion_tests::{Slot, cast, compare_u32_mostly, finish, gpu, run_kernel_slots, sample_frame};
+use webfusion_core::odometry::Features;
+use webfusion_tests::{Slot, cast, compare_u32_mostly, finish, gpu, run_kernel_slots};
+
+use super::pipeline::cpu_features;
 
 fn run(query: &Features, train: &Features) -> (Vec<[u32; 4]>, Vec<[u32; 4]>) {
     let gpu = gpu();
@@ -77,14 +77,7 @@ fn known_distances_give_the_nearest_and_second() {
 
 #[test]
 fn two_real_frames_match_like_the_twin() {
-    let config = FeatureConfig::default();
-    let features = |index: usize| {
-        let (calibration, frame) = sample_frame(index);
-        let pre = preprocess(&calibration, &PreprocessConfig::default(), &frame);
-        let levels: Vec<&[f32]> = pre.levels.iter().map(|l| l.intensity.as_slice()).collect();
-        reference::extract(&config, &calibration.intrinsics, &levels, &pre.levels[0].depth_m)
-    };
-    let (a, b) = (features(0), features(1));
+    let (a, b) = (cpu_features(0), cpu_features(1));
     let (g, c) = run(&b, &a);
     assert_exact_with_controls("frames 1 -> 0", &g, &c);
     // Consecutive frames: most keypoints find a close match.

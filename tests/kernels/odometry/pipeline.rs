@@ -6,26 +6,19 @@
 //! within tolerances (bilateral filter), so a keypoint at a threshold may fall either way: at
 //! least 98 % of the slots and of the matches must be identical.
 
-use webfusion_core::cpu;
 use webfusion_core::cpu::preprocess::chain::preprocess;
-use webfusion_core::kernels::hamming_match::HammingMatchParams;
 use webfusion_core::odometry::gpu::FeatureExtractor;
+use webfusion_core::odometry::reference::matches as cpu_matches;
 use webfusion_core::odometry::{FeatureConfig, Features, reference};
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
 use webfusion_tests::{compare_u32_mostly, finish, gpu, sample_frame};
 
-fn cpu_features(index: usize) -> Features {
+/// The sample's frame `index` through the CPU chain of twins.
+pub(crate) fn cpu_features(index: usize) -> Features {
     let (calibration, frame) = sample_frame(index);
     let pre = preprocess(&calibration, &PreprocessConfig::default(), &frame);
     let levels: Vec<&[f32]> = pre.levels.iter().map(|l| l.intensity.as_slice()).collect();
     reference::extract(&FeatureConfig::default(), &calibration.intrinsics, &levels, &pre.levels[0].depth_m)
-}
-
-fn cpu_matches(query: &Features, train: &Features) -> Vec<[u32; 4]> {
-    let p = HammingMatchParams { query_count: query.slots() as u32, train_count: train.slots() as u32 };
-    let mut out = vec![[0; 4]; query.slots()];
-    cpu::hamming_match(&p, &query.keypoints, &query.descriptors, &train.keypoints, &train.descriptors, &mut out);
-    out
 }
 
 /// Keypoint slots (position, level, whether held) at most 2 % different.
