@@ -78,6 +78,16 @@ pub const DEFAULT_MAX_TRANSLATION_CONDITION: f32 = 100.0;
 pub const DEFAULT_ROTATION_SCALE_M: f32 = 1.0;
 /// Default largest plausible translation between consecutive frames, metres.
 pub const DEFAULT_MAX_JUMP_M: f32 = 0.20;
+/// Default largest correction ICP may make to a relocalised pose (a reseed) for the
+/// relocalisation to stand, metres. A pose from ≥ 20 RANSAC inliers under the Kinect noise
+/// model (σ_z 1.5 mm at 1 m, 2.6 cm at 4 m; the refit averages it down) is good to about a
+/// centimetre; ICP confirming it refines it by that much. Moving it by several times more means
+/// ICP found a different fit than the features did (a self-similar scene slid into place), and
+/// the two independent estimates disagree: the relocalisation is rejected, not fused.
+pub const DEFAULT_MAX_RESEED_CORRECTION_M: f32 = 0.05;
+/// Default largest rotation ICP may apply to a relocalised pose, radians (3°; as above, a
+/// few times what 20 inliers spread over the image fix).
+pub const DEFAULT_MAX_RESEED_CORRECTION_RAD: f32 = 3.0 * std::f32::consts::PI / 180.0;
 /// Default largest plausible rotation between consecutive frames, radians (25°).
 pub const DEFAULT_MAX_JUMP_RAD: f32 = 25.0 * std::f32::consts::PI / 180.0;
 /// Default Huber threshold on point-to-plane residuals, metres.
@@ -128,6 +138,10 @@ pub struct IcpConfig {
     pub max_jump_m: f32,
     /// Largest plausible inter-frame rotation, radians.
     pub max_jump_rad: f32,
+    /// Largest correction ICP may make to a reseeded (relocalised) pose, metres.
+    pub max_reseed_correction_m: f32,
+    /// Largest rotation ICP may apply to a reseeded pose, radians.
+    pub max_reseed_correction_rad: f32,
     /// Huber threshold on point-to-plane residuals, metres (0: plain least squares).
     pub huber_delta_m: f32,
     /// Weight pairs by the Kinect axial noise model (far points count less).
@@ -159,6 +173,8 @@ impl Default for IcpConfig {
             rotation_scale_m: DEFAULT_ROTATION_SCALE_M,
             max_jump_m: DEFAULT_MAX_JUMP_M,
             max_jump_rad: DEFAULT_MAX_JUMP_RAD,
+            max_reseed_correction_m: DEFAULT_MAX_RESEED_CORRECTION_M,
+            max_reseed_correction_rad: DEFAULT_MAX_RESEED_CORRECTION_RAD,
             constant_velocity: false,
             huber_delta_m: DEFAULT_HUBER_DELTA_M,
             rgb_weight: DEFAULT_RGB_WEIGHT,
@@ -228,7 +244,7 @@ impl FusionConfig {
         if !(icp.min_inlier_fraction >= 0.0 && icp.min_inlier_fraction <= 1.0) {
             return bad(format!("the inlier fraction {} must be in [0, 1]", icp.min_inlier_fraction));
         }
-        if !positive(icp.max_condition) || !positive(icp.max_translation_condition) || !positive(icp.max_jump_m) || !positive(icp.max_jump_rad) || !positive(icp.rotation_scale_m) {
+        if !positive(icp.max_condition) || !positive(icp.max_translation_condition) || !positive(icp.max_jump_m) || !positive(icp.max_jump_rad) || !positive(icp.rotation_scale_m) || !positive(icp.max_reseed_correction_m) || !positive(icp.max_reseed_correction_rad) {
             return bad("the lost-frame limits must be positive".into());
         }
         Ok(())
@@ -395,6 +411,9 @@ pub struct KinectFusion {
     run: u64,
     frames_submitted: usize,
     last_pose: Se3,
+    /// The pose of the last frame tracked (what a lost frame reports, also after a reseed that
+    /// its frame did not confirm).
+    last_good_pose: Se3,
 }
 
 impl KinectFusion {
@@ -419,7 +438,7 @@ impl KinectFusion {
         let tracker = IcpTracker::new(gpu, &config.icp, &preprocessor, &predictor, state)?;
         let timer = StageTimer::new(gpu, "core.fusion");
         let readbacks = ReadbackRing::new(gpu, "core.fusion", READBACK_BYTES, MAX_FRAMES_IN_FLIGHT);
-        Ok(Self { config, preprocessor, tracker, mapper, predictor, timer, readbacks, reports: VecDeque::new(), run: 0, frames_submitted: 0, last_pose: Se3::IDENTITY })
+        Ok(Self { config, preprocessor, tracker, mapper, predictor, timer, readbacks, reports: VecDeque::new(), run: 0, frames_submitted: 0, last_pose: Se3::IDENTITY, last_good_pose: Se3::IDENTITY })
     }
 
     /// The settings.
@@ -491,12 +510,31 @@ impl KinectFusion {
         self.frames_submitted = 0;
         self.reports.clear();
         self.last_pose = Se3::IDENTITY;
+        self.last_good_pose = Se3::IDENTITY;
     }
 
     /// Starts the next frame's tracking from `world_from_camera` (e.g. given poses used as an
     /// initial guess).
     pub fn set_initial_guess(&self, gpu: &Gpu, world_from_camera: &Se3) {
         self.tracker.set_guess(gpu, world_from_camera);
+    }
+
+    /// Relocalises the camera at `world_from_camera` (found by feature matching after tracking
+    /// was lost): the tracker's reference moves there ([`IcpTracker::reseed`]) and the model is
+    /// rendered there in a submission of its own, so the next frame is tracked against what the
+    /// map holds at that pose and is Recovered when it checks out (its jump measured from that
+    /// pose). A relocalisation that the next frame does not confirm is undone by reseeding at
+    /// the last good pose. Map blocks swapped out around that pose come back with the next
+    /// frame, not for this render.
+    pub fn reseed(&mut self, gpu: &Gpu, world_from_camera: &Se3) -> Result<()> {
+        gpu.check_lost()?;
+        self.tracker.reseed(gpu, world_from_camera);
+        let mut fe = FrameEncoder::new(gpu, "core.fusion.reseed", None);
+        self.predictor.encode(gpu, &mut fe, "predict");
+        let (commands, _) = fe.finish(None);
+        gpu.submit([commands]);
+        self.last_pose = *world_from_camera;
+        Ok(())
     }
 
     /// Uploads `frame` and submits its whole pipeline as one command buffer. Never waits for
@@ -601,6 +639,13 @@ impl KinectFusion {
         });
         if let Some(stats) = &mut report.map {
             self.mapper.on_report(stats);
+        }
+        // A lost frame publishes the tracker's reference, which a reseed may have moved: it
+        // reports the last tracked pose instead.
+        if report.state.is_lost() {
+            report.world_from_camera = self.last_good_pose;
+        } else {
+            self.last_good_pose = report.world_from_camera;
         }
         self.last_pose = report.world_from_camera;
         self.reports.push_back(report);

@@ -148,6 +148,24 @@ impl IcpTracker {
         gpu.queue.write_buffer(&self.state, flag_offset, bytemuck::bytes_of(&1u32));
     }
 
+    /// Moves the tracker's reference to `world_from_camera` (a relocalisation found by another
+    /// tracker): the next frame starts there and its jump check measures from there, the
+    /// motion model restarts, and the pose is published active so that the predictor renders
+    /// the model at it. The photometric term keeps comparing against the last fused frame's
+    /// intensity at that frame's own pose (`previous_view`, which a reseed leaves alone), so
+    /// a right relocalisation pairs with it where the views overlap. The lost-frame streak is
+    /// kept, so a frame that tracks from here reports Recovered; that frame's jump check holds
+    /// ICP's correction of the reseeded pose to `max_reseed_correction_m` / `_rad`.
+    pub fn reseed(&self, gpu: &Gpu, world_from_camera: &Se3) {
+        let cols = world_from_camera.to_cols_f32();
+        let write = |offset: usize, bytes: &[u8]| gpu.queue.write_buffer(&self.state, offset as u64, bytes);
+        write(std::mem::offset_of!(TrackState, pose), bytemuck::bytes_of(&crate::cpu::shared::camera_pose(&cols, 1)));
+        write(std::mem::offset_of!(TrackState, reference), bytemuck::cast_slice(&cols));
+        write(std::mem::offset_of!(TrackState, motion), bytemuck::cast_slice(&IDENTITY));
+        write(std::mem::offset_of!(TrackState, has_guess), bytemuck::bytes_of(&0u32));
+        write(std::mem::offset_of!(TrackState, reseeded), bytemuck::bytes_of(&1u32));
+    }
+
     /// Records the tracking of the preprocessed frame: begin, every level's iterations, finish.
     pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
         gpu.kernels.track_begin.dispatch_in(pass, &self.begin, [1, 1, 1]);
@@ -208,6 +226,7 @@ pub fn initial_state() -> TrackState {
         pose: crate::cpu::shared::camera_pose(&IDENTITY, 0),
         estimate: IDENTITY,
         reference: IDENTITY,
+        previous_view: IDENTITY,
         motion: IDENTITY,
         guess: IDENTITY,
         ..Default::default()
@@ -239,7 +258,10 @@ pub fn track_params(config: &IcpConfig, level: usize, k: PinholeIntrinsics, min_
         max_translation_condition: config.max_translation_condition,
         max_jump_m: config.max_jump_m,
         max_jump_rad: config.max_jump_rad,
+        max_reseed_correction_m: config.max_reseed_correction_m,
+        max_reseed_correction_rad: config.max_reseed_correction_rad,
         constant_velocity: u32::from(config.constant_velocity),
         rotation_scale_m: config.rotation_scale_m,
+        ..Default::default()
     }
 }

@@ -1,16 +1,16 @@
 // SPDX-License-Identifier: MIT
 //! One Gauss-Newton iteration's normal equations of the tracker, geometric and photometric rows
 //! in one pass. Each invocation walks pixels ix, ix + threads, ... of the current frame's level
-//! and, with the estimate T = `state.estimate` and the reference pose `state.reference` (where
-//! the prediction and the previous intensity were made), adds for each pixel
+//! and, with the estimate T = `state.estimate` and the last fused frame's pose
+//! `state.previous_view` (where the previous intensity was taken), adds for each pixel
 //! - its point-to-plane row (000-digest §1.3.4, Eq. 1.12-1.16): the vertex and normal mapped to
 //!   world by T, projected into the prediction (projective association), pairs further apart
 //!   than `dist_thresh_m` or whose normals differ by more than acos(`cos_angle_thresh`)
 //!   rejected; residual r = m · (v - q), row J = [v × m, m], weighted by Huber (optional) times
 //!   the Kinect axial noise model (optional);
 //! - its photometric row (DVO-style): r = I_ref(u') - I(u) with I_ref and its gradient (kept by
-//!   `keep_previous`) bilinear at the reprojection u' of the vertex into the reference frame,
-//!   kept when the reference depth there agrees within `rgb_max_depth_diff_m` and
+//!   `keep_previous`) bilinear at the reprojection u' of the vertex into the previous frame,
+//!   kept when the previous depth there agrees within `rgb_max_depth_diff_m` and
 //!   |r| <= `rgb_max_residual`; with the projected intensity gradient gw in world,
 //!   J = [p × gw, gw], scaled by sqrt(`rgb_weight`);
 //! both into one accumulator (the twist is applied on the left, rotation first). The workgroup
@@ -61,7 +61,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation
     let k = params.intrinsics;
     let pixel_count = k.width_px * k.height_px;
     let world_from_camera = state.estimate;
+    // The prediction's camera (projective association) and the previous frame's (photometric).
     let camera_ref_from_world = rigid_inverse(state.reference);
+    let camera_prev_from_world = rigid_inverse(state.previous_view);
     let rgb_scale = sqrt(max(params.rgb_weight, 0.0));
     var acc = ne_zero();
     for (var ix = gid.x; ix < pixel_count; ix += params.thread_count) {
@@ -101,21 +103,22 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation
             }
         }
         // Photometric row.
-        if rgb_scale > 0.0 {
-            let uf = k.fx_px * p_ref.x / p_ref.z + k.cx_px;
-            let wf = k.fy_px * p_ref.y / p_ref.z + k.cy_px;
+        let p_prev = (camera_prev_from_world * vec4<f32>(v, 1.0)).xyz;
+        if rgb_scale > 0.0 && p_prev.z > 0.0 {
+            let uf = k.fx_px * p_prev.x / p_prev.z + k.cx_px;
+            let wf = k.fy_px * p_prev.y / p_prev.z + k.cy_px;
             // One pixel of margin for the central differences.
             if uf >= 1.0 && wf >= 1.0 && uf < f32(k.width_px) - 2.0 && wf < f32(k.height_px) - 2.0 {
                 let z_ref = previous[u32(wf + 0.5) * k.width_px + u32(uf + 0.5)].w;
-                if is_valid_f32(z_ref) && abs(z_ref - p_ref.z) <= params.rgb_max_depth_diff_m {
+                if is_valid_f32(z_ref) && abs(z_ref - p_prev.z) <= params.rgb_max_depth_diff_m {
                     let ig = previous_bilinear(uf, wf);
                     let r = ig.x - intensity[ix];
                     if abs(r) <= params.rgb_max_residual {
                         let gx = ig.y;
                         let gy = ig.z;
-                        let inv_z = 1.0 / p_ref.z;
-                        let gp = vec3<f32>(gx * k.fx_px * inv_z, gy * k.fy_px * inv_z, -(gx * k.fx_px * p_ref.x + gy * k.fy_px * p_ref.y) * inv_z * inv_z);
-                        let gw = (state.reference * vec4<f32>(gp, 0.0)).xyz;
+                        let inv_z = 1.0 / p_prev.z;
+                        let gp = vec3<f32>(gx * k.fx_px * inv_z, gy * k.fy_px * inv_z, -(gx * k.fx_px * p_prev.x + gy * k.fy_px * p_prev.y) * inv_z * inv_z);
+                        let gw = (state.previous_view * vec4<f32>(gp, 0.0)).xyz;
                         ne_add_jacobian(&acc, cross(v, gw) * rgb_scale, gw * rgb_scale, r * rgb_scale);
                         ne_add_rgb_stats(&acc, r);
                     }

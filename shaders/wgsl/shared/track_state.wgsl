@@ -46,14 +46,21 @@ struct TrackState {
     pose: CameraPose,
     // The ICP estimate of the current frame, camera to world.
     estimate: mat4x4<f32>,
-    // The last fused frame's pose: the prediction and the previous intensity were made there.
+    // The last fused frame's pose, or where a relocalisation reseeded the tracker: the
+    // prediction was rendered there and the next frame's jump is measured from there.
     reference: mat4x4<f32>,
+    // The last fused frame's pose: where the previous intensity (`keep_previous`) was taken
+    // (a reseed moves the reference, not this).
+    previous_view: mat4x4<f32>,
     // The last tracked inter-frame motion, estimate · reference⁻¹ (identity after a loss).
     motion: mat4x4<f32>,
     // An initial estimate set by the host or another tracker (used when `has_guess` is 1).
     guess: mat4x4<f32>,
     // 1: start the next frame from `guess` instead of the reference or the motion model.
     has_guess: u32,
+    // 1: the reference was set by a relocalisation (`IcpTracker::reseed`): the next frame's
+    // jump is held to the reseed correction limits.
+    reseeded: u32,
     // Frames begun since the last reset.
     frames: u32,
     // Frames fused into the model (0: the next frame initialises the world frame).
@@ -119,6 +126,12 @@ struct TrackParams {
     max_jump_m: f32,
     // Largest plausible inter-frame rotation, radians.
     max_jump_rad: f32,
+    // After a reseed (relocalisation): the largest correction ICP may make to the reseeded
+    // pose, metres, and radians.
+    max_reseed_correction_m: f32,
+    max_reseed_correction_rad: f32,
+    _pad0: u32,
+    _pad1: u32,
     // Non-zero: start each frame from motion · reference (constant velocity).
     constant_velocity: u32,
     // Length that scales the rotation columns of JᵀJ for the condition number, metres.

@@ -25,10 +25,10 @@ fn run(gpu: &Gpu, p: &TrackParams, state: &TrackState) -> (TrackState, TrackStat
 }
 
 fn same(g: &TrackState, c: &TrackState) -> Result<(), String> {
-    let mats = |s: &TrackState| [s.pose.world_from_camera, s.pose.camera_from_world, s.estimate, s.reference, s.motion, s.guess];
+    let mats = |s: &TrackState| [s.pose.world_from_camera, s.pose.camera_from_world, s.estimate, s.reference, s.previous_view, s.motion, s.guess];
     let close = mats(g).iter().flatten().flatten().zip(mats(c).iter().flatten().flatten()).all(|(a, b)| (a - b).abs() <= 1e-5);
     let floats = (g.jump_translation_m - c.jump_translation_m).abs() <= 1e-5 && (g.jump_rotation_rad - c.jump_rotation_rad).abs() <= 1e-3;
-    let rest = (g.pose.enabled, g.outcome, g.frames, g.fused_frames, g.lost_streak, g.done_levels, g.has_guess) == (c.pose.enabled, c.outcome, c.frames, c.fused_frames, c.lost_streak, c.done_levels, c.has_guess);
+    let rest = (g.pose.enabled, g.outcome, g.frames, g.fused_frames, g.lost_streak, g.done_levels, g.has_guess, g.reseeded) == (c.pose.enabled, c.outcome, c.frames, c.fused_frames, c.lost_streak, c.done_levels, c.has_guess, c.reseeded);
     if close && floats && rest { Ok(()) } else { Err(format!("GPU {g:?}\nvs CPU {c:?}")) }
 }
 
@@ -48,6 +48,9 @@ fn every_outcome_is_decided_as_the_twin_decides() {
         ("ill-conditioned", TrackState { levels: [TrackLevelStats { condition: 2e5, ..good }; 4], ..tracking }, outcome::LOST_ILL_CONDITIONED),
         ("a translation unobserved", TrackState { levels: [TrackLevelStats { translation_condition: 300.0, ..good }; 4], ..tracking }, outcome::LOST_ILL_CONDITIONED),
         ("jump", TrackState { estimate: (Se3::new(DQuat::IDENTITY, DVec3::new(0.3, 0.0, 0.0)) * reference).to_cols_f32(), ..tracking }, outcome::LOST_IMPLAUSIBLE_JUMP),
+        ("reseeded, refined", TrackState { reseeded: 1, lost_streak: 1, estimate: (Se3::new(DQuat::IDENTITY, DVec3::new(0.03, 0.0, 0.0)) * reference).to_cols_f32(), ..tracking }, outcome::RECOVERED),
+        ("reseeded, moved", TrackState { reseeded: 1, lost_streak: 1, estimate: (Se3::new(DQuat::IDENTITY, DVec3::new(0.08, 0.0, 0.0)) * reference).to_cols_f32(), ..tracking }, outcome::LOST_IMPLAUSIBLE_JUMP),
+        ("reseeded, turned", TrackState { reseeded: 1, estimate: (Se3::new(DQuat::from_axis_angle(DVec3::Z, 0.1), DVec3::ZERO) * reference).to_cols_f32(), ..tracking }, outcome::LOST_IMPLAUSIBLE_JUMP),
         ("turn", TrackState { estimate: (Se3::new(DQuat::from_axis_angle(DVec3::Z, 0.5), DVec3::ZERO) * reference).to_cols_f32(), ..tracking }, outcome::LOST_IMPLAUSIBLE_JUMP),
     ];
     for (what, state, want) in cases {
@@ -55,14 +58,15 @@ fn every_outcome_is_decided_as_the_twin_decides() {
         same(&g, &c).unwrap_or_else(|e| panic!("{what}: {e}"));
         assert_eq!(g.outcome, want, "{what}: outcome");
         assert_eq!(g.frames, state.frames + 1, "{what}: frame counted");
+        assert_eq!(g.reseeded, 0, "{what}: a reseed holds for one frame");
         let lost = want >= outcome::LOST_TOO_FEW_INLIERS;
         if lost {
             assert_eq!(g.pose.enabled, 0, "{what}: a lost frame is neither fused nor predicted");
             assert_eq!(g.pose.world_from_camera, state.reference, "{what}: and keeps the last good pose");
-            assert_eq!((g.reference, g.fused_frames, g.lost_streak), (state.reference, state.fused_frames, state.lost_streak + 1), "{what}: reference kept");
+            assert_eq!((g.reference, g.previous_view, g.fused_frames, g.lost_streak), (state.reference, state.previous_view, state.fused_frames, state.lost_streak + 1), "{what}: reference and previous view kept");
         } else {
             assert_eq!(g.pose.enabled, 1, "{what}: fused and predicted");
-            assert_eq!((g.pose.world_from_camera, g.reference), (state.estimate, state.estimate), "{what}: the estimate becomes the pose and reference");
+            assert_eq!((g.pose.world_from_camera, g.reference, g.previous_view), (state.estimate, state.estimate, state.estimate), "{what}: the estimate becomes the pose, reference and previous view");
             assert_eq!((g.fused_frames, g.lost_streak), (state.fused_frames + 1, 0), "{what}: counted as fused");
         }
     }

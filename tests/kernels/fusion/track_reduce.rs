@@ -64,7 +64,7 @@ fn params(maps: &Maps, estimate: &Se3, reference: &Se3, dist_thresh_m: f32, angl
 
 /// A `TrackState` with `estimate` and `reference` set (the rest as after a reset).
 pub(crate) fn state_at(estimate: &Se3, reference: &Se3) -> TrackState {
-    TrackState { estimate: estimate.to_cols_f32(), reference: reference.to_cols_f32(), ..initial_state() }
+    TrackState { estimate: estimate.to_cols_f32(), reference: reference.to_cols_f32(), previous_view: reference.to_cols_f32(), ..initial_state() }
 }
 
 /// All of `track_reduce`'s inputs, in binding order after the params and state.

@@ -26,6 +26,8 @@ pub fn track_finish(params: &TrackParams, state: &mut TrackState) {
     let mut out = outcome::INITIALISED;
     if state.fused_frames != 0 {
         let finest = state.levels[0];
+        let reseeded = state.reseeded != 0;
+        let (max_jump_m, max_jump_rad) = if reseeded { (params.max_reseed_correction_m, params.max_reseed_correction_rad) } else { (params.max_jump_m, params.max_jump_rad) };
         let relative = mat4_mul(&rigid_inverse(&estimate), &state.reference);
         let t = relative[3];
         state.jump_translation_m = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
@@ -34,7 +36,7 @@ pub fn track_finish(params: &TrackParams, state: &mut TrackState) {
             outcome::LOST_TOO_FEW_INLIERS
         } else if !(finest.condition <= params.max_condition) || !(finest.translation_condition <= params.max_translation_condition) {
             outcome::LOST_ILL_CONDITIONED
-        } else if state.jump_translation_m > params.max_jump_m || state.jump_rotation_rad > params.max_jump_rad {
+        } else if state.jump_translation_m > max_jump_m || state.jump_rotation_rad > max_jump_rad {
             outcome::LOST_IMPLAUSIBLE_JUMP
         } else if state.lost_streak > 0 {
             outcome::RECOVERED
@@ -43,6 +45,7 @@ pub fn track_finish(params: &TrackParams, state: &mut TrackState) {
         };
     }
     state.outcome = out;
+    state.reseeded = 0;
     state.frames += 1;
     if out >= outcome::LOST_TOO_FEW_INLIERS {
         state.lost_streak += 1;
@@ -51,6 +54,7 @@ pub fn track_finish(params: &TrackParams, state: &mut TrackState) {
     } else {
         state.motion = if out == outcome::INITIALISED { IDENTITY } else { mat4_mul(&estimate, &rigid_inverse(&state.reference)) };
         state.reference = estimate;
+        state.previous_view = estimate;
         state.pose = camera_pose(&estimate, 1);
         state.fused_frames += 1;
         state.lost_streak = 0;

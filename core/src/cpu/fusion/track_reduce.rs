@@ -45,6 +45,7 @@ pub fn track_rows(params: &TrackParams, state: &TrackState, inputs: &TrackInputs
     let k = &params.intrinsics;
     let world_from_camera = &state.estimate;
     let camera_ref_from_world = rigid_inverse(&state.reference);
+    let camera_prev_from_world = rigid_inverse(&state.previous_view);
     let rgb_scale = params.rgb_weight.max(0.0).sqrt();
     let v_cam = inputs.vertex_in_camera[ix];
     if !is_valid_f32(v_cam[2]) {
@@ -82,19 +83,20 @@ pub fn track_rows(params: &TrackParams, state: &TrackState, inputs: &TrackInputs
         }
     }
     let mut rgb = None;
-    if rgb_scale > 0.0 {
-        let uf = k.fx_px * p_ref[0] / p_ref[2] + k.cx_px;
-        let wf = k.fy_px * p_ref[1] / p_ref[2] + k.cy_px;
+    let p_prev = transform_point(&camera_prev_from_world, v);
+    if rgb_scale > 0.0 && p_prev[2] > 0.0 {
+        let uf = k.fx_px * p_prev[0] / p_prev[2] + k.cx_px;
+        let wf = k.fy_px * p_prev[1] / p_prev[2] + k.cy_px;
         if uf >= 1.0 && wf >= 1.0 && uf < k.width_px as f32 - 2.0 && wf < k.height_px as f32 - 2.0 {
             let z_ref = inputs.previous[((wf + 0.5) as u32 * k.width_px + (uf + 0.5) as u32) as usize][3];
-            if is_valid_f32(z_ref) && (z_ref - p_ref[2]).abs() <= params.rgb_max_depth_diff_m {
+            if is_valid_f32(z_ref) && (z_ref - p_prev[2]).abs() <= params.rgb_max_depth_diff_m {
                 let ig = previous_bilinear(params, inputs.previous, uf, wf);
                 let r = ig[0] - inputs.intensity[ix];
                 if r.abs() <= params.rgb_max_residual {
                     let (gx, gy) = (ig[1], ig[2]);
-                    let inv_z = 1.0 / p_ref[2];
-                    let gp = [gx * k.fx_px * inv_z, gy * k.fy_px * inv_z, -(gx * k.fx_px * p_ref[0] + gy * k.fy_px * p_ref[1]) * inv_z * inv_z];
-                    let gw = transform_vector(&state.reference, gp);
+                    let inv_z = 1.0 / p_prev[2];
+                    let gp = [gx * k.fx_px * inv_z, gy * k.fy_px * inv_z, -(gx * k.fx_px * p_prev[0] + gy * k.fy_px * p_prev[1]) * inv_z * inv_z];
+                    let gw = transform_vector(&state.previous_view, gp);
                     let a = cross3(v, gw);
                     let s = rgb_scale;
                     rgb = Some(([a[0] * s, a[1] * s, a[2] * s, gw[0] * s, gw[1] * s, gw[2] * s, r * s], r));
