@@ -11,6 +11,8 @@ use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, TsdfStore as _
 use webfusion_core::fusion::mapper::Mapper;
 use webfusion_core::map::{MapKind, MapStats};
 use webfusion_core::map::file::{MapFile, MapFileHeader, MapFrame, read_map_file, read_map_file_recovering, write_map_file};
+use webfusion_core::odometry::assist::{FeatureAssist, Guess};
+use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::{GpuOptions, Se3};
 
 use crate::calib::CalibrationArgs;
@@ -93,11 +95,14 @@ pub(crate) struct ReconstructArgs {
     /// far tracking moved each one (`refine.txt`, stats.json).
     #[arg(long)]
     refine: bool,
-    /// Seed 002's feature odometry beside ICP: each frame's features, matched against the last
-    /// tracked frame, give ICP its initial guess, and let it take up tracking again after lost
-    /// frames (one host wait per frame: frames are processed one at a time).
+    /// Turn off seed 002's feature odometry beside ICP. By default each frame's features,
+    /// matched against the last tracked frame, give ICP its initial guess, and after a loss
+    /// the frame is relocalised against stored keyframes and ICP verifies it
+    /// (`core::odometry::assist`; one host wait per frame: frames are processed one at a time).
+    /// Off by itself with given poses (they are the guess) and for images too small for
+    /// keypoints.
     #[arg(long)]
-    features: bool,
+    no_features: bool,
     /// Keep only every N-th frame of the range (fast motion as a slower camera would see it).
     #[arg(long, default_value_t = 1)]
     every: usize,
@@ -330,7 +335,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         eprint!("\rframe {}/{} [{}], ICP inliers {inliers}   ", trajectory.len(), n_frames, report.state.name());
     };
     let mut skipped = Vec::new();
-    let mut assist = if args.features && given.is_none() { Some(crate::odometry::FeatureAssist::new(&gpu, fusion.preprocessor())?) } else { None };
+    let (mut assist, features_off) = feature_assist(args, &gpu, &fusion, given.is_some())?;
     for index in frames {
         let sw = crate::timing::Stopwatch::start();
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
@@ -344,10 +349,15 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             fusion.set_initial_guess(&gpu, &pose);
             guess = Some(pose);
         }
-        if let Some(assist) = &mut assist
-            && let Some(pose) = assist.guess(&gpu, fusion.preprocessor(), &frame)?
-        {
-            fusion.set_initial_guess(&gpu, &pose);
+        if let Some(assist) = &mut assist {
+            match pollster::block_on(assist.guess(&gpu, fusion.preprocessor(), &frame)).with_context(|| format!("features of frame {index}"))? {
+                Some(Guess::Motion(pose)) => fusion.set_initial_guess(&gpu, &pose),
+                Some(Guess::Relocalised { world_from_camera, keyframe, inliers }) => {
+                    eprintln!("\nframe {index}: relocalised against frame {keyframe} ({inliers} feature inliers); ICP verifies");
+                    fusion.reseed(&gpu, &world_from_camera)?;
+                }
+                None => {}
+            }
         }
         timestamps.insert(frame.index, (frame.depth_timestamp_ns, guess));
         // With features, their pass has uploaded and preprocessed the frame already.
@@ -358,8 +368,9 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         for report in reports {
             if let Some(assist) = &mut assist
                 && report.index == frame.index
+                && let Some(back) = assist.verdict(&gpu, !report.state.is_lost(), &report.world_from_camera)?
             {
-                assist.verdict(!report.state.is_lost(), &report.world_from_camera);
+                fusion.reseed(&gpu, &back)?;
             }
             on_report(report, &mut times, &mut trajectory, &mut timestamps);
         }
@@ -444,7 +455,22 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         },
         "stages_ms": times.to_json(),
         "given_poses": given_json,
-        "features": assist.as_ref().map(|a| serde_json::json!({ "guesses": a.guesses, "recoveries": a.recoveries, "ms_median": if a.ms.is_empty() { 0.0 } else { crate::timing::summarize(&a.ms).median_ms } })),
+        "features": match &assist {
+            Some(a) => {
+                let s = a.stats();
+                let ms = a.frame_ms();
+                serde_json::json!({
+                    "guesses": s.guesses,
+                    "relocalisations": s.relocalisations,
+                    "relocalisations_confirmed": s.relocalisations_confirmed,
+                    "recoveries": s.recoveries,
+                    "keyframes_added": s.keyframes_added,
+                    "keyframes": a.keyframes(),
+                    "ms_median": if ms.is_empty() { 0.0 } else { crate::timing::summarize(ms).median_ms },
+                })
+            }
+            None => serde_json::json!({ "off": features_off }),
+        },
         "every": args.every,
         "dropped": args.drop,
     });
@@ -600,4 +626,27 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
     std::fs::write(&stats_path, serde_json::to_string_pretty(&stats)?).with_context(|| format!("writing {}", stats_path.display()))?;
     println!("wrote {}, {}", trajectory_path.display(), stats_path.display());
     Ok(())
+}
+
+/// The feature assistant of a reconstruction, or why there is none.
+fn feature_assist(args: &ReconstructArgs, gpu: &webfusion_core::Gpu, fusion: &KinectFusion, given_poses: bool) -> anyhow::Result<(Option<FeatureAssist>, &'static str)> {
+    if args.no_features {
+        return Ok((None, "--no-features"));
+    }
+    if given_poses {
+        return Ok((None, "poses given"));
+    }
+    match FeatureAssist::new(gpu, fusion.preprocessor(), OdometryConfig::default()) {
+        Ok(mut assist) => {
+            let icp = &fusion.config().icp;
+            assist.set_jump_limits(f64::from(icp.max_jump_m), f64::from(icp.max_jump_rad));
+            Ok((Some(assist), ""))
+        }
+        // Too small an image or too few pyramid levels for the keypoint grid: ICP alone.
+        Err(webfusion_core::Error::InvalidConfig(why)) => {
+            eprintln!("feature odometry off: {why}");
+            Ok((None, "the frames are too small for keypoints"))
+        }
+        Err(e) => Err(e.into()),
+    }
 }

@@ -77,7 +77,7 @@ fn bad_options_are_refused_with_a_reason() {
 #[test]
 fn reconstruct_with_features_tracks_every_third_frame() {
     let out = scratch("every3");
-    let o = webfusion(&["reconstruct", SAMPLE, "--out", out.to_str().expect("utf-8"), "--frames", "0..60", "--every", "3", "--features", "--no-mesh"]);
+    let o = webfusion(&["reconstruct", SAMPLE, "--out", out.to_str().expect("utf-8"), "--frames", "0..60", "--every", "3", "--no-mesh"]);
     assert!(o.status.success(), "reconstruct failed: {}", String::from_utf8_lossy(&o.stderr));
     let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).expect("stats.json")).expect("json");
     assert_eq!(stats["frames"], 20);
@@ -125,7 +125,7 @@ fn a_cut_to_another_scene_is_never_relocalised_into_the_first() {
     std::fs::write(tum.join("rgb.txt"), column(0, 1)).expect("rgb.txt");
     std::fs::write(tum.join("depth.txt"), column(2, 3)).expect("depth.txt");
     let out = dir.join("out");
-    let o = webfusion(&["reconstruct", tum.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--features", "--no-mesh", "--intrinsics", "517.3,516.5,318.6,255.3", "--depth-scale", "5000"]);
+    let o = webfusion(&["reconstruct", tum.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--no-mesh", "--intrinsics", "517.3,516.5,318.6,255.3", "--depth-scale", "5000"]);
     assert!(o.status.success(), "reconstruct failed: {}", String::from_utf8_lossy(&o.stderr));
     let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).expect("stats.json")).expect("json");
     let lost: Vec<u64> = stats["lost_frames"].as_array().expect("lost_frames").iter().filter_map(serde_json::Value::as_u64).collect();
@@ -135,5 +135,6 @@ fn a_cut_to_another_scene_is_never_relocalised_into_the_first() {
     assert!(lost.iter().all(|&i| i >= 30), "a frame of the first scene was lost: {lost:?}");
     assert_eq!(lost.len(), 30, "a frame after the cut was tracked into the first scene's map: lost {lost:?}");
     assert_eq!(stats["features"]["recoveries"], 0);
+    assert_eq!(stats["features"]["relocalisations_confirmed"], 0, "{}", stats["features"]);
     assert!(stats["features"]["guesses"].as_u64().is_some_and(|g| g <= 29), "{}", stats["features"]);
 }

@@ -49,6 +49,8 @@ pub fn start() {
 #[derive(Clone, Debug, PartialEq)]
 struct Settings {
     config: FusionConfig,
+    /// Feature odometry beside ICP (seed 002): initial guesses and relocalisation.
+    features: bool,
 }
 
 impl Settings {
@@ -74,7 +76,7 @@ impl Settings {
         config.icp.angle_thresh_rad = number("set-icp-angle-deg", "ICP angle")?.to_radians();
         config.icp.rgb_weight = number("set-rgb-weight", "photometric weight")?;
         config.validate().map_err(|e| e.to_string())?;
-        Ok(Self { config })
+        Ok(Self { config, features: !ui::value("set-features").is_empty() })
     }
 }
 
@@ -96,6 +98,7 @@ fn fill_settings_form(query: &std::collections::HashMap<String, String>) -> (Set
         ("set-icp-dist-cm", "icp_dist_cm", format!("{}", icp.dist_thresh_m * 100.0)),
         ("set-icp-angle-deg", "icp_angle_deg", format!("{}", icp.angle_thresh_rad.to_degrees().round())),
         ("set-rgb-weight", "rgb_weight", icp.rgb_weight.to_string()),
+        ("set-features", "features", "1".to_owned()),
     ];
     for (id, _, value) in &fields {
         ui::set_value(id, value);
@@ -112,7 +115,7 @@ fn fill_settings_form(query: &std::collections::HashMap<String, String>) -> (Set
     // The defaults always validate; should they not, say so rather than start half-configured.
     let settings = Settings::from_form().unwrap_or_else(|message| {
         warnings.push(format!("the default settings are invalid: {message}"));
-        Settings { config: defaults }
+        Settings { config: defaults, features: true }
     });
     (settings, warnings)
 }
@@ -215,7 +218,7 @@ async fn run() -> Result<(), String> {
     ui::bind_controls(&inbox);
     let overlay: web_sys::HtmlCanvasElement = ui::element("view-free-overlay")?;
     ui::bind_gestures(&inbox, &overlay);
-    let mode = FusionMode::new(settings.config.clone());
+    let mode = FusionMode::new(settings.config.clone(), settings.features);
     install_hooks(&inbox, &mode);
     // The browser compiles the pipelines after `Gpu::new` returns; an empty submission
     // completes once they are ready (a milestone of the status).
@@ -522,7 +525,7 @@ impl App {
             }
             Ui::ApplySettings => match Settings::from_form() {
                 Ok(settings) => {
-                    self.mode.set_config(settings.config.clone());
+                    self.mode.set_config(settings.config.clone(), settings.features);
                     self.settings = settings;
                     self.settings_warnings.clear();
                     self.reset_run();
@@ -789,6 +792,13 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         v.voxel_size_m * 1000.0,
         v.memory_bytes as f64 / (1 << 20) as f64,
     ));
+    lines.push(match &f.features {
+        Some(x) => format!(
+            "feature odometry: {} guesses · {} relocalisations ({} confirmed by ICP) · {} keyframes · {:.0} ms/frame",
+            x.guesses, x.relocalisations, x.relocalisations_confirmed, x.keyframes, x.median_ms
+        ),
+        None => "feature odometry off".to_owned(),
+    });
     if s.frames_skipped > 0 {
         lines.push(format!("⚠ the bridge skipped {} damaged frame(s) of the source", s.frames_skipped));
     }

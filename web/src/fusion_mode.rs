@@ -7,6 +7,11 @@
 //! their canvases in a second one. Reports (pose, tracking state, GPU stage times) come back
 //! a frame or two later through [`FusionMode::poll`]; the trajectory, the running ATE and the
 //! statistics are updated then, in O(1) per frame.
+//!
+//! With feature odometry on (the default; `core::odometry::assist`), each frame's features are
+//! extracted first (uploading and preprocessing it for both), give ICP its initial guess or,
+//! after a loss, a relocalisation against stored keyframes, and the frame's report is awaited
+//! before the next one: the guess needs the last verdict, so frames are not pipelined then.
 
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -18,6 +23,8 @@ use webfusion_core::map::{MapKind, MapStats};
 use webfusion_core::eval::{Alignment, RunningAte};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, RaycastTarget, TrackingState};
 use webfusion_core::io::{TUM_TRAJECTORY_HEADER, push_tum_line};
+use webfusion_core::odometry::assist::{AssistStats, FeatureAssist, Guess};
+use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::source::TimedPose;
 use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, NormalView};
 use webfusion_core::{Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
@@ -67,13 +74,28 @@ struct FreeView {
 /// The pipeline and everything built on its device.
 struct Pipeline {
     fusion: KinectFusion,
+    /// Feature odometry beside ICP (off by the setting, or for frames too small for it).
+    assist: Option<FeatureAssist>,
     views: FrameViews,
     free: FreeView,
 }
 
 impl Pipeline {
-    fn new(gpu: &Gpu, calibration: RgbdCalibration, config: &FusionConfig) -> Result<Self, String> {
+    fn new(gpu: &Gpu, calibration: RgbdCalibration, config: &FusionConfig, features: bool) -> Result<Self, String> {
         let fusion = KinectFusion::new(gpu, calibration, config.clone()).map_err(|e| format!("cannot build the pipeline: {e}"))?;
+        let assist = if features {
+            match FeatureAssist::new(gpu, fusion.preprocessor(), OdometryConfig::default()) {
+                Ok(mut assist) => {
+                    assist.set_jump_limits(f64::from(config.icp.max_jump_m), f64::from(config.icp.max_jump_rad));
+                    Some(assist)
+                }
+                // Frames too small for the keypoint grid: ICP alone.
+                Err(webfusion_core::Error::InvalidConfig(_)) => None,
+                Err(e) => return Err(format!("cannot build feature odometry: {e}")),
+            }
+        } else {
+            None
+        };
         let k = calibration.intrinsics;
         let size = [k.width_px, k.height_px];
         let pre = fusion.preprocessor();
@@ -88,13 +110,15 @@ impl Pipeline {
         let target = RaycastTarget::new(gpu, fusion.volume(), FREE_VIEW, "web.free_view");
         let shading = NormalView::new(gpu, "web.view.free", &target.normal_in_world, [FREE_VIEW.width_px, FREE_VIEW.height_px]);
         let free = FreeView { target, shading, canvas: GpuCanvas::new(gpu, "view-free", [FREE_VIEW.width_px, FREE_VIEW.height_px])? };
-        Ok(Self { fusion, views, free })
+        Ok(Self { fusion, assist, views, free })
     }
 }
 
 /// KinectFusion on the frames the shell hands over.
 pub(crate) struct FusionMode {
     config: FusionConfig,
+    /// Feature odometry beside ICP.
+    features: bool,
     pipeline: Option<Pipeline>,
     in_flight: VecDeque<InFlight>,
     /// Index of the last frame submitted.
@@ -157,12 +181,27 @@ pub(crate) struct FusionStatus {
     pub(crate) ate_pairs: usize,
     pub(crate) volume: VolumeStatus,
     pub(crate) latency_ms: Option<f64>,
+    /// Feature odometry's counts (absent when it is off).
+    pub(crate) features: Option<FeatureStatus>,
+}
+
+/// Feature odometry's part of the status.
+#[derive(Clone, Debug, serde::Serialize)]
+pub(crate) struct FeatureStatus {
+    pub(crate) guesses: usize,
+    pub(crate) relocalisations: usize,
+    pub(crate) relocalisations_confirmed: usize,
+    pub(crate) recoveries: usize,
+    pub(crate) keyframes: usize,
+    /// Median milliseconds of a frame's feature work (extraction to estimate).
+    pub(crate) median_ms: f64,
 }
 
 impl FusionMode {
-    pub(crate) fn new(config: FusionConfig) -> Self {
+    pub(crate) fn new(config: FusionConfig, features: bool) -> Self {
         Self {
             config,
+            features,
             pipeline: None,
             in_flight: VecDeque::new(),
             last_submitted: None,
@@ -190,8 +229,9 @@ impl FusionMode {
     }
 
     /// Replaces the settings: the pipeline is rebuilt at the next frame.
-    pub(crate) fn set_config(&mut self, config: FusionConfig) {
+    pub(crate) fn set_config(&mut self, config: FusionConfig, features: bool) {
         self.config = config;
+        self.features = features;
         self.pipeline = None;
     }
 
@@ -212,6 +252,9 @@ impl FusionMode {
     pub(crate) fn reset(&mut self, gpu: &Gpu) {
         if let Some(p) = &mut self.pipeline {
             p.fusion.reset(gpu);
+            if let Some(assist) = &mut p.assist {
+                assist.reset();
+            }
         }
         self.in_flight.clear();
         self.reset_run_state();
@@ -274,10 +317,20 @@ impl FusionMode {
     pub(crate) async fn submit(&mut self, gpu: &Gpu, calibration: RgbdCalibration, frame: &RgbdFrame, received: Received, draw_views: bool) -> Result<(), String> {
         let Received { ground_truth, arrived, decode_ms } = received;
         if self.pipeline.is_none() {
-            self.pipeline = Some(Pipeline::new(gpu, calibration, &self.config)?);
+            self.pipeline = Some(Pipeline::new(gpu, calibration, &self.config, self.features)?);
         }
         let Some(p) = self.pipeline.as_mut() else { return Ok(()) };
-        p.fusion.submit_frame(gpu, frame).await.map_err(|e| format!("frame {}: {e}", frame.index))?;
+        let failed = |e: webfusion_core::Error| format!("frame {}: {e}", frame.index);
+        if let Some(assist) = &mut p.assist {
+            match assist.guess(gpu, p.fusion.preprocessor(), frame).await.map_err(failed)? {
+                Some(Guess::Motion(pose)) => p.fusion.set_initial_guess(gpu, &pose),
+                Some(Guess::Relocalised { world_from_camera, .. }) => p.fusion.reseed(gpu, &world_from_camera).map_err(failed)?,
+                None => {}
+            }
+            p.fusion.submit_preprocessed_frame(gpu, frame).await.map_err(failed)?;
+        } else {
+            p.fusion.submit_frame(gpu, frame).await.map_err(failed)?;
+        }
         let t_views = Instant::now();
         if draw_views {
             draw_frame_views(gpu, p, frame)?;
@@ -285,6 +338,21 @@ impl FusionMode {
         let views_ms = t_views.elapsed().as_secs_f64() * 1e3;
         self.in_flight.push_back(InFlight { index: frame.index, timestamp_ns: frame.depth_timestamp_ns, ground_truth, arrived, decode_ms, views_ms });
         self.last_submitted = Some(frame.index);
+        if p.assist.is_some() {
+            // The next frame's guess needs this one's verdict.
+            let reports = p.fusion.flush(gpu).await.map_err(failed)?;
+            for report in &reports {
+                if report.index == frame.index
+                    && let Some(assist) = &mut p.assist
+                    && let Some(back) = assist.verdict(gpu, !report.state.is_lost(), &report.world_from_camera).map_err(failed)?
+                {
+                    p.fusion.reseed(gpu, &back).map_err(failed)?;
+                }
+            }
+            for report in reports {
+                self.apply(report);
+            }
+        }
         Ok(())
     }
 
@@ -450,6 +518,12 @@ impl FusionMode {
                 memory_bytes: t.memory_bytes(),
             },
             latency_ms: self.latency_ms,
+            features: self.pipeline.as_ref().and_then(|p| p.assist.as_ref()).map(|a| {
+                let AssistStats { guesses, relocalisations, relocalisations_confirmed, recoveries, .. } = a.stats();
+                let mut ms = a.frame_ms().iter().rev().take(STATS_WINDOW).copied().collect::<Vec<f64>>();
+                ms.sort_by(f64::total_cmp);
+                FeatureStatus { guesses, relocalisations, relocalisations_confirmed, recoveries, keyframes: a.keyframes(), median_ms: ms.get(ms.len() / 2).copied().unwrap_or(0.0) }
+            }),
         }
     }
 }

@@ -7,6 +7,10 @@
 //! request when the reference fails, [`FeatureExtractor::rematch_previous`]) and the frame
 //! being written; [`FeatureExtractor::accept`] promotes the current frame.
 //!
+//! Keyframes for relocalisation are copies of a processed frame's keypoints and descriptors
+//! ([`FeatureExtractor::store_keyframe`]); [`FeatureExtractor::match_keyframes`] matches the
+//! last processed frame against up to [`RELOCALISATION_CANDIDATES`] of them in one submission.
+//!
 //! The host reads each frame's keypoints, points and matches back (one readback of
 //! 80 bytes per slot) and estimates the motion on the CPU; moving RANSAC onto the GPU, so that
 //! no frame waits for the host, is the next step of issue 14.
@@ -23,6 +27,9 @@ use crate::{Error, Gpu, Result, RgbdFrame};
 /// The stages a frame is timed by, in order.
 pub const STAGES: [&str; 4] = ["update", "detection", "description", "matching"];
 
+/// Keyframes matched per [`FeatureExtractor::match_keyframes`].
+pub const RELOCALISATION_CANDIDATES: usize = 4;
+
 /// Keypoint sets on the GPU: reference, previous, current.
 const SETS: usize = 3;
 
@@ -34,6 +41,12 @@ struct Set {
     points: wgpu::Buffer,
     descriptors: wgpu::Buffer,
     features: wgpu::Buffer,
+}
+
+/// A keyframe's copy of a set: what matching reads.
+struct StoredSet {
+    keypoints: wgpu::Buffer,
+    descriptors: wgpu::Buffer,
 }
 
 struct Level {
@@ -72,9 +85,14 @@ pub struct FeatureExtractor {
     backward: wgpu::Buffer,
     /// At `current * SETS + reference`: (forward, backward) matching of two different sets.
     matching: Vec<Option<[wgpu::BindGroup; 2]>>,
-    _match_params: wgpu::Buffer,
+    match_params: wgpu::Buffer,
     _pattern: wgpu::Buffer,
     readback: ReadbackRing<()>,
+    /// Stored keyframes, by keyframe slot.
+    keyframes: Vec<StoredSet>,
+    /// Per relocalisation candidate: forward and backward matches.
+    candidate_matches: Vec<[wgpu::Buffer; 2]>,
+    candidate_readback: ReadbackRing<()>,
     timer: Option<StageTimer>,
     /// The set the last frame was written to.
     current: usize,
@@ -149,7 +167,29 @@ impl FeatureExtractor {
             .collect();
         let readback = ReadbackRing::new(gpu, "core.features", SLOT_BYTES * slots as u64 + StageTimer::BYTES, 1);
         let timer = StageTimer::new(gpu, "core.features");
-        Ok(Self { config, slots, levels, sets, forward, backward, matching, _match_params: match_params, _pattern: pattern, readback, timer, current: 0, reference: None, previous: None })
+        let candidate_matches = (0..RELOCALISATION_CANDIDATES)
+            .map(|c| ["forward", "backward"].map(|d| gpu.storage_buffer::<[u32; 4]>(&format!("core.hamming_match.candidate[{c}].{d}"), slots)))
+            .collect();
+        let candidate_readback = ReadbackRing::new(gpu, "core.features.candidates", 2 * 16 * (RELOCALISATION_CANDIDATES * slots) as u64, 1);
+        Ok(Self {
+            config,
+            slots,
+            levels,
+            sets,
+            forward,
+            backward,
+            matching,
+            match_params,
+            _pattern: pattern,
+            readback,
+            keyframes: Vec::new(),
+            candidate_matches,
+            candidate_readback,
+            timer,
+            current: 0,
+            reference: None,
+            previous: None,
+        })
     }
 
     /// The settings.
@@ -241,6 +281,67 @@ impl FeatureExtractor {
         let done = self.readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the feature readback vanished".into()))?;
         let bytes = &done.bytes;
         Ok(Some((bytemuck::pod_collect_to_vec(&bytes[..n as usize]), bytemuck::pod_collect_to_vec(&bytes[n as usize..2 * n as usize]))))
+    }
+
+    /// Copies the last processed frame's keypoints and descriptors into keyframe slot `slot`
+    /// (a slot past the last one grows the store by one; an existing one is overwritten).
+    pub fn store_keyframe(&mut self, gpu: &Gpu, slot: usize) -> Result<()> {
+        if slot > self.keyframes.len() {
+            return Err(Error::InvalidConfig(format!("features: keyframe slot {slot} past the {} stored", self.keyframes.len())));
+        }
+        if slot == self.keyframes.len() {
+            self.keyframes.push(StoredSet {
+                keypoints: gpu.storage_buffer::<[f32; 4]>(&format!("core.features.keyframe[{slot}].keypoints"), self.slots),
+                descriptors: gpu.storage_buffer::<u32>(&format!("core.features.keyframe[{slot}].descriptors"), self.slots * DESCRIPTOR_WORDS),
+            });
+        }
+        let (set, stored) = (&self.sets[self.current], &self.keyframes[slot]);
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.features.store_keyframe") });
+        encoder.copy_buffer_to_buffer(&set.keypoints, 0, &stored.keypoints, 0, set.keypoints.size());
+        encoder.copy_buffer_to_buffer(&set.descriptors, 0, &stored.descriptors, 0, set.descriptors.size());
+        gpu.submit([encoder.finish()]);
+        Ok(())
+    }
+
+    /// Keyframes stored.
+    pub fn keyframe_count(&self) -> usize {
+        self.keyframes.len()
+    }
+
+    /// Matches the last processed frame against the stored keyframes `slots` (at most
+    /// [`RELOCALISATION_CANDIDATES`]) in one submission and waits: per keyframe, (forward,
+    /// backward) as in [`FrameFeatures`], the keyframe in the reference's role.
+    pub async fn match_keyframes(&mut self, gpu: &Gpu, slots: &[usize]) -> Result<Vec<(Vec<[u32; 4]>, Vec<[u32; 4]>)>> {
+        if slots.len() > RELOCALISATION_CANDIDATES {
+            return Err(Error::InvalidConfig(format!("features: {} keyframes asked for, at most {RELOCALISATION_CANDIDATES} per submission", slots.len())));
+        }
+        if let Some(&bad) = slots.iter().find(|&&k| k >= self.keyframes.len()) {
+            return Err(Error::InvalidConfig(format!("features: keyframe slot {bad} past the {} stored", self.keyframes.len())));
+        }
+        let n = self.slots as u32;
+        let c = &self.sets[self.current];
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.features.match_keyframes") });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("matching"), timestamp_writes: None });
+            for (i, &k) in slots.iter().enumerate() {
+                let (kf, [forward, backward]) = (&self.keyframes[k], &self.candidate_matches[i]);
+                let fwd = hamming_match::Bindings { params: &self.match_params, query_keypoints: &c.keypoints, query_descriptors: &c.descriptors, train_keypoints: &kf.keypoints, train_descriptors: &kf.descriptors, matches: forward }.bind_group(gpu);
+                let bwd = hamming_match::Bindings { params: &self.match_params, query_keypoints: &kf.keypoints, query_descriptors: &kf.descriptors, train_keypoints: &c.keypoints, train_descriptors: &c.descriptors, matches: backward }.bind_group(gpu);
+                gpu.kernels.hamming_match.dispatch_in(&mut pass, &fwd, [n, 1, 1]);
+                gpu.kernels.hamming_match.dispatch_in(&mut pass, &bwd, [n, 1, 1]);
+            }
+        }
+        let (slot, buffer) = self.candidate_readback.free_slot().ok_or_else(|| Error::Poll("the keyframe matches' readback is still in flight".into()))?;
+        let bytes_per = u64::from(n) * 16;
+        for (i, pair) in self.candidate_matches.iter().take(slots.len()).enumerate() {
+            encoder.copy_buffer_to_buffer(&pair[0], 0, buffer, 2 * i as u64 * bytes_per, bytes_per);
+            encoder.copy_buffer_to_buffer(&pair[1], 0, buffer, (2 * i as u64 + 1) * bytes_per, bytes_per);
+        }
+        let submission = gpu.submit([encoder.finish()]);
+        self.candidate_readback.start(gpu, slot, submission, ());
+        let done = self.candidate_readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the keyframe matches' readback vanished".into()))?;
+        let part = |j: usize| bytemuck::pod_collect_to_vec(&done.bytes[j * bytes_per as usize..(j + 1) * bytes_per as usize]);
+        Ok((0..slots.len()).map(|i| (part(2 * i), part(2 * i + 1))).collect())
     }
 
     /// Uploads and preprocesses `frame`, extracts its features and matches them against the

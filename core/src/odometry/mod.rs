@@ -11,9 +11,13 @@
 //! from the 3D-3D pairs with RANSAC on 3-point Kabsch samples, then Gauss-Newton refits of the
 //! Mahalanobis cost under the Kinect noise model ([`rigid`]).
 //!
+//! Beside a dense tracker, [`assist::FeatureAssist`] gives ICP its initial guess and
+//! relocalises against stored keyframes after a loss.
+//!
 //! [`reference::extract`] is the CPU chain of the kernels' twins; [`gpu::FeatureExtractor`]
 //! records the same chain on the GPU.
 
+pub mod assist;
 pub mod gpu;
 pub mod matching;
 pub mod reference;

@@ -1,0 +1,307 @@
+// SPDX-License-Identifier: MIT
+//! Feature odometry beside a dense tracker (ICP): each frame's initial guess from its features
+//! matched against the last frame the dense tracker accepted, and relocalisation against
+//! stored keyframes once tracking is lost.
+//!
+//! Per frame the caller asks [`FeatureAssist::guess`] before tracking and reports the dense
+//! tracker's outcome with [`FeatureAssist::verdict`] after it:
+//!
+//! - **tracking**: the frame's motion against the last accepted frame, when RANSAC accepts it,
+//!   is a [`Guess::Motion`]: the dense tracker starts there instead of its motion model.
+//!   A motion beyond the dense tracker's plausible inter-frame jump
+//!   ([`FeatureAssist::set_jump_limits`]), which its jump check would reject, is proposed as
+//!   a relocalisation instead (below), verified the same way.
+//! - **lost**: the frame is matched against the last accepted frame and against up to
+//!   [`RELOCALISATION_CANDIDATES`] stored keyframes (nearest to the last good pose first, the
+//!   next ones on the next lost frame, so a long loss cycles through the whole store); the
+//!   candidate with the most RANSAC inliers (at least `min_inliers`) is a
+//!   [`Guess::Relocalised`]: the dense tracker re-renders its model at that pose and tracks
+//!   the frame from there. The relocalisation stands only when the dense tracker then tracks
+//!   the frame (its own inlier, conditioning and jump checks, the jump now measured from the
+//!   relocalised pose); otherwise [`FeatureAssist::verdict`] hands back the last good pose to
+//!   reseed at, so a false relocalisation leaves nothing behind.
+//!
+//! A tracked frame becomes a keyframe when no stored keyframe lies within
+//! [`KEYFRAME_SPACING_M`] and [`KEYFRAME_SPACING_RAD`] of it. The spacing keeps every view of
+//! the covered region within half of it (5 cm, 5°) of a keyframe, well inside the viewpoint
+//! change binary descriptors tolerate (rotated BRIEF holds its matches to about 30°; Rublee et
+//! al. 2011), while a camera sweeping a room adds one every few frames, not every frame. The
+//! store holds [`KEYFRAME_CAPACITY`]; when full, the most redundant keyframe (the one whose
+//! nearest other keyframe is closest) gives way, so the store keeps its spread over the room.
+
+use super::gpu::{FeatureExtractor, RELOCALISATION_CANDIDATES};
+use super::tracker::{MotionEstimate, OdometryConfig, estimate_motion};
+use super::Features;
+use crate::preprocess::DepthPreprocessor;
+use crate::{Gpu, PinholeIntrinsics, Result, RgbdFrame, Se3};
+
+/// Translation between keyframes, metres.
+pub const KEYFRAME_SPACING_M: f64 = 0.10;
+/// Rotation between keyframes, radians (10°).
+pub const KEYFRAME_SPACING_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// Keyframes kept (each holds one frame's keypoint slots on the GPU: about 58 KB at 640×480).
+pub const KEYFRAME_CAPACITY: usize = 64;
+
+/// A feature-based starting pose for the dense tracker.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Guess {
+    /// The frame's camera-to-world pose from its motion against the last accepted frame: start
+    /// tracking there.
+    Motion(Se3),
+    /// After a loss, the frame's camera-to-world pose from a stored keyframe (or the last
+    /// accepted frame): reseed the tracker there and verify.
+    Relocalised {
+        /// The camera-to-world pose.
+        world_from_camera: Se3,
+        /// The source frame index of the keyframe it came from.
+        keyframe: u64,
+        /// RANSAC inliers against it.
+        inliers: usize,
+    },
+}
+
+impl Guess {
+    /// The camera-to-world pose.
+    pub fn world_from_camera(&self) -> Se3 {
+        match self {
+            Guess::Motion(p) => *p,
+            Guess::Relocalised { world_from_camera, .. } => *world_from_camera,
+        }
+    }
+}
+
+/// Counts over a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AssistStats {
+    /// Frames given a motion guess.
+    pub guesses: usize,
+    /// Relocalisations proposed after a loss.
+    pub relocalisations: usize,
+    /// Of those, the ones the dense tracker confirmed.
+    pub relocalisations_confirmed: usize,
+    /// Lost frames followed by a tracked one that had a feature guess.
+    pub recoveries: usize,
+    /// Keyframes added (including the ones that replaced others).
+    pub keyframes_added: usize,
+}
+
+struct Keyframe {
+    features: Features,
+    world_from_camera: Se3,
+    frame: u64,
+}
+
+/// The last accepted frame: its features and pose.
+struct Reference {
+    features: Features,
+    world_from_camera: Se3,
+    frame: u64,
+}
+
+/// Feature odometry as the dense tracker's assistant.
+pub struct FeatureAssist {
+    extractor: FeatureExtractor,
+    config: OdometryConfig,
+    k0: PinholeIntrinsics,
+    reference: Option<Reference>,
+    keyframes: Vec<Keyframe>,
+    /// The frame being tracked: its features and the guess given for it.
+    pending: Option<(Features, u64, Option<Guess>)>,
+    lost_streak: usize,
+    /// The dense tracker's largest plausible inter-frame motion (metres, radians).
+    jump_limits: Option<(f64, f64)>,
+    stats: AssistStats,
+    /// Host milliseconds per frame (features, matching, estimation, relocalisation).
+    ms: Vec<f64>,
+}
+
+impl std::fmt::Debug for FeatureAssist {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FeatureAssist").field("keyframes", &self.keyframes.len()).field("lost_streak", &self.lost_streak).field("stats", &self.stats).finish_non_exhaustive()
+    }
+}
+
+/// Distance between two poses for ranking keyframes: metres plus radians at 1 m.
+fn pose_distance(a: &Se3, b: &Se3) -> f64 {
+    let d = a.inverse().compose(b);
+    d.translation_m.length() + d.rotation_angle_rad()
+}
+
+fn within_spacing(a: &Se3, b: &Se3) -> bool {
+    let d = a.inverse().compose(b);
+    d.translation_m.length() < KEYFRAME_SPACING_M && d.rotation_angle_rad() < KEYFRAME_SPACING_RAD
+}
+
+impl FeatureAssist {
+    /// Feature odometry reading `preprocessor` (the dense pipeline's: the feature pass uploads
+    /// and preprocesses each frame, and the dense pipeline then skips both).
+    pub fn new(gpu: &Gpu, preprocessor: &DepthPreprocessor, config: OdometryConfig) -> Result<Self> {
+        config.validate()?;
+        let extractor = FeatureExtractor::new(gpu, preprocessor, config.features)?;
+        Ok(Self { extractor, config, k0: preprocessor.levels[0].intrinsics, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new() })
+    }
+
+    /// The dense tracker's largest plausible inter-frame translation and rotation: a feature
+    /// motion beyond either is proposed as a relocalisation (a reseed), not a guess the jump
+    /// check would reject.
+    pub fn set_jump_limits(&mut self, max_m: f64, max_rad: f64) {
+        self.jump_limits = Some((max_m, max_rad));
+    }
+
+    /// Forgets the reference, the keyframes and the counts (the dense tracker was reset: a new
+    /// world frame). The keyframes' GPU buffers are kept for reuse.
+    pub fn reset(&mut self) {
+        self.extractor.reset();
+        self.reference = None;
+        self.keyframes.clear();
+        self.pending = None;
+        self.lost_streak = 0;
+        self.stats = AssistStats::default();
+        self.ms.clear();
+    }
+
+    /// The counts so far.
+    pub fn stats(&self) -> AssistStats {
+        self.stats
+    }
+
+    /// Host milliseconds of each frame's feature work.
+    pub fn frame_ms(&self) -> &[f64] {
+        &self.ms
+    }
+
+    /// Keyframes held.
+    pub fn keyframes(&self) -> usize {
+        self.keyframes.len()
+    }
+
+    /// Uploads and preprocesses `frame` into the shared preprocessor, extracts its features and
+    /// proposes the dense tracker's starting pose (see the module docs), waiting for the GPU.
+    pub async fn guess(&mut self, gpu: &Gpu, preprocessor: &DepthPreprocessor, frame: &RgbdFrame) -> Result<Option<Guess>> {
+        let started = web_time::Instant::now();
+        let result = self.extractor.process(gpu, preprocessor, frame).await?;
+        let seed = frame.index as u32;
+        let against_reference = self.reference.as_ref().and_then(|r| {
+            let e = estimate_motion(&self.config, &self.k0, &result.features, &r.features, &result.forward, &result.backward, seed);
+            Some((e.reference_from_current()?, e.inliers(), r))
+        });
+        let guess = if self.lost_streak == 0 {
+            against_reference.map(|(ref_from_cur, inliers, r)| {
+                let world_from_camera = r.world_from_camera.compose(&ref_from_cur);
+                let beyond = self.jump_limits.is_some_and(|(m, rad)| ref_from_cur.translation_m.length() > m || ref_from_cur.rotation_angle_rad() > rad);
+                if beyond { Guess::Relocalised { world_from_camera, keyframe: r.frame, inliers } } else { Guess::Motion(world_from_camera) }
+            })
+        } else {
+            let mut best = against_reference.map(|(ref_from_cur, inliers, r)| (inliers, r.world_from_camera.compose(&ref_from_cur), r.frame));
+            for (inliers, pose, keyframe) in self.match_keyframes(gpu, &result.features, seed).await? {
+                if best.as_ref().is_none_or(|b| inliers > b.0) {
+                    best = Some((inliers, pose, keyframe));
+                }
+            }
+            best.map(|(inliers, world_from_camera, keyframe)| Guess::Relocalised { world_from_camera, keyframe, inliers })
+        };
+        match guess {
+            Some(Guess::Motion(_)) => self.stats.guesses += 1,
+            Some(Guess::Relocalised { .. }) => self.stats.relocalisations += 1,
+            None => {}
+        }
+        self.pending = Some((result.features, frame.index, guess));
+        self.ms.push(started.elapsed().as_secs_f64() * 1e3);
+        Ok(guess)
+    }
+
+    /// The accepted estimates of the last processed frame against this loss's window of
+    /// keyframes: (inliers, camera-to-world pose, keyframe's frame index).
+    async fn match_keyframes(&mut self, gpu: &Gpu, current: &Features, seed: u32) -> Result<Vec<(usize, Se3, u64)>> {
+        let Some(last_good) = self.reference.as_ref().map(|r| r.world_from_camera) else { return Ok(Vec::new()) };
+        let reference_frame = self.reference.as_ref().map(|r| r.frame);
+        let mut order: Vec<usize> = (0..self.keyframes.len()).filter(|&k| Some(self.keyframes[k].frame) != reference_frame).collect();
+        if order.is_empty() {
+            return Ok(Vec::new());
+        }
+        order.sort_by(|&a, &b| pose_distance(&last_good, &self.keyframes[a].world_from_camera).total_cmp(&pose_distance(&last_good, &self.keyframes[b].world_from_camera)));
+        let windows = order.len().div_ceil(RELOCALISATION_CANDIDATES);
+        let start = ((self.lost_streak - 1) % windows) * RELOCALISATION_CANDIDATES;
+        let window: Vec<usize> = order[start..(start + RELOCALISATION_CANDIDATES).min(order.len())].to_vec();
+        let matches = self.extractor.match_keyframes(gpu, &window).await?;
+        Ok(window
+            .iter()
+            .zip(matches)
+            .filter_map(|(&k, (forward, backward))| {
+                let kf = &self.keyframes[k];
+                let e: MotionEstimate = estimate_motion(&self.config, &self.k0, current, &kf.features, &forward, &backward, seed ^ (k as u32 + 1));
+                Some((e.inliers(), kf.world_from_camera.compose(&e.reference_from_current()?), kf.frame))
+            })
+            .collect())
+    }
+
+    /// The dense tracker's outcome for the frame last given to [`Self::guess`]: tracked at
+    /// `world_from_camera` (it becomes the reference, and a keyframe where the store has none
+    /// near it) or lost. Returns the pose to reseed the dense tracker at when a relocalisation
+    /// was not confirmed (the last good pose), so that it leaves nothing behind.
+    pub fn verdict(&mut self, gpu: &Gpu, tracked: bool, world_from_camera: &Se3) -> Result<Option<Se3>> {
+        let Some((features, frame, guess)) = self.pending.take() else { return Ok(None) };
+        let relocalised = matches!(guess, Some(Guess::Relocalised { .. }));
+        if !tracked {
+            self.lost_streak += 1;
+            return Ok(if relocalised { self.reference.as_ref().map(|r| r.world_from_camera) } else { None });
+        }
+        if self.lost_streak > 0 && guess.is_some() {
+            self.stats.recoveries += 1;
+        }
+        if relocalised {
+            self.stats.relocalisations_confirmed += 1;
+        }
+        self.lost_streak = 0;
+        self.extractor.accept(true);
+        if !self.keyframes.iter().any(|k| within_spacing(&k.world_from_camera, world_from_camera)) {
+            self.add_keyframe(gpu, Keyframe { features: features.clone(), world_from_camera: *world_from_camera, frame })?;
+        }
+        self.reference = Some(Reference { features, world_from_camera: *world_from_camera, frame });
+        Ok(None)
+    }
+
+    fn add_keyframe(&mut self, gpu: &Gpu, keyframe: Keyframe) -> Result<()> {
+        let slot = if self.keyframes.len() < KEYFRAME_CAPACITY { self.keyframes.len() } else { most_redundant(&self.keyframes) };
+        self.extractor.store_keyframe(gpu, slot)?;
+        if slot == self.keyframes.len() {
+            self.keyframes.push(keyframe);
+        } else {
+            self.keyframes[slot] = keyframe;
+        }
+        self.stats.keyframes_added += 1;
+        Ok(())
+    }
+}
+
+/// The keyframe whose nearest other keyframe is closest (the first of such a pair).
+fn most_redundant(keyframes: &[Keyframe]) -> usize {
+    let nearest = |i: usize| keyframes.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, k)| pose_distance(&keyframes[i].world_from_camera, &k.world_from_camera)).fold(f64::INFINITY, f64::min);
+    (0..keyframes.len()).min_by(|&a, &b| nearest(a).total_cmp(&nearest(b))).unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{DQuat, DVec3};
+
+    fn kf(x: f64, yaw: f64, frame: u64) -> Keyframe {
+        Keyframe { features: Features::default(), world_from_camera: Se3::new(DQuat::from_rotation_y(yaw), DVec3::new(x, 0.0, 0.0)), frame }
+    }
+
+    #[test]
+    fn keyframe_spacing_needs_both_distances_small() {
+        let a = kf(0.0, 0.0, 0).world_from_camera;
+        assert!(within_spacing(&a, &kf(0.05, 0.1, 1).world_from_camera));
+        assert!(!within_spacing(&a, &kf(0.12, 0.0, 1).world_from_camera));
+        assert!(!within_spacing(&a, &kf(0.0, 0.2, 1).world_from_camera));
+    }
+
+    #[test]
+    fn the_most_redundant_keyframe_is_one_of_the_closest_pair() {
+        let store = vec![kf(0.0, 0.0, 0), kf(1.0, 0.0, 1), kf(1.02, 0.0, 2), kf(2.0, 0.0, 3)];
+        assert!([1, 2].contains(&most_redundant(&store)));
+        let spread = vec![kf(0.0, 0.0, 0), kf(0.5, 0.0, 1), kf(2.0, 0.0, 2)];
+        assert!([0, 1].contains(&most_redundant(&spread)));
+    }
+}
