@@ -147,6 +147,22 @@ try {
   check('one submission and one late readback per frame', final.host_per_frame.submits === 1 && final.host_per_frame.readbacks === 1 && final.host_per_frame.host_waits <= 1,
     `the last frame's pipeline: ${JSON.stringify(final.host_per_frame)}`);
 
+  // 6b. Feature odometry (on by default): its view shows the last pair with RANSAC's inliers,
+  // and its step button walks through the stages (past the last it fetches the next frame).
+  stage = 'the odometry view';
+  const fv = final.features;
+  const odoShot = decodePng(await page.locator('#view-odometry').screenshot({ path: join(out, 'odometry_view.png') }));
+  let odoLit = 0;
+  for (let i = 0; i < odoShot.width * odoShot.height; i++) {
+    if (odoShot.pixels[i * odoShot.channels] + odoShot.pixels[i * odoShot.channels + 1] + odoShot.pixels[i * odoShot.channels + 2] > 60) odoLit++;
+  }
+  check('feature odometry view', fv && fv.pair && fv.pair.inliers >= 20 && fv.pair.matches >= fv.pair.inliers && fv.pair.stage === 'estimation' && fv.guesses >= total - 2 && odoLit / (odoShot.width * odoShot.height) > 0.3,
+    `features ${JSON.stringify(fv)}; view ${(100 * odoLit / (odoShot.width * odoShot.height)).toFixed(0)} % lit (saved ${join(out, 'odometry_view.png')})`);
+  await page.click('#odometry-step');
+  await page.click('#odometry-step');
+  const stepped = await evaluateWithin(page, () => window.webfusion.status, 'the status after two stage steps');
+  check('odometry stage steps', stepped.features?.pair?.stage === 'detection', `after two steps from 'estimation': '${stepped.features?.pair?.stage}' (${await page.locator('#odometry-stage').textContent()})`);
+
   // 7. Bad settings in the URL, then a lost device, in a browser of their own (a fresh GPU
   // process, as a new visitor would have).
   stage = 'the second browser';

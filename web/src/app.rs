@@ -500,6 +500,15 @@ impl App {
                 self.send(Control::Delivery(Delivery::Lossless));
                 self.send(Control::Step);
             }
+            Ui::OdometryStage => {
+                if self.mode.next_odometry_stage() {
+                    // Past the last stage: the next frame, one at a time.
+                    self.playing = false;
+                    self.send(Control::Pause);
+                    self.send(Control::Delivery(Delivery::Lossless));
+                    self.send(Control::Step);
+                }
+            }
             Ui::Playback(Control::Seek(index)) => {
                 // A jump in time is a new reconstruction from that frame.
                 self.reset_run();

@@ -23,7 +23,7 @@ use webfusion_core::map::{MapKind, MapStats};
 use webfusion_core::eval::{Alignment, RunningAte};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, RaycastTarget, TrackingState};
 use webfusion_core::io::{TUM_TRAJECTORY_HEADER, push_tum_line};
-use webfusion_core::odometry::assist::{AssistStats, FeatureAssist, Guess};
+use webfusion_core::odometry::assist::{AssistStats, FeatureAssist, Guess, PAIR_STAGES, PairView};
 use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::source::TimedPose;
 use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, NormalView};
@@ -32,7 +32,7 @@ use webfusion_core::{Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
 use crate::canvas::GpuCanvas;
 use crate::status::{HostPerFrame, STATS_WINDOW, StageMedians, VolumeStatus, Window};
 use crate::ui;
-use crate::view::{self, Orbit};
+use crate::view::{self, FrameImage, Orbit};
 
 /// The free view's camera.
 pub(crate) const FREE_VIEW: PinholeIntrinsics = PinholeIntrinsics { fx_px: 420.0, fy_px: 420.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 };
@@ -153,6 +153,12 @@ pub(crate) struct FusionMode {
     free_model_dirty: bool,
     free_drawn_at: Option<Instant>,
     free_colour: bool,
+    /// The odometry view: the stage shown (an index into `PAIR_STAGES`), the last pair and the
+    /// colour images of its two frames.
+    odometry_stage: usize,
+    pair: Option<PairView>,
+    reference_image: Option<FrameImage>,
+    current_image: Option<FrameImage>,
 }
 
 /// How a frame reached the page: its ground truth (if the source has it), when it arrived and
@@ -195,6 +201,23 @@ pub(crate) struct FeatureStatus {
     pub(crate) keyframes: usize,
     /// Median milliseconds of a frame's feature work (extraction to estimate).
     pub(crate) median_ms: f64,
+    /// The last frame pair (the odometry view).
+    pub(crate) pair: Option<PairStatus>,
+}
+
+/// The odometry view's pair.
+#[derive(Clone, Debug, serde::Serialize)]
+pub(crate) struct PairStatus {
+    pub(crate) frame: u64,
+    pub(crate) reference_frame: u64,
+    pub(crate) keypoints: usize,
+    pub(crate) reference_keypoints: usize,
+    pub(crate) matches: usize,
+    pub(crate) inliers: usize,
+    /// The stage the view shows.
+    pub(crate) stage: &'static str,
+    /// Milliseconds per stage (`PAIR_STAGES`; null without GPU timestamps).
+    pub(crate) stages_ms: [Option<f64>; 5],
 }
 
 impl FusionMode {
@@ -225,6 +248,10 @@ impl FusionMode {
             free_model_dirty: false,
             free_drawn_at: None,
             free_colour: false,
+            odometry_stage: PAIR_STAGES.len() - 1,
+            pair: None,
+            reference_image: None,
+            current_image: None,
         }
     }
 
@@ -278,6 +305,9 @@ impl FusionMode {
         self.orbit = None;
         self.free_dirty = true;
         self.free_model_dirty = false;
+        self.pair = None;
+        self.reference_image = None;
+        self.current_image = None;
     }
 
     /// Index of the last frame submitted (the shell requests the next one from it).
@@ -327,6 +357,11 @@ impl FusionMode {
                 Some(Guess::Relocalised { world_from_camera, .. }) => p.fusion.reseed(gpu, &world_from_camera).map_err(failed)?,
                 None => {}
             }
+            self.pair = assist.last_pair().cloned();
+            self.current_image = Some((frame.index, frame.color.width_px, frame.color.height_px, view::rgba_from_rgb(&frame.color.rgb8)));
+            if draw_views {
+                draw_odometry_view(self.pair.as_ref(), self.reference_image.as_ref(), self.current_image.as_ref(), self.odometry_stage);
+            }
             p.fusion.submit_preprocessed_frame(gpu, frame).await.map_err(failed)?;
         } else {
             p.fusion.submit_frame(gpu, frame).await.map_err(failed)?;
@@ -348,12 +383,25 @@ impl FusionMode {
                 {
                     p.fusion.reseed(gpu, &back).map_err(failed)?;
                 }
+                if report.index == frame.index && !report.state.is_lost() {
+                    // The next pair's left frame.
+                    self.reference_image = self.current_image.clone();
+                }
             }
             for report in reports {
                 self.apply(report);
             }
         }
         Ok(())
+    }
+
+    /// Shows the odometry view's next stage; past the last one it starts again from the first
+    /// and returns true: the caller fetches the next frame.
+    pub(crate) fn next_odometry_stage(&mut self) -> bool {
+        let wrapped = self.odometry_stage + 1 >= PAIR_STAGES.len();
+        self.odometry_stage = if wrapped { 0 } else { self.odometry_stage + 1 };
+        draw_odometry_view(self.pair.as_ref(), self.reference_image.as_ref(), self.current_image.as_ref(), self.odometry_stage);
+        wrapped
     }
 
     /// Takes the reports that came back (never waits); true if any did.
@@ -522,7 +570,17 @@ impl FusionMode {
                 let AssistStats { guesses, relocalisations, relocalisations_confirmed, recoveries, .. } = a.stats();
                 let mut ms = a.frame_ms().iter().rev().take(STATS_WINDOW).copied().collect::<Vec<f64>>();
                 ms.sort_by(f64::total_cmp);
-                FeatureStatus { guesses, relocalisations, relocalisations_confirmed, recoveries, keyframes: a.keyframes(), median_ms: ms.get(ms.len() / 2).copied().unwrap_or(0.0) }
+                let pair = self.pair.as_ref().map(|v| PairStatus {
+                    frame: v.frame,
+                    reference_frame: v.reference_frame,
+                    keypoints: v.current.len(),
+                    reference_keypoints: v.reference.len(),
+                    matches: v.matches.len(),
+                    inliers: v.matches.iter().filter(|m| m.2).count(),
+                    stage: PAIR_STAGES[self.odometry_stage],
+                    stages_ms: v.stages_ms.map(|t| t.is_finite().then_some(t)),
+                });
+                FeatureStatus { guesses, relocalisations, relocalisations_confirmed, recoveries, keyframes: a.keyframes(), median_ms: ms.get(ms.len() / 2).copied().unwrap_or(0.0), pair }
             }),
         }
     }
@@ -546,4 +604,31 @@ fn draw_frame_views(gpu: &Gpu, p: &Pipeline, frame: &RgbdFrame) -> Result<(), St
     let (w, h) = (frame.color.width_px, frame.color.height_px);
     view::draw_rgba(&ui::element("view-colour")?, w, h, &view::rgba_from_rgb(&frame.color.rgb8)).map_err(|e| crate::link::js_text(&e))?;
     Ok(())
+}
+
+/// Draws the odometry view and its caption (what the stage shows, the counts, the stage
+/// times); a pair whose images are missing is described, not drawn.
+fn draw_odometry_view(pair: Option<&PairView>, reference: Option<&FrameImage>, current: Option<&FrameImage>, stage: usize) {
+    let Some(pair) = pair else { return };
+    let what = [
+        "update: the two frames (uploaded and preprocessed)",
+        "detection: FAST-9 keypoints per grid cell that pass 002's depth border filter",
+        "description: each keypoint's orientation (its 256-bit descriptor is taken along it)",
+        "matching: the matches kept (Lowe ratio 0.8, mutual)",
+        "estimation: RANSAC inliers (green) and outliers (red)",
+    ][stage.min(PAIR_STAGES.len() - 1)];
+    let inliers = pair.matches.iter().filter(|m| m.2).count();
+    ui::set_text(
+        "odometry-stage",
+        &format!("frame {} vs {}: {what} · {} / {} keypoints · {} matches · {inliers} inliers", pair.frame, pair.reference_frame, pair.reference.len(), pair.current.len(), pair.matches.len()),
+    );
+    let times: Vec<String> = PAIR_STAGES.iter().zip(pair.stages_ms).map(|(name, ms)| if ms.is_finite() { format!("{name} {ms:.1}") } else { format!("{name} -") }).collect();
+    ui::set_text("odometry-times", &format!("ms: {} (GPU timestamps; estimation on the host)", times.join(" · ")));
+    if let (Some(r), Some(c)) = (reference, current)
+        && r.0 == pair.reference_frame
+        && c.0 == pair.frame
+        && let Ok(canvas) = ui::element::<web_sys::HtmlCanvasElement>("view-odometry")
+    {
+        view::draw_odometry_pair(&canvas, r, c, pair, stage).ok();
+    }
 }

@@ -53,6 +53,8 @@ pub(crate) enum Ui {
     Zoom(f32),
     /// Show the model's fused colour instead of shading in the free view.
     ViewColour(bool),
+    /// The odometry view's next stage (after the last: the next frame, paused).
+    OdometryStage,
 }
 
 /// Events waiting for the app loop, and the loop's wake-up call.

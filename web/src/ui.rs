@@ -120,6 +120,7 @@ pub(crate) fn bind_controls(inbox: &Rc<Inbox>) {
         ("export-ply", Ui::ExportPly),
         ("export-glb", Ui::ExportGlb),
         ("export-trajectory", Ui::ExportTrajectory),
+        ("odometry-step", Ui::OdometryStage),
     ] {
         on(inbox, id, "click", move || Some(ui.clone()));
     }

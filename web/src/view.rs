@@ -4,6 +4,7 @@
 
 use glam::{DMat3, DQuat, DVec3};
 use wasm_bindgen::prelude::*;
+use webfusion_core::odometry::assist::PairView;
 use webfusion_core::{PinholeIntrinsics, Se3};
 
 /// Packed RGB8 as RGBA8.
@@ -26,6 +27,57 @@ pub(crate) fn draw_rgba(canvas: &web_sys::HtmlCanvasElement, width: u32, height:
     let image = web_sys::ImageData::new_with_u8_clamped_array_and_sh(wasm_bindgen::Clamped(rgba), width, height)?;
     ctx.put_image_data(&image, 0.0, 0.0)?;
     Ok(ctx)
+}
+
+/// An RGBA8 image: its frame index, width, height and pixels.
+pub(crate) type FrameImage = (u64, u32, u32, Vec<u8>);
+
+/// Draws a feature-odometry pair side by side (the last accepted frame left, the current one
+/// right) with what `stage` (an index into `PAIR_STAGES`) shows: 0 the frames, 1 the
+/// keypoints (circles of 3 · 2^level px), 2 their orientations, 3 the kept matches, 4 RANSAC's
+/// inliers (green) and outliers (red).
+pub(crate) fn draw_odometry_pair(canvas: &web_sys::HtmlCanvasElement, reference: &FrameImage, current: &FrameImage, pair: &PairView, stage: usize) -> Result<(), JsValue> {
+    let (w, h) = (current.1, current.2);
+    if (reference.1, reference.2) != (w, h) {
+        return Err("the two frames differ in size".into());
+    }
+    let ctx = context_2d(canvas, 2 * w, h)?;
+    for (image, x0) in [(reference, 0.0), (current, f64::from(w))] {
+        let data = web_sys::ImageData::new_with_u8_clamped_array_and_sh(wasm_bindgen::Clamped(&image.3), w, h)?;
+        ctx.put_image_data(&data, x0, 0.0)?;
+    }
+    ctx.set_line_width(1.5);
+    let radius = |k: &[f32; 4]| 3.0 * f64::from(1u32 << (k[3].max(0.0) as u32).min(4));
+    if stage >= 1 {
+        ctx.set_stroke_style_str("rgba(255, 220, 0, 0.9)");
+        for (keypoints, x0) in [(&pair.reference, 0.0), (&pair.current, f64::from(w))] {
+            for k in keypoints.iter() {
+                let (x, y, r) = (x0 + f64::from(k[0]), f64::from(k[1]), radius(k));
+                ctx.begin_path();
+                ctx.arc(x, y, r, 0.0, std::f64::consts::TAU)?;
+                if stage >= 2 {
+                    ctx.move_to(x, y);
+                    ctx.line_to(x + r * f64::from(k[2]).cos(), y + r * f64::from(k[2]).sin());
+                }
+                ctx.stroke();
+            }
+        }
+    }
+    if stage >= 3 {
+        for &(q, t, inlier) in &pair.matches {
+            let (Some(c), Some(r)) = (pair.current.get(q as usize), pair.reference.get(t as usize)) else { continue };
+            ctx.set_stroke_style_str(match (stage, inlier) {
+                (3, _) => "rgba(0, 200, 255, 0.8)",
+                (_, true) => "rgba(40, 230, 40, 0.9)",
+                (_, false) => "rgba(255, 40, 40, 0.9)",
+            });
+            ctx.begin_path();
+            ctx.move_to(f64::from(r[0]), f64::from(r[1]));
+            ctx.line_to(f64::from(w) + f64::from(c[0]), f64::from(c[1]));
+            ctx.stroke();
+        }
+    }
+    Ok(())
 }
 
 /// The free viewer: it orbits a target point, in the world frame of the first camera

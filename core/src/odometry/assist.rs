@@ -113,6 +113,59 @@ pub struct FeatureAssist {
     stats: AssistStats,
     /// Host milliseconds per frame (features, matching, estimation, relocalisation).
     ms: Vec<f64>,
+    /// The last frame against the last accepted one, for display.
+    last_pair: Option<PairView>,
+}
+
+/// One frame matched against the last accepted frame, as seed 002's step-by-step view shows it:
+/// both frames' keypoints, the matches the filters kept, which of them RANSAC took as inliers,
+/// and the time of each stage.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PairView {
+    /// The current frame's source index.
+    pub frame: u64,
+    /// The reference (last accepted) frame's source index.
+    pub reference_frame: u64,
+    /// The current frame's keypoints: (x, y in full-resolution pixels, orientation radians,
+    /// pyramid level).
+    pub current: Vec<[f32; 4]>,
+    /// The reference frame's keypoints, likewise.
+    pub reference: Vec<[f32; 4]>,
+    /// Kept matches: (index into `current`, index into `reference`, RANSAC inlier).
+    pub matches: Vec<(u32, u32, bool)>,
+    /// Milliseconds of [`PAIR_STAGES`] (GPU timestamps for the first four, NaN without them;
+    /// host time for the estimation).
+    pub stages_ms: [f64; 5],
+}
+
+/// The stages of a [`PairView`], seed 002's.
+pub const PAIR_STAGES: [&str; 5] = ["update", "detection", "description", "matching", "estimation"];
+
+impl PairView {
+    fn new(frame: u64, reference_frame: u64, current: &Features, reference: &Features, estimate: &MotionEstimate, stages_ms: [f64; 5]) -> Self {
+        // Slot → position among the frame's keypoints.
+        let compact = |f: &Features| {
+            let mut position = vec![u32::MAX; f.slots()];
+            let mut kept = Vec::new();
+            for slot in (0..f.slots()).filter(|&i| f.is_keypoint(i)) {
+                position[slot] = kept.len() as u32;
+                kept.push(f.features[slot]);
+            }
+            (position, kept)
+        };
+        let ((cur_at, cur), (ref_at, refs)) = (compact(current), compact(reference));
+        let inliers: std::collections::HashSet<usize> = estimate.rigid.as_ref().map(|r| r.inliers.iter().copied().collect()).unwrap_or_default();
+        let matches = estimate
+            .matched
+            .iter()
+            .enumerate()
+            .filter_map(|(i, m)| {
+                let (q, t) = (cur_at[m.query as usize], ref_at[m.train as usize]);
+                (q != u32::MAX && t != u32::MAX).then_some((q, t, inliers.contains(&i)))
+            })
+            .collect();
+        Self { frame, reference_frame, current: cur, reference: refs, matches, stages_ms }
+    }
 }
 
 impl std::fmt::Debug for FeatureAssist {
@@ -138,7 +191,7 @@ impl FeatureAssist {
     pub fn new(gpu: &Gpu, preprocessor: &DepthPreprocessor, config: OdometryConfig) -> Result<Self> {
         config.validate()?;
         let extractor = FeatureExtractor::new(gpu, preprocessor, config.features)?;
-        Ok(Self { extractor, config, k0: preprocessor.levels[0].intrinsics, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new() })
+        Ok(Self { extractor, config, k0: preprocessor.levels[0].intrinsics, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new(), last_pair: None })
     }
 
     /// The dense tracker's largest plausible inter-frame translation and rotation: a feature
@@ -158,6 +211,7 @@ impl FeatureAssist {
         self.lost_streak = 0;
         self.stats = AssistStats::default();
         self.ms.clear();
+        self.last_pair = None;
     }
 
     /// The counts so far.
@@ -168,6 +222,11 @@ impl FeatureAssist {
     /// Host milliseconds of each frame's feature work.
     pub fn frame_ms(&self) -> &[f64] {
         &self.ms
+    }
+
+    /// The last frame matched against the last accepted one (`None` before the second frame).
+    pub fn last_pair(&self) -> Option<&PairView> {
+        self.last_pair.as_ref()
     }
 
     /// Keyframes held.
@@ -181,10 +240,14 @@ impl FeatureAssist {
         let started = web_time::Instant::now();
         let result = self.extractor.process(gpu, preprocessor, frame).await?;
         let seed = frame.index as u32;
-        let against_reference = self.reference.as_ref().and_then(|r| {
-            let e = estimate_motion(&self.config, &self.k0, &result.features, &r.features, &result.forward, &result.backward, seed);
-            Some((e.reference_from_current()?, e.inliers(), r))
+        let estimated = web_time::Instant::now();
+        let estimate = self.reference.as_ref().map(|r| estimate_motion(&self.config, &self.k0, &result.features, &r.features, &result.forward, &result.backward, seed));
+        let estimation_ms = estimated.elapsed().as_secs_f64() * 1e3;
+        self.last_pair = self.reference.as_ref().zip(estimate.as_ref()).map(|(r, e)| {
+            let [update, detection, description, matching] = result.gpu_ms.unwrap_or([f64::NAN; 4]);
+            PairView::new(frame.index, r.frame, &result.features, &r.features, e, [update, detection, description, matching, estimation_ms])
         });
+        let against_reference = self.reference.as_ref().zip(estimate).and_then(|(r, e)| Some((e.reference_from_current()?, e.inliers(), r)));
         let guess = if self.lost_streak == 0 {
             against_reference.map(|(ref_from_cur, inliers, r)| {
                 let world_from_camera = r.world_from_camera.compose(&ref_from_cur);

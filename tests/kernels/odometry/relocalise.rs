@@ -70,6 +70,13 @@ fn a_return_after_a_jump_is_relocalised_against_a_keyframe_and_confirmed_by_icp(
         assert!(*state == TrackingState::Tracked && *t_cm < 1.0 && *r_deg < 0.5, "frame {i} after the return: {state:?}, {t_cm} cm, {r_deg}°");
     }
     assert_eq!(stats.relocalisations_confirmed, 1, "{stats:?}");
+    // The last pair as the browser's odometry view shows it: frame 15 against frame 14.
+    let pair = assist.last_pair().expect("a pair");
+    let inliers = pair.matches.iter().filter(|m| m.2).count();
+    assert_eq!((pair.frame, pair.reference_frame), (15, 14));
+    assert!(inliers >= 20 && pair.matches.iter().all(|&(q, t, _)| (q as usize) < pair.current.len() && (t as usize) < pair.reference.len()), "{} matches, {inliers} inliers", pair.matches.len());
+    assert!(pair.current.iter().chain(&pair.reference).all(|k| k[0] >= 0.0 && k[0] < 640.0 && k[1] >= 0.0 && k[1] < 480.0), "keypoints in full-resolution pixels");
+    assert!(pair.stages_ms[4] >= 0.0, "the estimation is timed");
     finish(&gpu);
 }
 
