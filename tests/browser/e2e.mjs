@@ -158,10 +158,12 @@ try {
   }
   check('feature odometry view', fv && fv.pair && fv.pair.inliers >= 20 && fv.pair.matches >= fv.pair.inliers && fv.pair.stage === 'estimation' && fv.guesses >= total - 2 && odoLit / (odoShot.width * odoShot.height) > 0.3,
     `features ${JSON.stringify(fv)}; view ${(100 * odoLit / (odoShot.width * odoShot.height)).toFixed(0)} % lit (saved ${join(out, 'odometry_view.png')})`);
+  // The page handles each click in its event loop: wait for each step to show.
   await page.click('#odometry-step');
+  await waitFor(page, 'the first stage step', (s) => s.features?.pair?.stage === 'update', 30_000);
   await page.click('#odometry-step');
-  const stepped = await evaluateWithin(page, () => window.webfusion.status, 'the status after two stage steps');
-  check('odometry stage steps', stepped.features?.pair?.stage === 'detection', `after two steps from 'estimation': '${stepped.features?.pair?.stage}' (${await page.locator('#odometry-stage').textContent()})`);
+  const stepped = await waitFor(page, 'the second stage step', (s) => s.features?.pair?.stage === 'detection', 30_000);
+  check('odometry stage steps', stepped.features.pair.stage === 'detection', `estimation -> update (the next frame requested) -> detection: "${await page.locator('#odometry-stage').textContent()}"`);
 
   // 7. Bad settings in the URL, then a lost device, in a browser of their own (a fresh GPU
   // process, as a new visitor would have).
