@@ -501,8 +501,11 @@ impl App {
                 self.send(Control::Step);
             }
             Ui::OdometryStage => {
-                if self.mode.next_odometry_stage() {
-                    // Past the last stage: the next frame, one at a time.
+                let count = self.source.as_ref().and_then(|s| s.frame_count);
+                let next = self.mode.last_submitted().map_or(0, |i| i + 1);
+                // Past the last stage: the next frame, one at a time, if the log has one (a
+                // step past the end would start a new pass).
+                if self.mode.next_odometry_stage() && count.is_none_or(|n| next < n) {
                     self.playing = false;
                     self.send(Control::Pause);
                     self.send(Control::Delivery(Delivery::Lossless));
