@@ -70,7 +70,7 @@ fn reference(dir: &Path) -> Reference {
 fn reference_from(source: &str, dir: &Path, extra: &[&str]) -> Reference {
     let out = dir.join("reference.wfr");
     let status = record_from(source, &out, extra).wait_with_output().expect("reference run");
-    assert!(status.status.success(), "reference recording: {}", String::from_utf8_lossy(&status.stderr));
+    assert!(status.status.success(), "reference recording ended with {}: {}", status.status, String::from_utf8_lossy(&status.stderr));
     let stdout = String::from_utf8_lossy(&status.stdout);
     assert!(stdout.contains("frames/s written") && stdout.contains("frames dropped by the source"), "the summary gives the take's rate: {stdout}");
     let mut reader = RecordingReader::open(&out).expect("the reference is finished");
