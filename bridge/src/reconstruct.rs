@@ -350,13 +350,12 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             guess = Some(pose);
         }
         if let Some(assist) = &mut assist {
-            match pollster::block_on(assist.guess(&gpu, fusion.preprocessor(), &frame)).with_context(|| format!("features of frame {index}"))? {
-                Some(Guess::Motion(pose)) => fusion.set_initial_guess(&gpu, &pose),
-                Some(Guess::Relocalised { world_from_camera, keyframe, inliers }) => {
-                    eprintln!("\nframe {index}: relocalised against frame {keyframe} ({inliers} feature inliers); ICP verifies");
-                    fusion.reseed(&gpu, &world_from_camera)?;
-                }
-                None => {}
+            let feature_guess = pollster::block_on(assist.guess(&gpu, fusion.preprocessor(), &frame)).with_context(|| format!("features of frame {index}"))?;
+            if let Some(Guess::Relocalised { keyframe, inliers, .. }) = feature_guess {
+                eprintln!("\nframe {index}: relocalised against frame {keyframe} ({inliers} feature inliers); ICP verifies");
+            }
+            if let Some(g) = feature_guess {
+                g.apply(&gpu, &mut fusion)?;
             }
         }
         timestamps.insert(frame.index, (frame.depth_timestamp_ns, guess));
@@ -366,11 +365,8 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         // With features, the frame's outcome is needed before the next one's guess.
         let reports = if assist.is_some() { pollster::block_on(fusion.flush(&gpu))? } else { fusion.poll_reports(&gpu)? };
         for report in reports {
-            if let Some(assist) = &mut assist
-                && report.index == frame.index
-                && let Some(back) = assist.verdict(&gpu, !report.state.is_lost(), &report.world_from_camera)?
-            {
-                fusion.reseed(&gpu, &back)?;
+            if let Some(assist) = &mut assist {
+                assist.verdict(&gpu, &mut fusion, &report)?;
             }
             on_report(report, &mut times, &mut trajectory, &mut timestamps);
         }

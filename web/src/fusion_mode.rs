@@ -23,7 +23,7 @@ use webfusion_core::map::{MapKind, MapStats};
 use webfusion_core::eval::{Alignment, RunningAte};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, RaycastTarget, TrackingState};
 use webfusion_core::io::{TUM_TRAJECTORY_HEADER, push_tum_line};
-use webfusion_core::odometry::assist::{AssistStats, FeatureAssist, Guess, PAIR_STAGES, PairView};
+use webfusion_core::odometry::assist::{AssistStats, FeatureAssist, PAIR_STAGES, PairView};
 use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::source::TimedPose;
 use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, NormalView};
@@ -352,10 +352,8 @@ impl FusionMode {
         let Some(p) = self.pipeline.as_mut() else { return Ok(()) };
         let failed = |e: webfusion_core::Error| format!("frame {}: {e}", frame.index);
         if let Some(assist) = &mut p.assist {
-            match assist.guess(gpu, p.fusion.preprocessor(), frame).await.map_err(failed)? {
-                Some(Guess::Motion(pose)) => p.fusion.set_initial_guess(gpu, &pose),
-                Some(Guess::Relocalised { world_from_camera, .. }) => p.fusion.reseed(gpu, &world_from_camera).map_err(failed)?,
-                None => {}
+            if let Some(guess) = assist.guess(gpu, p.fusion.preprocessor(), frame).await.map_err(failed)? {
+                guess.apply(gpu, &mut p.fusion).map_err(failed)?;
             }
             self.pair = assist.last_pair().cloned();
             self.current_image = Some((frame.index, frame.color.width_px, frame.color.height_px, view::rgba_from_rgb(&frame.color.rgb8)));
@@ -377,11 +375,8 @@ impl FusionMode {
             // The next frame's guess needs this one's verdict.
             let reports = p.fusion.flush(gpu).await.map_err(failed)?;
             for report in &reports {
-                if report.index == frame.index
-                    && let Some(assist) = &mut p.assist
-                    && let Some(back) = assist.verdict(gpu, !report.state.is_lost(), &report.world_from_camera).map_err(failed)?
-                {
-                    p.fusion.reseed(gpu, &back).map_err(failed)?;
+                if let Some(assist) = &mut p.assist {
+                    assist.verdict(gpu, &mut p.fusion, report).map_err(failed)?;
                 }
                 if report.index == frame.index && !report.state.is_lost() {
                     // The next pair's left frame.

@@ -3,8 +3,9 @@
 //! matched against the last frame the dense tracker accepted, and relocalisation against
 //! stored keyframes once tracking is lost.
 //!
-//! Per frame the caller asks [`FeatureAssist::guess`] before tracking and reports the dense
-//! tracker's outcome with [`FeatureAssist::verdict`] after it:
+//! Per frame the caller asks [`FeatureAssist::guess`] before tracking and hands the guess to
+//! KinectFusion ([`Guess::apply`]), and reports the frame's outcome with
+//! [`FeatureAssist::verdict`] after it:
 //!
 //! - **tracking**: the frame's motion against the last accepted frame, when RANSAC accepts it,
 //!   is a [`Guess::Motion`]: the dense tracker starts there instead of its motion model.
@@ -18,8 +19,8 @@
 //!   [`Guess::Relocalised`]: the dense tracker re-renders its model at that pose and tracks
 //!   the frame from there. The relocalisation stands only when the dense tracker then tracks
 //!   the frame (its own inlier, conditioning and jump checks, the jump now measured from the
-//!   relocalised pose); otherwise [`FeatureAssist::verdict`] hands back the last good pose to
-//!   reseed at, so a false relocalisation leaves nothing behind.
+//!   relocalised pose); otherwise [`FeatureAssist::verdict`] reseeds it back at the last good
+//!   pose, so a false relocalisation leaves nothing behind.
 //!
 //! A tracked frame becomes a keyframe when no stored keyframe lies within
 //! [`KEYFRAME_SPACING_M`] and [`KEYFRAME_SPACING_RAD`] of it. The spacing keeps every view of
@@ -32,6 +33,7 @@
 use super::gpu::{FeatureExtractor, RELOCALISATION_CANDIDATES};
 use super::tracker::{MotionEstimate, OdometryConfig, estimate_motion};
 use super::Features;
+use crate::fusion::{FrameReport, KinectFusion};
 use crate::preprocess::DepthPreprocessor;
 use crate::{Gpu, PinholeIntrinsics, Result, RgbdFrame, Se3};
 
@@ -61,11 +63,15 @@ pub enum Guess {
 }
 
 impl Guess {
-    /// The camera-to-world pose.
-    pub fn world_from_camera(&self) -> Se3 {
+    /// Hands the guess to `fusion` before the frame is submitted: a motion becomes the
+    /// tracker's initial guess, a relocalisation reseeds it ([`KinectFusion::reseed`]).
+    pub fn apply(&self, gpu: &Gpu, fusion: &mut KinectFusion) -> Result<()> {
         match self {
-            Guess::Motion(p) => *p,
-            Guess::Relocalised { world_from_camera, .. } => *world_from_camera,
+            Guess::Motion(pose) => {
+                fusion.set_initial_guess(gpu, pose);
+                Ok(())
+            }
+            Guess::Relocalised { world_from_camera, .. } => fusion.reseed(gpu, world_from_camera),
         }
     }
 }
@@ -85,14 +91,9 @@ pub struct AssistStats {
     pub keyframes_added: usize,
 }
 
+/// A frame the dense tracker accepted (the reference, or a keyframe): its features, pose and
+/// source index.
 struct Keyframe {
-    features: Features,
-    world_from_camera: Se3,
-    frame: u64,
-}
-
-/// The last accepted frame: its features and pose.
-struct Reference {
     features: Features,
     world_from_camera: Se3,
     frame: u64,
@@ -103,7 +104,8 @@ pub struct FeatureAssist {
     extractor: FeatureExtractor,
     config: OdometryConfig,
     k0: PinholeIntrinsics,
-    reference: Option<Reference>,
+    /// The last accepted frame.
+    reference: Option<Keyframe>,
     keyframes: Vec<Keyframe>,
     /// The frame being tracked: its features and the guess given for it.
     pending: Option<(Features, u64, Option<Guess>)>,
@@ -298,16 +300,20 @@ impl FeatureAssist {
             .collect())
     }
 
-    /// The dense tracker's outcome for the frame last given to [`Self::guess`]: tracked at
-    /// `world_from_camera` (it becomes the reference, and a keyframe where the store has none
-    /// near it) or lost. Returns the pose to reseed the dense tracker at when a relocalisation
-    /// was not confirmed (the last good pose), so that it leaves nothing behind.
-    pub fn verdict(&mut self, gpu: &Gpu, tracked: bool, world_from_camera: &Se3) -> Result<Option<Se3>> {
-        let Some((features, frame, guess)) = self.pending.take() else { return Ok(None) };
+    /// `fusion`'s report of the frame last given to [`Self::guess`]: tracked (it becomes the
+    /// reference, and a keyframe where the store has none near it) or lost. A relocalisation
+    /// the report does not confirm is undone: `fusion` is reseeded at the last good pose, so it
+    /// leaves nothing behind. A report of another frame is ignored.
+    pub fn verdict(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, report: &FrameReport) -> Result<()> {
+        let Some((features, frame, guess)) = self.pending.take_if(|p| p.1 == report.index) else { return Ok(()) };
         let relocalised = matches!(guess, Some(Guess::Relocalised { .. }));
-        if !tracked {
+        let world_from_camera = &report.world_from_camera;
+        if report.state.is_lost() {
             self.lost_streak += 1;
-            return Ok(if relocalised { self.reference.as_ref().map(|r| r.world_from_camera) } else { None });
+            if relocalised && let Some(r) = &self.reference {
+                fusion.reseed(gpu, &r.world_from_camera)?;
+            }
+            return Ok(());
         }
         if self.lost_streak > 0 && guess.is_some() {
             self.stats.recoveries += 1;
@@ -320,8 +326,8 @@ impl FeatureAssist {
         if !self.keyframes.iter().any(|k| within_spacing(&k.world_from_camera, world_from_camera)) {
             self.add_keyframe(gpu, Keyframe { features: features.clone(), world_from_camera: *world_from_camera, frame })?;
         }
-        self.reference = Some(Reference { features, world_from_camera: *world_from_camera, frame });
-        Ok(None)
+        self.reference = Some(Keyframe { features, world_from_camera: *world_from_camera, frame });
+        Ok(())
     }
 
     fn add_keyframe(&mut self, gpu: &Gpu, keyframe: Keyframe) -> Result<()> {

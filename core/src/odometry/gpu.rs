@@ -303,11 +303,6 @@ impl FeatureExtractor {
         Ok(())
     }
 
-    /// Keyframes stored.
-    pub fn keyframe_count(&self) -> usize {
-        self.keyframes.len()
-    }
-
     /// Matches the last processed frame against the stored keyframes `slots` (at most
     /// [`RELOCALISATION_CANDIDATES`]) in one submission and waits: per keyframe, (forward,
     /// backward) as in [`FrameFeatures`], the keyframe in the reference's role.

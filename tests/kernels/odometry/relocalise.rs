@@ -36,16 +36,12 @@ fn a_return_after_a_jump_is_relocalised_against_a_keyframe_and_confirmed_by_icp(
     for (i, truth) in poses.iter().enumerate() {
         let frame = room.frame(&K, &poses, i);
         let guess = pollster::block_on(assist.guess(&gpu, fusion.preprocessor(), &frame)).expect("features");
-        match guess {
-            Some(Guess::Motion(p)) => fusion.set_initial_guess(&gpu, &p),
-            Some(Guess::Relocalised { world_from_camera, .. }) => fusion.reseed(&gpu, &world_from_camera).expect("reseed"),
-            None => {}
+        if let Some(g) = guess {
+            g.apply(&gpu, &mut fusion).expect("apply the guess");
         }
         pollster::block_on(fusion.submit_preprocessed_frame(&gpu, &frame)).expect("submit");
         let report = pollster::block_on(fusion.flush(&gpu)).expect("flush").pop().expect("a report");
-        if let Some(back) = assist.verdict(&gpu, !report.state.is_lost(), &report.world_from_camera).expect("verdict") {
-            fusion.reseed(&gpu, &back).expect("undo");
-        }
+        assist.verdict(&gpu, &mut fusion, &report).expect("verdict");
         let error = poses[0].inverse().compose(truth).inverse().compose(&report.world_from_camera);
         let (t_cm, r_deg) = (error.translation_m.length() * 100.0, error.rotation_angle_rad().to_degrees());
         let kind = match guess {
