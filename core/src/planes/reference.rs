@@ -30,10 +30,10 @@ pub fn normal_histogram(normals: &[[f32; 4]], labels: &[u32]) -> Vec<u32> {
 /// first, after clearing the bins within `clear_bins` of each of `known` normals (a later
 /// round's peaks are new planes); see the kernel.
 pub fn normal_peaks(hist: &[u32], min_count: u32, exclusion_bins: f32, known: &[[f32; 3]], clear_bins: f32) -> Vec<[f32; 3]> {
-    let params = NormalPeaksParams { min_count, known_count: known.len() as u32, exclusion_bins, clear_bins };
+    let params = NormalPeaksParams { min_count, exclusion_bins, clear_bins, ..Default::default() };
     let known: Vec<[f32; 4]> = known.iter().map(|n| [n[0], n[1], n[2], 0.0]).collect();
     let (mut peaks, mut count) = (vec![[0.0f32; 4]; MAX_NORMAL_PEAKS], [0u32]);
-    crate::cpu::normal_peaks(&params, hist, &known, &mut peaks, &mut count);
+    crate::cpu::normal_peaks(&params, hist, &known, &[known.len() as u32], &mut peaks, &mut count);
     peaks[..count[0] as usize].iter().map(|p| [p[0], p[1], p[2]]).collect()
 }
 

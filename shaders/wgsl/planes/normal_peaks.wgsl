@@ -4,7 +4,7 @@
 //! tree reduction; it stops at a count below `min_count`; the peak's normal is that of the
 //! count-weighted centroid of its 3 x 3 neighbourhood (bin i spans [i, i + 1)), and every bin
 //! whose centre lies within `exclusion_bins` of the peak's bin centre is cleared before the next
-//! search. Bins within `clear_bins` of each of the `known_count` normals of earlier rounds'
+//! search. Bins within `clear_bins` of each of the `known_count[0]` normals of earlier rounds'
 //! planes are cleared first. Each of the 256 invocations owns 4 bins. Mirrors
 //! core/src/cpu/planes/normal_peaks.rs.
 #import invalid
@@ -16,24 +16,25 @@ const WORKGROUP: u32 = 256u;
 struct NormalPeaksParams {
     // The smallest count a peak's bin may have.
     min_count: u32,
-    // Normals in `known_normals`.
-    known_count: u32,
     // Radius cleared around each peak, bins.
     exclusion_bins: f32,
     // Radius cleared around each known normal, bins.
     clear_bins: f32,
+    _pad0: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: NormalPeaksParams;
 // The normal histogram, NORMAL_BINS² counts, row-major (y, x).
 @group(0) @binding(1) var<storage, read> histogram: array<u32>;
-// Normals (xyz) of the planes earlier rounds found; `known_count` of them are read.
+// Normals (xyz) of the planes earlier rounds found; `known_count[0]` of them are read (a
+// buffer, so the plane list on the GPU can set it).
 @group(0) @binding(2) var<storage, read> known_normals: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> known_count: array<u32>;
 // Out: MAX_NORMAL_PEAKS entries, highest first: unit normal (n_z ≥ 0) and its bin's count in
 // w; NaN past the last peak.
-@group(0) @binding(3) var<storage, read_write> peaks: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> peaks: array<vec4<f32>>;
 // Out: [0] = the number of peaks.
-@group(0) @binding(4) var<storage, read_write> peak_count: array<u32>;
+@group(0) @binding(5) var<storage, read_write> peak_count: array<u32>;
 
 var<workgroup> bins: array<u32, 1024>;
 var<workgroup> best_count: array<u32, 256>;
@@ -56,7 +57,7 @@ fn main(@builtin(local_invocation_index) lid: u32) {
         bins[lid + i * WORKGROUP] = histogram[lid + i * WORKGROUP];
     }
     workgroupBarrier();
-    for (var k = 0u; k < params.known_count; k++) {
+    for (var k = 0u; k < known_count[0]; k++) {
         clear_around(lid, vec2<f32>(normal_bin(known_normals[k].xyz)) + vec2<f32>(0.5), params.clear_bins);
     }
     workgroupBarrier();

@@ -18,10 +18,10 @@ const TOL: f32 = 1e-5;
 fn run(p: &NormalPeaksParams, hist: &[u32], known: &[[f32; 4]]) -> ((Vec<[f32; 4]>, u32), (Vec<[f32; 4]>, u32)) {
     let gpu = gpu();
     let known_buf: Vec<[f32; 4]> = if known.is_empty() { vec![[0.0; 4]] } else { known.to_vec() };
-    let out = run_kernel_slots(&gpu, &gpu.kernels.normal_peaks, p, &[Slot::In(bytemuck::cast_slice(hist)), Slot::In(bytemuck::cast_slice(&known_buf)), Slot::Out(16 * MAX_NORMAL_PEAKS), Slot::Out(4)], [1, 1, 1]);
+    let out = run_kernel_slots(&gpu, &gpu.kernels.normal_peaks, p, &[Slot::In(bytemuck::cast_slice(hist)), Slot::In(bytemuck::cast_slice(&known_buf)), Slot::In(bytemuck::bytes_of(&(known.len() as u32))), Slot::Out(16 * MAX_NORMAL_PEAKS), Slot::Out(4)], [1, 1, 1]);
     finish(&gpu);
     let (mut peaks, mut count) = (vec![[0.0f32; 4]; MAX_NORMAL_PEAKS], [0u32]);
-    cpu::normal_peaks(p, hist, &known_buf, &mut peaks, &mut count);
+    cpu::normal_peaks(p, hist, &known_buf, &[known.len() as u32], &mut peaks, &mut count);
     ((cast(&out[0]), cast::<u32>(&out[1])[0]), (peaks, count[0]))
 }
 
@@ -57,8 +57,8 @@ fn assert_same_with_controls(what: &str, g: &(Vec<[f32; 4]>, u32), c: &(Vec<[f32
     }
 }
 
-fn params(min_count: u32, known: usize) -> NormalPeaksParams {
-    NormalPeaksParams { min_count, known_count: known as u32, exclusion_bins: 8.0, clear_bins: 4.0 }
+fn params(min_count: u32) -> NormalPeaksParams {
+    NormalPeaksParams { min_count, exclusion_bins: 8.0, clear_bins: 4.0, ..Default::default() }
 }
 
 #[test]
@@ -73,7 +73,7 @@ fn crafted_histograms_pin_the_rules() {
     h[at(16, 16)] = 300;
     h[at(23, 8)] = 400; // 4.2 bins from (20, 5): cleared
     h[at(30, 30)] = 20;
-    let (g, c) = run(&params(50, 0), &h, &[]);
+    let (g, c) = run(&params(50), &h, &[]);
     assert_same_with_controls("crafted", &g, &c);
     assert_eq!(c.1, 3, "{:?}", c.0);
     let counts: Vec<f32> = c.0[..3].iter().map(|p| p[3]).collect();
@@ -83,12 +83,12 @@ fn crafted_histograms_pin_the_rules() {
     // Known normals clear their surroundings: the (20, 5) peak is known, so (23, 8) (4.2 bins
     // away, past the clearing radius of 4) comes back.
     let known = cpu::planes::normal_peaks::bin_normal(20.5, 5.5);
-    let (g, c) = run(&params(50, 1), &h, &[[known[0], known[1], known[2], 0.0]]);
+    let (g, c) = run(&params(50), &h, &[[known[0], known[1], known[2], 0.0]]);
     assert_same_with_controls("known", &g, &c);
     let counts: Vec<f32> = c.0[..c.1 as usize].iter().map(|p| p[3]).collect();
     assert_eq!(counts, [500.0, 400.0, 300.0], "(3, 25), then (23, 8), then (16, 16)");
     // An empty histogram: no peak.
-    let (g, c) = run(&params(1, 0), &vec![0; NORMAL_BINS * NORMAL_BINS], &[]);
+    let (g, c) = run(&params(1), &vec![0; NORMAL_BINS * NORMAL_BINS], &[]);
     compare("empty", &g, &c).unwrap();
     assert_eq!(c.1, 0);
 }
@@ -100,7 +100,7 @@ fn a_real_frame_peaks_like_the_twin() {
     let mut h = vec![0u32; NORMAL_BINS * NORMAL_BINS];
     let labels = vec![NO_LABEL; normals.len()];
     cpu::normal_histogram(&NormalHistogramParams { pixel_count: normals.len() as u32, use_labels: 1, ..Default::default() }, &normals, &labels, &mut h);
-    let (g, c) = run(&params(800, 0), &h, &[]);
+    let (g, c) = run(&params(800), &h, &[]);
     assert_same_with_controls("real frame", &g, &c);
     assert!(c.1 >= 2, "the desk and the partition at least: {} peaks", c.1);
 }

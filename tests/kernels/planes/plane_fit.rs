@@ -10,7 +10,7 @@
 
 use webfusion_core::cpu;
 use webfusion_core::cpu::planes::moments::{PlaneMoments, plane_moments_combine, plane_moments_point, plane_moments_to_sums, plane_moments_zero};
-use webfusion_core::cpu::planes::plane_fit::{PLANE_FIT_VEC4S, fit_moments};
+use webfusion_core::cpu::planes::plane_fit::{PLANE_FIT_VEC4S, plane_fit_moments};
 use webfusion_core::kernels::plane_fit::PlaneFitParams;
 use webfusion_core::planes::reference;
 use webfusion_tests::{SENTINEL_F32, Slot, cast, finish, gpu, run_kernel_slots};
@@ -113,7 +113,7 @@ fn real_planes_fit_like_the_twin_and_like_f64() {
     let (g, c) = run(&sets);
     assert_fits_controls("real frame", &g, &c);
     for (k, m) in sets.iter().enumerate() {
-        let f32fit = fit_moments(m);
+        let f32fit = plane_fit_moments(m);
         let f64fit = reference::fit(&plane_moments_to_sums(m)).unwrap();
         let angle = angle_deg([0, 1, 2].map(|i| f64::from(f32fit[0][i])), f64fit.normal);
         let offset = (f64::from(f32fit[0][3]) - f64fit.offset_m).abs();

@@ -27,9 +27,9 @@ fn clear_around(bins: &mut [u32], centre: [f32; 2], radius: f32) {
 }
 
 /// Finds the peaks as the kernel's workgroup does.
-pub fn normal_peaks(params: &NormalPeaksParams, histogram: &[u32], known_normals: &[[f32; 4]], peaks: &mut [[f32; 4]], peak_count: &mut [u32]) {
+pub fn normal_peaks(params: &NormalPeaksParams, histogram: &[u32], known_normals: &[[f32; 4]], known_count: &[u32], peaks: &mut [[f32; 4]], peak_count: &mut [u32]) {
     let mut bins = histogram[..NORMAL_BINS * NORMAL_BINS].to_vec();
-    for k in 0..params.known_count as usize {
+    for k in 0..known_count[0] as usize {
         let (bx, by) = normal_bin(known_normals[k]);
         clear_around(&mut bins, [bx as f32 + 0.5, by as f32 + 0.5], params.clear_bins);
     }

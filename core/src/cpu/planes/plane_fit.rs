@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
-//! CPU reference of `shaders/wgsl/planes/plane_fit.wgsl`, in f32 like the kernel
+//! CPU reference of `shaders/wgsl/planes/plane_fit.wgsl` and `shared/plane_fitting.wgsl`, in
+//! f32 like the kernel
 //! ([`crate::planes::reference::fit`] is the f64 fit both are held to).
 
 use crate::cpu::planes::moments::{PLANE_MOMENT_VEC4S, PlaneMoments};
@@ -80,8 +81,8 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// Twin of one invocation: the fit of one plane's moments.
-pub fn fit_moments(m: &PlaneMoments) -> [[f32; 4]; PLANE_FIT_VEC4S] {
+/// Twin of `plane_fit_moments()` in `shared/plane_fitting.wgsl`: the fit of one set of moments.
+pub fn plane_fit_moments(m: &PlaneMoments) -> [[f32; 4]; PLANE_FIT_VEC4S] {
     let count = m[0][0];
     if !(count >= 3.0) {
         return [[0.0; 4]; PLANE_FIT_VEC4S];
@@ -128,6 +129,6 @@ pub fn fit_moments(m: &PlaneMoments) -> [[f32; 4]; PLANE_FIT_VEC4S] {
 pub fn plane_fit(params: &PlaneFitParams, moments: &[[f32; 4]], fits: &mut [[f32; 4]]) {
     for plane in 0..params.plane_count as usize {
         let m: PlaneMoments = moments[plane * PLANE_MOMENT_VEC4S..(plane + 1) * PLANE_MOMENT_VEC4S].try_into().expect("10 vec4");
-        fits[plane * PLANE_FIT_VEC4S..(plane + 1) * PLANE_FIT_VEC4S].copy_from_slice(&fit_moments(&m));
+        fits[plane * PLANE_FIT_VEC4S..(plane + 1) * PLANE_FIT_VEC4S].copy_from_slice(&plane_fit_moments(&m));
     }
 }
