@@ -50,6 +50,8 @@ pub const DISTANCE_BINS: usize = 1024;
 pub const MAX_NORMAL_PEAKS: usize = 8;
 /// Most distance peaks (planes) per normal peak.
 pub const MAX_DISTANCE_PEAKS: usize = 8;
+/// Most planes the GPU's plane list holds per frame (more are counted as overflow).
+pub const MAX_PLANES: usize = 64;
 /// Pixel label of no plane.
 pub const NO_LABEL: u32 = u32::MAX;
 

@@ -10,6 +10,8 @@ const DISTANCE_BINS: u32 = 1024u;
 // Most normal peaks per round, and distance peaks (planes) per normal peak.
 const MAX_NORMAL_PEAKS: u32 = 8u;
 const MAX_DISTANCE_PEAKS: u32 = 8u;
+// Most planes a frame's plane list holds.
+const MAX_PLANES: u32 = 64u;
 // A pixel without a plane.
 const NO_LABEL: u32 = 0xffffffffu;
 const PLANES_PI: f32 = 3.14159265358979;

@@ -1,0 +1,167 @@
+// SPDX-License-Identifier: MIT
+//! CPU reference of `shaders/wgsl/planes/plane_list.wgsl`.
+
+use crate::cpu::planes::moments::{PLANE_MOMENT_VEC4S, PlaneMoments, plane_moments_combine};
+use crate::cpu::planes::plane_fit::{PLANE_FIT_VEC4S, plane_fit_moments};
+use crate::cpu::shared::kinect_sigma_m;
+use crate::kernels::plane_list::PlaneListParams;
+use crate::planes::{MAX_PLANES, NO_LABEL};
+
+/// vec4s per list record: moments, then fit.
+pub const PLANE_RECORD_VEC4S: usize = PLANE_MOMENT_VEC4S + PLANE_FIT_VEC4S;
+/// vec4s of the list buffer: MAX_PLANES records, then scratch for 2 · MAX_PLANES.
+pub const PLANE_LIST_VEC4S: usize = 3 * MAX_PLANES * PLANE_RECORD_VEC4S;
+/// Mode 0: add the inner loop's fits and merge.
+pub const MODE_MERGE: u32 = 0;
+/// Mode 1: keep the refitted planes that pass.
+pub const MODE_KEEP: u32 = 1;
+/// Mode 2: most pixels first.
+pub const MODE_SORT: u32 = 2;
+/// `state` entries: planes, curved rejected, overflow.
+pub const PLANE_LIST_STATE: usize = 3;
+/// `dispatch` entries: three indirect (x, y, z) sizes.
+pub const PLANE_LIST_DISPATCH: usize = 9;
+const SCRATCH: usize = MAX_PLANES;
+const R: usize = PLANE_RECORD_VEC4S;
+const F: usize = PLANE_MOMENT_VEC4S;
+
+fn count_of(list: &[[f32; 4]], record: usize) -> f32 {
+    list[record * R + F + 1][3]
+}
+
+fn copy_record(list: &mut [[f32; 4]], to: usize, from: usize) {
+    list.copy_within(from * R..(from + 1) * R, to * R);
+}
+
+fn store_slot(list: &mut [[f32; 4]], fits: &[[f32; 4]], moments: &[[f32; 4]], to: usize, slot: usize) {
+    list[to * R..to * R + F].copy_from_slice(&moments[slot * F..(slot + 1) * F]);
+    list[to * R + F..(to + 1) * R].copy_from_slice(&fits[slot * PLANE_FIT_VEC4S..(slot + 1) * PLANE_FIT_VEC4S]);
+}
+
+fn moments_of(list: &[[f32; 4]], record: usize) -> PlaneMoments {
+    list[record * R..record * R + F].try_into().expect("10 vec4")
+}
+
+fn sorted_order(list: &[[f32; 4]], first: usize, count: usize) -> Vec<usize> {
+    let mut order = vec![0usize; count];
+    for i in 0..count {
+        let c = count_of(list, first + i);
+        let mut j = i;
+        while j > 0 && count_of(list, first + order[j - 1]) < c {
+            order[j] = order[j - 1];
+            j -= 1;
+        }
+        order[j] = i;
+    }
+    order
+}
+
+fn dot(a: [f32; 4], b: [f32; 4]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn merge_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]], list: &mut [[f32; 4]], state: &mut [u32], n: usize) -> usize {
+    let mut m = 0;
+    for i in 0..n {
+        copy_record(list, SCRATCH + m, i);
+        m += 1;
+    }
+    for s in 0..params.slot_count as usize {
+        let f = fits[s * PLANE_FIT_VEC4S + 4];
+        let count = fits[s * PLANE_FIT_VEC4S + 1][3];
+        if f[3] == 0.0 || count < params.min_count.max(3.0) {
+            continue;
+        }
+        if f[1] > params.max_bend_deg {
+            state[1] += 1;
+            continue;
+        }
+        if m < 2 * MAX_PLANES {
+            store_slot(list, fits, moments, SCRATCH + m, s);
+            m += 1;
+        } else {
+            state[2] += 1;
+        }
+    }
+    let order = sorted_order(list, SCRATCH, m);
+    let mut out = 0;
+    for &o in &order {
+        let p = SCRATCH + o;
+        let (pn, pc) = (list[p * R + F], list[p * R + F + 1]);
+        let mut merged = false;
+        for q in 0..out {
+            let (qn, qc) = (list[q * R + F], list[q * R + F + 1]);
+            let apart = (dot(pn, qc) + pn[3]).abs().min((dot(qn, pc) + qn[3]).abs());
+            let z = 0.5 * (pc[2] + qc[2]);
+            if dot(pn, qn) >= params.cos_merge && apart < params.merge_sigmas * kinect_sigma_m(z) {
+                let sum = plane_moments_combine(&moments_of(list, q), &moments_of(list, p));
+                let fit = plane_fit_moments(&sum);
+                if fit[4][3] != 0.0 {
+                    list[q * R..q * R + F].copy_from_slice(&sum);
+                    list[q * R + F..(q + 1) * R].copy_from_slice(&fit);
+                    merged = true;
+                }
+                break;
+            }
+        }
+        if merged {
+            continue;
+        }
+        if out < MAX_PLANES {
+            copy_record(list, out, p);
+            out += 1;
+        } else {
+            state[2] += 1;
+        }
+    }
+    out
+}
+
+fn keep_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]], list: &mut [[f32; 4]], state: &mut [u32], renumber: &mut [u32], n: usize) -> usize {
+    let mut out = 0;
+    for i in 0..n {
+        let (f, normal, centroid) = (fits[i * PLANE_FIT_VEC4S + 4], fits[i * PLANE_FIT_VEC4S], fits[i * PLANE_FIT_VEC4S + 1]);
+        renumber[i] = NO_LABEL;
+        if f[3] == 0.0 {
+            continue;
+        }
+        let length = (centroid[0] * centroid[0] + centroid[1] * centroid[1] + centroid[2] * centroid[2]).sqrt();
+        if centroid[3] >= params.min_count && f[1] <= params.max_bend_deg && normal[3] >= length * params.cos_incidence {
+            store_slot(list, fits, moments, out, i);
+            renumber[i] = out as u32;
+            out += 1;
+        } else if f[1] > params.max_bend_deg {
+            state[1] += 1;
+        }
+    }
+    out
+}
+
+fn sort_mode(list: &mut [[f32; 4]], renumber: &mut [u32], n: usize) -> usize {
+    for i in 0..n {
+        copy_record(list, SCRATCH + i, i);
+    }
+    let order = sorted_order(list, SCRATCH, n);
+    for (r, &o) in order.iter().enumerate() {
+        copy_record(list, r, SCRATCH + o);
+        renumber[o] = r as u32;
+    }
+    n
+}
+
+/// Runs the kernel's one invocation.
+#[expect(clippy::too_many_arguments, reason = "one argument per WGSL binding, in binding order")]
+pub fn plane_list(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]], list: &mut [[f32; 4]], planes: &mut [[f32; 4]], state: &mut [u32], renumber: &mut [u32], dispatch: &mut [u32]) {
+    let n = state[0] as usize;
+    let out = match params.mode {
+        MODE_MERGE => merge_mode(params, fits, moments, list, state, n),
+        MODE_KEEP => keep_mode(params, fits, moments, list, state, renumber, n),
+        _ => sort_mode(list, renumber, n),
+    };
+    state[0] = out as u32;
+    for i in 0..out {
+        planes[i] = list[i * R + F];
+    }
+    let out = out as u32;
+    dispatch.copy_from_slice(&[params.chunks, out, 1, out, 1, 1, out.div_ceil(64), 1, 1]);
+}
