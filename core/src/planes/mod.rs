@@ -36,6 +36,7 @@
 //! frame with the unit normal facing the camera (d > 0).
 
 pub mod export;
+pub mod gpu;
 pub mod mesh;
 pub mod reference;
 pub mod world;
