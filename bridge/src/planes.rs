@@ -12,9 +12,10 @@
 //!   cover (the non-planar remainder) as `DIR/scene.glb` and `DIR/scene.obj` (+ `scene.mtl`,
 //!   `scene_textures/`).
 //!
-//! Segmentation and meshing run the CPU reference (`core::planes::reference`, `mesh`) on the
-//! CPU twin of the preprocessor; tracking and fusion run on the GPU. The GPU pipeline of the
-//! segmentation kernels is not assembled yet.
+//! Preprocessing and segmentation run on the GPU (`core::planes::gpu`: one submission per
+//! frame and one readback), or with `--cpu-reference` the CPU reference
+//! (`core::planes::reference`) on the CPU twin of the preprocessor; tracking and fusion run on
+//! the GPU; meshing and the world model on the CPU.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -23,7 +24,9 @@ use anyhow::Context as _;
 use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::io::format_timestamp_s;
 use webfusion_core::planes::{NO_LABEL, PlaneConfig, reference};
-use webfusion_core::preprocess::PreprocessConfig;
+use webfusion_core::cpu::shared::depth_to_metres;
+use webfusion_core::planes::gpu::GpuPlaneSegmenter;
+use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
 use webfusion_core::{ColorImage, GpuOptions, Se3, codec::png};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, pose_driven::PoseDrivenMapper};
 use webfusion_core::io::trajectory::{PoseTimeline, TimedPose, read_tum_trajectory, write_tum_trajectory};
@@ -61,9 +64,17 @@ pub(crate) struct PlanesArgs {
     /// frames are tracked by KinectFusion (the world is then the first camera's frame).
     #[arg(long)]
     poses: Option<PathBuf>,
-    /// Per-frame planes only: no world model, no tracking or fusion, no GPU.
+    /// Per-frame planes only: no world model, no tracking or fusion.
     #[arg(long)]
     no_world: bool,
+    /// Segment with the CPU reference (f64, on the CPU twin of the preprocessor) instead of the
+    /// GPU kernels: slower, for comparison.
+    #[arg(long)]
+    cpu_reference: bool,
+    /// Run the GPU segmentation one kernel at a time, waiting for each, and record each
+    /// kernel's time per frame in `frames.json` (`kernels_ms`; slower overall).
+    #[arg(long, conflicts_with = "cpu_reference")]
+    kernel_times: bool,
     /// Texels per metre of the world planes' textures (a power of two).
     #[arg(long, default_value_t = WorldConfig::default().px_per_m)]
     texture_px_per_m: f32,
@@ -213,6 +224,15 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
     let calibration = source.calibration();
     let k = calibration.intrinsics;
     let (pre_config, config) = (PreprocessConfig::default(), PlaneConfig::default());
+    let on_gpu = if args.cpu_reference {
+        None
+    } else {
+        let gpu = crate::gpu(options)?;
+        let pre = DepthPreprocessor::new(&gpu, calibration, pre_config)?;
+        let segmenter = GpuPlaneSegmenter::new(&gpu, &pre, &config)?;
+        Some((gpu, pre, segmenter))
+    };
+    let mut overflow = 0u32;
     let mut times = StageTimes::default();
     let mut frames = Vec::with_capacity(range.len());
     let mut skipped = Vec::new();
@@ -222,12 +242,40 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         let sw = Stopwatch::start();
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         let read_ms = sw.ms();
-        let sw = Stopwatch::start();
-        let pre = preprocess(&calibration, &pre_config, &frame);
-        let preprocess_ms = sw.ms();
-        let sw = Stopwatch::start();
-        let seg = reference::segment(&pre.levels, Some(&pre.depth_unfiltered_m), &config);
-        let segment_ms = sw.ms();
+        let mut kernels_ms: Vec<(&str, f64)> = Vec::new();
+        let (seg, raw_depth_m, preprocess_ms, segment_ms) = match &on_gpu {
+            None => {
+                let sw = Stopwatch::start();
+                let pre = preprocess(&calibration, &pre_config, &frame);
+                let preprocess_ms = sw.ms();
+                let sw = Stopwatch::start();
+                let seg = reference::segment(&pre.levels, Some(&pre.depth_unfiltered_m), &config);
+                (seg, pre.depth_unfiltered_m, preprocess_ms, sw.ms())
+            }
+            Some((gpu, pre, segmenter)) => {
+                // Two submissions, so that each stage's time is its own.
+                let sw = Stopwatch::start();
+                pre.upload(gpu, &frame)?;
+                let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("planes.preprocess") });
+                pre.encode(gpu, &mut encoder);
+                pollster::block_on(gpu.submit_and_wait(encoder))?;
+                let preprocess_ms = sw.ms();
+                let sw = Stopwatch::start();
+                if args.kernel_times {
+                    kernels_ms = pollster::block_on(segmenter.run_profiled(gpu))?;
+                } else {
+                    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("planes.segment") });
+                    segmenter.encode(gpu, &mut encoder);
+                    gpu.submit(Some(encoder.finish()));
+                }
+                let (seg, stats) = pollster::block_on(segmenter.read(gpu))?;
+                overflow += stats.overflow;
+                let segment_ms = sw.ms();
+                let p = pre_config.depth_to_metres_params(&calibration);
+                let raw: Vec<f32> = frame.depth.units.iter().map(|&u| depth_to_metres(u32::from(u), p.metres_per_unit, p.min_depth_m, p.max_depth_m)).collect();
+                (seg, raw, preprocess_ms, segment_ms)
+            }
+        };
         for (stage, ms) in [("read+decode", read_ms), ("preprocess", preprocess_ms), ("segment", segment_ms)] {
             times.record(stage, ms);
         }
@@ -237,7 +285,7 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         if let Some(pose) = world_input.as_ref().and_then(|w| w.poses.get(&frame.index)) {
             trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: *pose });
             let sw = Stopwatch::start();
-            let labels = complete_labels(&seg, &pre.depth_unfiltered_m, &k, &config, blend_reach_px(&pre_config));
+            let labels = complete_labels(&seg, &raw_depth_m, &k, &config, blend_reach_px(&pre_config));
             let view = PlaneView { index: frame.index, world_from_camera: *pose, segmentation: &seg, labels: &labels, colour: &frame.color, intrinsics: k };
             let association = world.add_frame(&view, &config);
             clipped_texels += association.clipped_texels;
@@ -276,13 +324,16 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
             "planes": planes,
             "curved_rejected": seg.curved_rejected,
             "stages_ms": {"preprocess": preprocess_ms, "segment": segment_ms, "world": world_ms},
+            "kernels_ms": (!kernels_ms.is_empty()).then(|| kernels_ms.iter().map(|(k, ms)| ((*k).to_owned(), serde_json::json!(ms))).collect::<serde_json::Map<_, _>>()),
         }));
         eprint!("\rframe {index}: {} planes", seg.planes.len());
     }
     eprintln!();
     let json = serde_json::json!({
         "source": source.name(),
-        "implementation": "cpu-reference",
+        "implementation": if args.cpu_reference { "cpu-reference" } else { "gpu" },
+        "adapter": on_gpu.as_ref().map(|(gpu, _, _)| gpu.adapter_summary()),
+        "planes_overflow": overflow,
         "frames": frames,
     });
     std::fs::write(&frames_json, serde_json::to_string_pretty(&json)?).with_context(|| format!("writing {}", frames_json.display()))?;

@@ -79,6 +79,22 @@ fn synthetic_planes_come_back_exactly() {
         assert!(label_image.is_file(), "{} written", label_image.display());
     }
     assert!(!out.join("scene.glb").exists() && !out.join("planes.json").exists(), "--no-world writes no world model");
+    assert_eq!(json["implementation"], "gpu");
+    // The CPU reference finds the same planes (the GPU holds to it within 0.05° and 0.5 mm on
+    // these scenes: tests/kernels/planes/pipeline.rs).
+    let reference_out = dir.join("reference");
+    let o = webfusion(&["planes", recording.to_str().expect("utf-8"), "--out", reference_out.to_str().expect("utf-8"), "--no-world", "--cpu-reference"]);
+    assert!(o.status.success(), "planes --cpu-reference failed: {}", String::from_utf8_lossy(&o.stderr));
+    let reference = frames_json(&reference_out);
+    assert_eq!(reference["implementation"], "cpu-reference");
+    for (g, c) in frames.iter().zip(reference["frames"].as_array().expect("frames")) {
+        let (g, c) = (g["planes"].as_array().expect("planes"), c["planes"].as_array().expect("planes"));
+        assert_eq!(g.len(), c.len());
+        for (gp, cp) in g.iter().zip(c) {
+            let (gn, cn) = (vec3(&gp["normal"]), vec3(&cp["normal"]));
+            assert!(gn[0] * cn[0] + gn[1] * cn[1] + gn[2] * cn[2] > 0.05f64.to_radians().cos() && (gp["offset_m"].as_f64().unwrap() - cp["offset_m"].as_f64().unwrap()).abs() < 5e-4, "{gp} vs {cp}");
+        }
+    }
 }
 
 /// The parts of a `.glb` the checks need: its JSON and BIN chunks, each checked for length.

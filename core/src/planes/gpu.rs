@@ -300,6 +300,49 @@ impl GpuPlaneSegmenter {
         }
     }
 
+    /// Runs the chain one step per submission, waiting for each, and returns the GPU time spent
+    /// in each kernel (summed over its dispatches, clears under "clear"), in the order first
+    /// run: per-stage times for benchmarks, at the cost of a host wait per step. The result is
+    /// the same as [`Self::encode`]'s.
+    ///
+    /// # Errors
+    /// A failed wait.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub async fn run_profiled(&self, gpu: &Gpu) -> Result<Vec<(&'static str, f64)>> {
+        let mut times: Vec<(&'static str, f64)> = Vec::new();
+        for step in &self.steps {
+            let started = std::time::Instant::now();
+            let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.planes.profiled") });
+            let name = match step {
+                Step::Clear(buffer) => {
+                    encoder.clear_buffer(buffer, 0, None);
+                    "clear"
+                }
+                Step::Direct(kernel, bg, invocations) => {
+                    let pipeline = kernel(&gpu.kernels);
+                    pipeline.dispatch(&mut encoder, bg, *invocations);
+                    pipeline.kernel.name
+                }
+                Step::Indirect(kernel, bg, offset) => {
+                    let pipeline = kernel(&gpu.kernels);
+                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.planes"), timestamp_writes: None });
+                    pass.set_pipeline(&pipeline.pipeline);
+                    pass.set_bind_group(0, bg, &[]);
+                    pass.dispatch_workgroups_indirect(&self.dispatch, *offset);
+                    drop(pass);
+                    pipeline.kernel.name
+                }
+            };
+            gpu.submit_and_wait(encoder).await?;
+            let ms = started.elapsed().as_secs_f64() * 1e3;
+            match times.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, t)) => *t += ms,
+                None => times.push((name, ms)),
+            }
+        }
+        Ok(times)
+    }
+
     /// Reads the last segmentation back: the labels, the plane table (largest first) and the
     /// list's overflow count.
     ///

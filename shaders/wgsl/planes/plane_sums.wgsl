@@ -2,8 +2,8 @@
 //! Each workgroup sums one plane's pixels in one chunk of PLANE_SUMS_CHUNK_PX pixels (seed 003
 //! §4.3.3's plane statistics, reduced on the GPU without float atomics): workgroup (c, k)
 //! takes the pixels of chunk c whose key (plane_keys' output) is k; each of its 64 invocations
-//! walks pixels c · PLANE_SUMS_CHUNK_PX + lid, + 64, ... and folds each into its moments
-//! (shared/plane_moments.wgsl: centred, combined pairwise), then the workgroup tree-combines
+//! walks pixels c · PLANE_SUMS_CHUNK_PX + lid, + 64, ... and adds each to its moments
+//! (shared/plane_moments.wgsl: centred, Welford's update), then the workgroup tree-combines
 //! its 64 moments and writes them as partial (k, c). A pixel's point is its vertex, or with
 //! `use_raw` its raw depth back-projected (whose model noise σ(z)² r rᵀ, r = p / z, it also
 //! adds); its footprint on the plane, z³ / (f_x f_y |n·p|), uses the normal
@@ -69,7 +69,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) 
         }
         let np = max(abs(dot(footprint_normal, p)), 1e-6);
         let area = p.z * p.z * p.z / (params.fx_px * params.fy_px * np);
-        acc = plane_moments_combine(acc, plane_moments_point(p, normal_in_camera[ix].xyz, area, noise_scale));
+        plane_moments_add_point(&acc, p, normal_in_camera[ix].xyz, area, noise_scale);
     }
     scratch[lid] = acc;
     for (var stride = PLANE_SUMS_WORKGROUP / 2u; stride > 0u; stride >>= 1u) {

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/planes/plane_sums.wgsl`.
 
-use crate::cpu::planes::moments::{PLANE_MOMENT_VEC4S, PlaneMoments, plane_moments_combine, plane_moments_point, plane_moments_zero};
+use crate::cpu::planes::moments::{PLANE_MOMENT_VEC4S, PlaneMoments, plane_moments_add_point, plane_moments_combine, plane_moments_zero};
 use crate::cpu::shared::kinect_sigma_m;
 use crate::kernels::plane_sums::PlaneSumsParams;
 
@@ -56,7 +56,7 @@ pub fn plane_sums(params: &PlaneSumsParams, keys: &[u32], vertex_in_camera: &[[f
                     let np = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs().max(1e-6);
                     let area = p[2] * p[2] * p[2] / (params.fx_px * params.fy_px * np);
                     let n = normal_in_camera[ix];
-                    *acc = plane_moments_combine(acc, &plane_moments_point(p, [n[0], n[1], n[2]], area, noise_scale));
+                    plane_moments_add_point(acc, p, [n[0], n[1], n[2]], area, noise_scale);
                 }
             }
             let m = tree_combine(&mut scratch);
