@@ -24,7 +24,7 @@ use anyhow::Context as _;
 use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::io::format_timestamp_s;
 use webfusion_core::planes::{NO_LABEL, PlaneConfig, reference};
-use webfusion_core::cpu::shared::depth_to_metres;
+use webfusion_core::cpu::shared::{depth_to_metres, plane_colour};
 use webfusion_core::planes::gpu::GpuPlaneSegmenter;
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
 use webfusion_core::{ColorImage, GpuOptions, Se3, codec::png};
@@ -188,19 +188,9 @@ fn remainder(mesh: &Mesh, planes: &[PlaneMesh], voxel_m: f32) -> Mesh {
     out
 }
 
-/// A distinct colour for plane `i` (golden-angle hues).
+/// A plane's colour in the label images (the browser's plane view uses the same).
 fn label_colour(i: u32) -> [u8; 3] {
-    let h = (i as f32 * 0.618_034).fract() * 6.0;
-    let x = 1.0 - (h % 2.0 - 1.0).abs();
-    let (r, g, b) = match h as u32 {
-        0 => (1.0, x, 0.0),
-        1 => (x, 1.0, 0.0),
-        2 => (0.0, 1.0, x),
-        3 => (0.0, x, 1.0),
-        4 => (x, 0.0, 1.0),
-        _ => (1.0, 0.0, x),
-    };
-    [r, g, b].map(|c: f32| (40.0 + 215.0 * c) as u8)
+    plane_colour(i).map(|c| (c * 255.0).round() as u8)
 }
 
 pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()> {

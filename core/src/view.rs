@@ -4,6 +4,7 @@
 //! pixel goes through the host.
 
 use crate::kernels::depth_colormap::{self, DepthColormapParams};
+use crate::kernels::label_colormap::{self, LabelColormapParams};
 use crate::kernels::normal_colormap::{self, NormalColormapParams};
 use crate::{Error, Gpu, Result};
 
@@ -87,6 +88,31 @@ impl DepthView {
     /// Records the colouring.
     pub fn dispatch_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
         gpu.kernels.depth_colormap.dispatch_in(pass, &self.bind_group, [self.image.width_px, self.image.height_px, 1]);
+    }
+}
+
+/// Plane labels over the frame's colour (seed 003's segmentation view).
+#[derive(Debug)]
+pub struct LabelView {
+    /// The coloured image.
+    pub image: ViewImage,
+    bind_group: wgpu::BindGroup,
+}
+
+impl LabelView {
+    /// Colours `labels` (`width_px` × `height_px` u32, [`crate::planes::NO_LABEL`] = none,
+    /// planes below [`crate::planes::MAX_PLANES`]) over `color` (vec4 per pixel).
+    pub fn new(gpu: &Gpu, label: &str, labels: &wgpu::Buffer, color: &wgpu::Buffer, size_px: [u32; 2]) -> Self {
+        let image = ViewImage::new(gpu, label, size_px[0], size_px[1]);
+        let params = LabelColormapParams { width_px: size_px[0], height_px: size_px[1], row_stride_px: image.row_stride_px, label_count: crate::planes::MAX_PLANES as u32 };
+        let params = gpu.uniform_buffer(&format!("{label}.params"), &params);
+        let bind_group = label_colormap::Bindings { params: &params, labels, color, rgba8: &image.rgba8 }.bind_group(gpu);
+        Self { image, bind_group }
+    }
+
+    /// Records the colouring.
+    pub fn dispatch_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        gpu.kernels.label_colormap.dispatch_in(pass, &self.bind_group, [self.image.width_px, self.image.height_px, 1]);
     }
 }
 

@@ -565,3 +565,19 @@ pub fn fast_circle_offset(k: u32) -> [i32; 2] {
     const CIRCLE: [[i32; 2]; 16] = [[0, -3], [1, -3], [2, -2], [3, -1], [3, 0], [3, 1], [2, 2], [1, 3], [0, 3], [-1, 3], [-2, 2], [-3, 1], [-3, 0], [-3, -1], [-2, -2], [-1, -3]];
     CIRCLE[k as usize]
 }
+
+/// Twin of `plane_colour()` in `shared/colormap.wgsl`: a distinct colour per plane label.
+pub fn plane_colour(label: u32) -> [f32; 3] {
+    let f = label as f32 * 0.618_034;
+    let h = (f - f.floor()) * 6.0;
+    let x = 1.0 - (h % 2.0 - 1.0).abs();
+    let c = match h as u32 {
+        0 => [1.0, x, 0.0],
+        1 => [x, 1.0, 0.0],
+        2 => [0.0, 1.0, x],
+        3 => [0.0, x, 1.0],
+        4 => [x, 0.0, 1.0],
+        _ => [1.0, 0.0, x],
+    };
+    c.map(|v| (40.0 + 215.0 * v) / 255.0)
+}

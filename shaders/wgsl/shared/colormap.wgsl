@@ -31,3 +31,24 @@ fn normal_colour(n: vec4<f32>) -> u32 {
     }
     return pack_rgba8(vec4<f32>(0.5 - 0.5 * n.xyz, 1.0));
 }
+
+// A distinct colour per plane label: hues a golden ratio of a turn apart, full saturation,
+// lifted off black.
+fn plane_colour(label: u32) -> vec3<f32> {
+    let h = fract(f32(label) * 0.618034) * 6.0;
+    let x = 1.0 - abs(h % 2.0 - 1.0);
+    let sector = u32(h);
+    var c = vec3<f32>(1.0, 0.0, x);
+    if sector == 0u {
+        c = vec3<f32>(1.0, x, 0.0);
+    } else if sector == 1u {
+        c = vec3<f32>(x, 1.0, 0.0);
+    } else if sector == 2u {
+        c = vec3<f32>(0.0, 1.0, x);
+    } else if sector == 3u {
+        c = vec3<f32>(0.0, x, 1.0);
+    } else if sector == 4u {
+        c = vec3<f32>(x, 0.0, 1.0);
+    }
+    return (40.0 + 215.0 * c) / 255.0;
+}
