@@ -165,6 +165,20 @@ try {
   const stepped = await waitFor(page, 'the second stage step', (s) => s.features?.pair?.stage === 'detection', 30_000);
   check('odometry stage steps', stepped.features.pair.stage === 'detection' && stepped.frames_done === final.frames_done, `estimation -> update (at the end of the log no frame is requested) -> detection: "${await page.locator('#odometry-stage').textContent()}"`);
 
+  // 6c. Plane segmentation (on by default): the plane view colours the last frame's planes,
+  // and the status lists them (the sample's desk and partition face the camera).
+  stage = 'the plane view';
+  const pv = final.planes;
+  const planeShot = decodePng(await page.locator('#view-planes').screenshot({ path: join(out, 'planes_view.png') }));
+  let saturated = 0;
+  for (let i = 0; i < planeShot.width * planeShot.height; i++) {
+    const [r, g, b] = [planeShot.pixels[i * planeShot.channels], planeShot.pixels[i * planeShot.channels + 1], planeShot.pixels[i * planeShot.channels + 2]];
+    if (Math.max(r, g, b) - Math.min(r, g, b) > 60) saturated++;
+  }
+  const planeFraction = saturated / (planeShot.width * planeShot.height);
+  check('plane view', pv && pv.count >= 2 && pv.frame === final.last_index && pv.planes.every((p) => Math.abs(Math.hypot(...p.normal) - 1) < 1e-3 && p.offset_m > 0 && p.pixels > 0) && planeFraction > 0.1,
+    `planes ${JSON.stringify(pv && { frame: pv.frame, count: pv.count, pixels: pv.planes.map((p) => p.pixels), median_ms: pv.median_ms })}; view ${(100 * planeFraction).toFixed(0)} % plane-coloured (saved ${join(out, 'planes_view.png')})`);
+
   // 7. Bad settings in the URL, then a lost device, in a browser of their own (a fresh GPU
   // process, as a new visitor would have).
   stage = 'the second browser';

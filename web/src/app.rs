@@ -51,6 +51,8 @@ struct Settings {
     config: FusionConfig,
     /// Feature odometry beside ICP (seed 002): initial guesses and relocalisation.
     features: bool,
+    /// Plane segmentation of every frame (seed 003).
+    planes: bool,
 }
 
 impl Settings {
@@ -76,7 +78,7 @@ impl Settings {
         config.icp.angle_thresh_rad = number("set-icp-angle-deg", "ICP angle")?.to_radians();
         config.icp.rgb_weight = number("set-rgb-weight", "photometric weight")?;
         config.validate().map_err(|e| e.to_string())?;
-        Ok(Self { config, features: !ui::value("set-features").is_empty() })
+        Ok(Self { config, features: !ui::value("set-features").is_empty(), planes: !ui::value("set-planes").is_empty() })
     }
 }
 
@@ -99,6 +101,7 @@ fn fill_settings_form(query: &std::collections::HashMap<String, String>) -> (Set
         ("set-icp-angle-deg", "icp_angle_deg", format!("{}", icp.angle_thresh_rad.to_degrees().round())),
         ("set-rgb-weight", "rgb_weight", icp.rgb_weight.to_string()),
         ("set-features", "features", "1".to_owned()),
+        ("set-planes", "planes", "1".to_owned()),
     ];
     for (id, _, value) in &fields {
         ui::set_value(id, value);
@@ -115,7 +118,7 @@ fn fill_settings_form(query: &std::collections::HashMap<String, String>) -> (Set
     // The defaults always validate; should they not, say so rather than start half-configured.
     let settings = Settings::from_form().unwrap_or_else(|message| {
         warnings.push(format!("the default settings are invalid: {message}"));
-        Settings { config: defaults, features: true }
+        Settings { config: defaults, features: true, planes: true }
     });
     (settings, warnings)
 }
@@ -218,7 +221,7 @@ async fn run() -> Result<(), String> {
     ui::bind_controls(&inbox);
     let overlay: web_sys::HtmlCanvasElement = ui::element("view-free-overlay")?;
     ui::bind_gestures(&inbox, &overlay);
-    let mode = FusionMode::new(settings.config.clone(), settings.features);
+    let mode = FusionMode::new(settings.config.clone(), settings.features, settings.planes);
     install_hooks(&inbox, &mode);
     // The browser compiles the pipelines after `Gpu::new` returns; an empty submission
     // completes once they are ready (a milestone of the status).
@@ -537,7 +540,7 @@ impl App {
             }
             Ui::ApplySettings => match Settings::from_form() {
                 Ok(settings) => {
-                    self.mode.set_config(settings.config.clone(), settings.features);
+                    self.mode.set_config(settings.config.clone(), settings.features, settings.planes);
                     self.settings = settings;
                     self.settings_warnings.clear();
                     self.reset_run();
@@ -810,6 +813,10 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
             x.guesses, x.relocalisations, x.relocalisations_confirmed, x.keyframes, x.median_ms
         ),
         None => "feature odometry off".to_owned(),
+    });
+    lines.push(match &f.planes {
+        Some(p) => format!("planes: {} in frame {} ({} curved surfaces rejected) · {:.0} ms/frame", p.count, p.frame, p.curved_rejected, p.median_ms),
+        None => "plane segmentation off".to_owned(),
     });
     if s.frames_skipped > 0 {
         lines.push(format!("⚠ the bridge skipped {} damaged frame(s) of the source", s.frames_skipped));

@@ -12,6 +12,11 @@
 //! extracted first (uploading and preprocessing it for both), give ICP its initial guess or,
 //! after a loss, a relocalisation against stored keyframes, and the frame's report is awaited
 //! before the next one: the guess needs the last verdict, so frames are not pipelined then.
+//!
+//! With plane segmentation on (the default; `core::planes::gpu`), each frame whose views are
+//! drawn is also segmented on the GPU after its submission, its labels coloured over the frame
+//! in the plane view, and the plane table (a few kilobytes, not the labels) read back for the
+//! status.
 
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -26,7 +31,9 @@ use webfusion_core::io::{TUM_TRAJECTORY_HEADER, push_tum_line};
 use webfusion_core::odometry::assist::{AssistStats, FeatureAssist, PAIR_STAGES, PairView};
 use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::source::TimedPose;
-use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, NormalView};
+use webfusion_core::planes::PlaneConfig;
+use webfusion_core::planes::gpu::GpuPlaneSegmenter;
+use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, LabelView, NormalView};
 use webfusion_core::{Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
 
 use crate::canvas::GpuCanvas;
@@ -71,17 +78,26 @@ struct FreeView {
     canvas: GpuCanvas,
 }
 
+/// Plane segmentation of each frame and its view.
+struct PlaneViews {
+    segmenter: GpuPlaneSegmenter,
+    view: LabelView,
+    canvas: GpuCanvas,
+}
+
 /// The pipeline and everything built on its device.
 struct Pipeline {
     fusion: KinectFusion,
     /// Feature odometry beside ICP (off by the setting, or for frames too small for it).
     assist: Option<FeatureAssist>,
+    /// Plane segmentation (off by the setting).
+    planes: Option<PlaneViews>,
     views: FrameViews,
     free: FreeView,
 }
 
 impl Pipeline {
-    fn new(gpu: &Gpu, calibration: RgbdCalibration, config: &FusionConfig, features: bool) -> Result<Self, String> {
+    fn new(gpu: &Gpu, calibration: RgbdCalibration, config: &FusionConfig, features: bool, planes: bool) -> Result<Self, String> {
         let fusion = KinectFusion::new(gpu, calibration, config.clone()).map_err(|e| format!("cannot build the pipeline: {e}"))?;
         let assist = if features {
             match FeatureAssist::new(gpu, fusion.preprocessor(), OdometryConfig::default()) {
@@ -110,7 +126,15 @@ impl Pipeline {
         let target = RaycastTarget::new(gpu, fusion.volume(), FREE_VIEW, "web.free_view");
         let shading = NormalView::new(gpu, "web.view.free", &target.normal_in_world, [FREE_VIEW.width_px, FREE_VIEW.height_px]);
         let free = FreeView { target, shading, canvas: GpuCanvas::new(gpu, "view-free", [FREE_VIEW.width_px, FREE_VIEW.height_px])? };
-        Ok(Self { fusion, assist, views, free })
+        let planes = if planes {
+            let segmenter = GpuPlaneSegmenter::new(gpu, pre, &PlaneConfig::default()).map_err(|e| format!("cannot build plane segmentation: {e}"))?;
+            let view = LabelView::new(gpu, "web.view.planes", &segmenter.labels, &pre.color, size);
+            Some(PlaneViews { segmenter, view, canvas: GpuCanvas::new(gpu, "view-planes", size)? })
+        } else {
+            ui::set_text("planes-caption", "off");
+            None
+        };
+        Ok(Self { fusion, assist, planes, views, free })
     }
 }
 
@@ -119,6 +143,8 @@ pub(crate) struct FusionMode {
     config: FusionConfig,
     /// Feature odometry beside ICP.
     features: bool,
+    /// Plane segmentation of every frame.
+    planes: bool,
     pipeline: Option<Pipeline>,
     in_flight: VecDeque<InFlight>,
     /// Index of the last frame submitted.
@@ -159,6 +185,10 @@ pub(crate) struct FusionMode {
     pair: Option<PairView>,
     reference_image: Option<FrameImage>,
     current_image: Option<FrameImage>,
+    /// The last segmented frame's planes.
+    plane_status: Option<PlaneStatus>,
+    /// Segmentation wall times per frame (submission to table), milliseconds.
+    plane_ms: Window,
 }
 
 /// How a frame reached the page: its ground truth (if the source has it), when it arrived and
@@ -189,6 +219,30 @@ pub(crate) struct FusionStatus {
     pub(crate) latency_ms: Option<f64>,
     /// Feature odometry's counts (absent when it is off).
     pub(crate) features: Option<FeatureStatus>,
+    /// The last frame's planes (absent when segmentation is off or no frame was segmented).
+    pub(crate) planes: Option<PlaneStatus>,
+}
+
+/// Plane segmentation's part of the status: the last segmented frame's planes.
+#[derive(Clone, Debug, serde::Serialize)]
+pub(crate) struct PlaneStatus {
+    pub(crate) frame: u64,
+    pub(crate) count: usize,
+    pub(crate) curved_rejected: u32,
+    pub(crate) overflow: u32,
+    /// Largest first: unit normal (camera frame, facing it), offset d of n·p + d = 0, pixels.
+    pub(crate) planes: Vec<PlaneEntry>,
+    /// Median wall time per frame, submission to plane table.
+    pub(crate) median_ms: f64,
+}
+
+/// One plane of [`PlaneStatus`].
+#[derive(Clone, Debug, serde::Serialize)]
+pub(crate) struct PlaneEntry {
+    pub(crate) normal: [f32; 3],
+    pub(crate) offset_m: f32,
+    pub(crate) pixels: u32,
+    pub(crate) area_m2: f32,
 }
 
 /// Feature odometry's part of the status.
@@ -221,10 +275,11 @@ pub(crate) struct PairStatus {
 }
 
 impl FusionMode {
-    pub(crate) fn new(config: FusionConfig, features: bool) -> Self {
+    pub(crate) fn new(config: FusionConfig, features: bool, planes: bool) -> Self {
         Self {
             config,
             features,
+            planes,
             pipeline: None,
             in_flight: VecDeque::new(),
             last_submitted: None,
@@ -252,13 +307,16 @@ impl FusionMode {
             pair: None,
             reference_image: None,
             current_image: None,
+            plane_status: None,
+            plane_ms: Window::default(),
         }
     }
 
     /// Replaces the settings: the pipeline is rebuilt at the next frame.
-    pub(crate) fn set_config(&mut self, config: FusionConfig, features: bool) {
+    pub(crate) fn set_config(&mut self, config: FusionConfig, features: bool, planes: bool) {
         self.config = config;
         self.features = features;
+        self.planes = planes;
         self.pipeline = None;
     }
 
@@ -347,7 +405,7 @@ impl FusionMode {
     pub(crate) async fn submit(&mut self, gpu: &Gpu, calibration: RgbdCalibration, frame: &RgbdFrame, received: Received, draw_views: bool) -> Result<(), String> {
         let Received { ground_truth, arrived, decode_ms } = received;
         if self.pipeline.is_none() {
-            self.pipeline = Some(Pipeline::new(gpu, calibration, &self.config, self.features)?);
+            self.pipeline = Some(Pipeline::new(gpu, calibration, &self.config, self.features, self.planes)?);
         }
         let Some(p) = self.pipeline.as_mut() else { return Ok(()) };
         let failed = |e: webfusion_core::Error| format!("frame {}: {e}", frame.index);
@@ -369,6 +427,13 @@ impl FusionMode {
             draw_frame_views(gpu, p, frame)?;
         }
         let views_ms = t_views.elapsed().as_secs_f64() * 1e3;
+        if draw_views && let Some(planes) = &p.planes {
+            let started = Instant::now();
+            let status = segment_planes(gpu, planes, frame.index).await.map_err(|e| format!("frame {}: planes: {e}", frame.index))?;
+            self.plane_ms.push(started.elapsed().as_secs_f64() * 1e3);
+            ui::set_text("planes-caption", &format!("{} in frame {}", status.count, status.frame));
+            self.plane_status = Some(status);
+        }
         self.in_flight.push_back(InFlight { index: frame.index, timestamp_ns: frame.depth_timestamp_ns, ground_truth, arrived, decode_ms, views_ms });
         self.last_submitted = Some(frame.index);
         if p.assist.is_some() {
@@ -577,8 +642,35 @@ impl FusionMode {
                 });
                 FeatureStatus { guesses, relocalisations, relocalisations_confirmed, recoveries, keyframes: a.keyframes(), median_ms: ms.get(ms.len() / 2).copied().unwrap_or(0.0), pair }
             }),
+            planes: self.plane_status.clone().filter(|_| self.pipeline.as_ref().is_some_and(|p| p.planes.is_some())).map(|mut s| {
+                s.median_ms = self.plane_ms.median().unwrap_or(0.0);
+                s
+            }),
         }
     }
+}
+
+/// Segments the frame the pipeline just submitted (its preprocessed maps) into planes and
+/// colours its labels into the plane view, in one submission; then reads the plane table back.
+async fn segment_planes(gpu: &Gpu, planes: &PlaneViews, index: u64) -> Result<PlaneStatus, String> {
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.planes") });
+    planes.segmenter.encode(gpu, &mut encoder);
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("web.planes.view"), timestamp_writes: None });
+        planes.view.dispatch_in(gpu, &mut pass);
+    }
+    let texture = planes.canvas.draw(&mut encoder, &planes.view.image)?;
+    gpu.submit([encoder.finish()]);
+    GpuCanvas::present(gpu, [texture]);
+    let (seg, stats) = planes.segmenter.read_table(gpu).await.map_err(|e| e.to_string())?;
+    Ok(PlaneStatus {
+        frame: index,
+        count: seg.planes.len(),
+        curved_rejected: seg.curved_rejected,
+        overflow: stats.overflow,
+        planes: seg.planes.iter().map(|p| PlaneEntry { normal: p.normal, offset_m: p.offset_m, pixels: p.pixels, area_m2: p.area_m2 }).collect(),
+        median_ms: 0.0,
+    })
 }
 
 /// Colours the frame's depth, normals and predicted model on the GPU and copies them into

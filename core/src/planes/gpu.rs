@@ -349,8 +349,25 @@ impl GpuPlaneSegmenter {
     /// # Errors
     /// A failed readback.
     pub async fn read(&self, gpu: &Gpu) -> Result<(Segmentation, GpuSegmentationStats)> {
-        let n = self.full.pixel_count();
-        let words: Vec<u32> = gpu.read_buffers(&[(&self.state, PLANE_LIST_STATE), (&self.list, 4 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 4 * MAX_PLANES), (&self.labels, n)]).await?;
+        self.read_parts(gpu, true).await
+    }
+
+    /// [`Self::read`] without the labels (which stay on the GPU, in [`Self::labels`], for a
+    /// view): the plane table, the curved rejections and the overflow, a few kilobytes.
+    ///
+    /// # Errors
+    /// A failed readback.
+    pub async fn read_table(&self, gpu: &Gpu) -> Result<(Segmentation, GpuSegmentationStats)> {
+        self.read_parts(gpu, false).await
+    }
+
+    async fn read_parts(&self, gpu: &Gpu, with_labels: bool) -> Result<(Segmentation, GpuSegmentationStats)> {
+        let n = if with_labels { self.full.pixel_count() } else { 0 };
+        let mut parts = vec![(&self.state, PLANE_LIST_STATE), (&self.list, 4 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 4 * MAX_PLANES)];
+        if with_labels {
+            parts.push((&self.labels, n));
+        }
+        let words: Vec<u32> = gpu.read_buffers(&parts).await?;
         let (state, rest) = words.split_at(PLANE_LIST_STATE);
         let (list, rest) = rest.split_at(4 * MAX_PLANES * PLANE_RECORD_VEC4S);
         let (extents, labels) = rest.split_at(4 * MAX_PLANES);
@@ -360,7 +377,7 @@ impl GpuPlaneSegmenter {
             .map(|k| {
                 let record = &list[4 * k * PLANE_RECORD_VEC4S..4 * (k + 1) * PLANE_RECORD_VEC4S];
                 let v = |i: usize| -> [f32; 4] { std::array::from_fn(|c| f(record[4 * (PLANE_MOMENT_VEC4S + i) + c])) };
-                let (nd, c, t0, _, stats) = (v(0), v(1), v(2), v(3), v(4));
+                let (nd, c, t0, stats) = (v(0), v(1), v(2), v(4));
                 Plane {
                     normal: [nd[0], nd[1], nd[2]],
                     offset_m: nd[3],
@@ -374,6 +391,8 @@ impl GpuPlaneSegmenter {
                 }
             })
             .collect();
+        // Labels past the table cannot occur (the last relabelling maps every dropped plane to
+        // none); clamped so a reader can index the table with any label.
         let labels = labels.iter().map(|&l| if l == NO_LABEL || (l as usize) < count { l } else { NO_LABEL }).collect();
         Ok((Segmentation { labels, planes, curved_rejected: state[1] }, GpuSegmentationStats { overflow: state[2] }))
     }
