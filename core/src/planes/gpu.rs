@@ -23,7 +23,7 @@ use crate::cpu::planes::moments::PLANE_MOMENT_VEC4S;
 use crate::cpu::planes::plane_extent::decode_extent;
 use crate::cpu::planes::plane_fit::PLANE_FIT_VEC4S;
 use crate::cpu::planes::plane_list::{MODE_KEEP, MODE_MERGE, MODE_SORT, PLANE_LIST_DISPATCH, PLANE_LIST_STATE, PLANE_LIST_VEC4S, PLANE_RECORD_VEC4S};
-use crate::cpu::planes::plane_sums::plane_sums_chunks;
+use crate::cpu::planes::plane_sums::{CHUNK_MASK_WORDS, plane_sums_chunks};
 use crate::kernels::{
     Kernels, KernelPipeline, distance_histogram, distance_peaks, normal_histogram, normal_peaks, peak_realign, plane_extent, plane_fit, plane_keys, plane_label, plane_list, plane_relabel, plane_sums,
     plane_sums_reduce,
@@ -105,6 +105,8 @@ impl GpuPlaneSegmenter {
         let interval_count = buffer("interval_count", 4 * MAX_NORMAL_PEAKS);
         let keys_inner = buffer("keys_inner", 4 * n_inner);
         let keys_full = buffer("keys_full", 4 * n_full);
+        let masks_inner = buffer("chunk_masks_inner", 4 * CHUNK_MASK_WORDS * chunks_inner);
+        let masks_full = buffer("chunk_masks_full", 4 * CHUNK_MASK_WORDS * chunks_full);
         let partials = buffer("partials", 16 * PLANE_MOMENT_VEC4S * (SLOTS * chunks_inner).max(MAX_PLANES * chunks_full));
         let moments = buffer("moments", 16 * PLANE_MOMENT_VEC4S * SLOTS.max(MAX_PLANES));
         let fits = buffer("fits", 16 * PLANE_FIT_VEC4S * SLOTS.max(MAX_PLANES));
@@ -207,8 +209,8 @@ impl GpuPlaneSegmenter {
         let (bg_dist_first, bg_dist_second) = (dist(&peaks), dist(&realigned));
         let bg_realign = peak_realign::Bindings { params: &p_realign, peaks: &peaks, peak_count: &peak_count, normal_sums: &normal_sums, realigned: &realigned }.bind_group(gpu);
         let bg_dpeaks = distance_peaks::Bindings { params: &p_dpeaks, histogram: &distance_hist, peak_count: &peak_count, intervals: &intervals, interval_count: &interval_count }.bind_group(gpu);
-        let bg_keys_inner = plane_keys::Bindings { params: &p_keys_inner, source: &assignment, intervals: &intervals, interval_count: &interval_count, raw_depth_m: &dummy, planes: &planes, keys: &keys_inner }.bind_group(gpu);
-        let bg_keys_full = plane_keys::Bindings { params: &p_keys_full, source: &labels, intervals: &intervals, interval_count: &interval_count, raw_depth_m: raw, planes: &planes, keys: &keys_full }.bind_group(gpu);
+        let bg_keys_inner = plane_keys::Bindings { params: &p_keys_inner, source: &assignment, intervals: &intervals, interval_count: &interval_count, raw_depth_m: &dummy, planes: &planes, keys: &keys_inner, chunk_masks: &masks_inner }.bind_group(gpu);
+        let bg_keys_full = plane_keys::Bindings { params: &p_keys_full, source: &labels, intervals: &intervals, interval_count: &interval_count, raw_depth_m: raw, planes: &planes, keys: &keys_full, chunk_masks: &masks_full }.bind_group(gpu);
         let bg_sums_inner = plane_sums::Bindings {
             params: &p_sums_inner,
             keys: &keys_inner,
@@ -217,9 +219,10 @@ impl GpuPlaneSegmenter {
             raw_depth_m: &dummy,
             normals: &realigned,
             partials: &partials,
+            chunk_masks: &masks_inner,
         }
         .bind_group(gpu);
-        let bg_sums_full = plane_sums::Bindings { params: &p_sums_full, keys: &keys_full, vertex_in_camera: &full_level.vertex_in_camera, normal_in_camera: &full_level.normal_in_camera, raw_depth_m: raw, normals: &planes, partials: &partials }.bind_group(gpu);
+        let bg_sums_full = plane_sums::Bindings { params: &p_sums_full, keys: &keys_full, vertex_in_camera: &full_level.vertex_in_camera, normal_in_camera: &full_level.normal_in_camera, raw_depth_m: raw, normals: &planes, partials: &partials, chunk_masks: &masks_full }.bind_group(gpu);
         let bg_reduce_inner = plane_sums_reduce::Bindings { params: &p_reduce_inner, partials: &partials, moments: &moments }.bind_group(gpu);
         let bg_reduce_full = plane_sums_reduce::Bindings { params: &p_reduce_full, partials: &partials, moments: &moments }.bind_group(gpu);
         let bg_fit = plane_fit::Bindings { params: &p_fit, moments: &moments, fits: &fits }.bind_group(gpu);
@@ -235,6 +238,7 @@ impl GpuPlaneSegmenter {
         steps.push(Step::Direct(|k| &k.plane_label, bg_label.clone(), [n_full as u32, 1, 1]));
         let full_sums = |steps: &mut Vec<Step>| {
             steps.push(Step::Direct(|k| &k.plane_label, bg_label.clone(), [n_full as u32, 1, 1]));
+            steps.push(Step::Clear(masks_full.clone()));
             steps.push(Step::Direct(|k| &k.plane_keys, bg_keys_full.clone(), [full.width_px, full.height_px, 1]));
             steps.push(Step::Indirect(|k| &k.plane_sums, bg_sums_full.clone(), 0));
             steps.push(Step::Indirect(|k| &k.plane_sums_reduce, bg_reduce_full.clone(), 12));
@@ -253,6 +257,7 @@ impl GpuPlaneSegmenter {
                 }
             }
             steps.push(Step::Direct(|k| &k.distance_peaks, bg_dpeaks.clone(), [256 * MAX_NORMAL_PEAKS as u32, 1, 1]));
+            steps.push(Step::Clear(masks_inner.clone()));
             steps.push(Step::Direct(|k| &k.plane_keys, bg_keys_inner.clone(), [inner.width_px, inner.height_px, 1]));
             steps.push(Step::Direct(|k| &k.plane_sums, bg_sums_inner.clone(), [64 * chunks_inner as u32, SLOTS as u32, 1]));
             steps.push(Step::Direct(|k| &k.plane_sums_reduce, bg_reduce_inner.clone(), [64 * SLOTS as u32, 1, 1]));
@@ -269,7 +274,7 @@ impl GpuPlaneSegmenter {
         steps.push(Step::Clear(extents.clone()));
         steps.push(Step::Direct(|k| &k.plane_extent, bg_extent, [n_full as u32, 1, 1]));
 
-        let keep_alive = [normal_hist, peaks, peak_count, realigned, assignment, distance_hist, normal_sums, intervals, interval_count, keys_inner, keys_full, partials, moments, fits, planes, renumber, dummy];
+        let keep_alive = [normal_hist, peaks, peak_count, realigned, assignment, distance_hist, normal_sums, intervals, interval_count, keys_inner, keys_full, masks_inner, masks_full, partials, moments, fits, planes, renumber, dummy];
         params_buffers.extend(keep_alive);
         Ok(Self { full, steps, labels, list, state, extents, dispatch, _keep_alive: params_buffers })
     }

@@ -8,7 +8,9 @@
 //!   same label (the filters blend depth and normals across a border, which would pull a narrow
 //!   plane's fit), and, with `use_raw`, if its raw depth is valid and the raw point lies within
 //!   the labelling distance max(`min_distance_m`, 3 σ(z)) of the plane.
-//! Mirrors core/src/cpu/planes/plane_keys.rs.
+//! Each keyed pixel also sets its plane's bit in its chunk's mask (PLANE_SUMS_CHUNK_PX pixels
+//! in index order; atomicOr, the caller clears), so plane_sums skips the (chunk, plane) pairs
+//! with no pixel. Mirrors core/src/cpu/planes/plane_keys.rs.
 #import invalid
 #import kinect
 #import planes
@@ -49,6 +51,9 @@ struct PlaneKeysParams {
 @group(0) @binding(5) var<storage, read> planes: array<vec4<f32>>;
 // Out: per pixel its plane, or NO_LABEL.
 @group(0) @binding(6) var<storage, read_write> keys: array<u32>;
+// In/out (cleared by the caller): per chunk CHUNK_MASK_WORDS words, bit k set when a pixel of
+// the chunk has key k.
+@group(0) @binding(7) var<storage, read_write> chunk_masks: array<atomic<u32>>;
 
 fn key_from_assignment(ix: u32) -> u32 {
     let a = source[ix];
@@ -104,9 +109,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let ix = gid.y * params.width_px + gid.x;
+    var key = NO_LABEL;
     if params.mode == 0u {
-        keys[ix] = key_from_assignment(ix);
+        key = key_from_assignment(ix);
     } else {
-        keys[ix] = key_from_label(gid.x, gid.y);
+        key = key_from_label(gid.x, gid.y);
+    }
+    keys[ix] = key;
+    if key != NO_LABEL {
+        atomicOr(&chunk_masks[(ix / PLANE_SUMS_CHUNK_PX) * CHUNK_MASK_WORDS + key / 32u], 1u << (key % 32u));
     }
 }

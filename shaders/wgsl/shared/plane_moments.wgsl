@@ -30,28 +30,6 @@ fn plane_moments_point(p: vec3<f32>, n: vec3<f32>, area_m2: f32, noise_scale: f3
     return m;
 }
 
-// Adds one pixel to `m` in place (Welford's update; the same arithmetic as combining `m` with
-// plane_moments_point(p, n, area_m2, noise_scale), without building and copying a set).
-fn plane_moments_add_point(m: ptr<function, array<vec4<f32>, 10>>, p: vec3<f32>, n: vec3<f32>, area_m2: f32, noise_scale: f32) {
-    let na = (*m)[0].x;
-    let count = na + 1.0;
-    let wb = 1.0 / count;
-    let f = na * wb;
-    let dp = p - (*m)[1].xyz;
-    let dn = n - (*m)[2].xyz;
-    let fp = f * dp;
-    (*m)[0] = vec4<f32>(count, (*m)[0].y + area_m2, 0.0, 0.0);
-    (*m)[1] = vec4<f32>((*m)[1].xyz + wb * dp, 0.0);
-    (*m)[2] = vec4<f32>((*m)[2].xyz + wb * dn, 0.0);
-    (*m)[3] = vec4<f32>((*m)[3].xyz + fp * dp, 0.0);
-    (*m)[4] = vec4<f32>((*m)[4].xyz + vec3<f32>(fp.x * dp.y, fp.x * dp.z, fp.y * dp.z), 0.0);
-    (*m)[5] = vec4<f32>((*m)[5].xyz + dn.x * fp, 0.0);
-    (*m)[6] = vec4<f32>((*m)[6].xyz + dn.y * fp, 0.0);
-    (*m)[7] = vec4<f32>((*m)[7].xyz + dn.z * fp, 0.0);
-    (*m)[8] = vec4<f32>((*m)[8].xyz + noise_scale * p * p, 0.0);
-    (*m)[9] = vec4<f32>((*m)[9].xyz + noise_scale * vec3<f32>(p.x * p.y, p.x * p.z, p.y * p.z), 0.0);
-}
-
 // The moments of the union of two disjoint sets.
 fn plane_moments_combine(a: array<vec4<f32>, 10>, b: array<vec4<f32>, 10>) -> array<vec4<f32>, 10> {
     let na = a[0].x;

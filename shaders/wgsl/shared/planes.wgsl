@@ -12,6 +12,10 @@ const MAX_NORMAL_PEAKS: u32 = 8u;
 const MAX_DISTANCE_PEAKS: u32 = 8u;
 // Most planes a frame's plane list holds.
 const MAX_PLANES: u32 = 64u;
+// Pixels per chunk of the per-plane sums (plane_sums' workgroup share), and u32 words of each
+// chunk's mask of the planes it holds (one bit per plane key below MAX_PLANES).
+const PLANE_SUMS_CHUNK_PX: u32 = 4096u;
+const CHUNK_MASK_WORDS: u32 = 2u;
 // A pixel without a plane.
 const NO_LABEL: u32 = 0xffffffffu;
 const PLANES_PI: f32 = 3.14159265358979;

@@ -3,10 +3,12 @@
 //! (mode 0) on the box scene's inner level, from the twins of the stages before it (integer
 //! work only: identical); labelled keys (mode 1) on a real frame with the reference's planes
 //! and its raw depth (at most 1 ‰ different: a raw point at the distance limit may fall either
-//! way when WGSL fuses a multiply-add). Four negative controls each. The fixtures here feed the
+//! way when WGSL fuses a multiply-add). Four negative controls each; each side's chunk masks
+//! must be exactly those of its own keys. The fixtures here feed the
 //! plane_sums, plane_sums_reduce and plane_fit tests.
 
 use webfusion_core::cpu;
+use webfusion_core::cpu::planes::plane_sums::{CHUNK_MASK_WORDS, PLANE_SUMS_CHUNK_PX, plane_sums_chunks};
 use webfusion_core::cpu::preprocess::chain::{CpuPreprocessed, CpuPyramidLevel, preprocess};
 use webfusion_core::kernels::distance_histogram::DistanceHistogramParams;
 use webfusion_core::kernels::distance_peaks::DistancePeaksParams;
@@ -106,10 +108,31 @@ pub(crate) fn label_params(level: &CpuPyramidLevel, use_raw: bool) -> PlaneKeysP
     }
 }
 
-/// Runs plane_keys on the GPU and its twin; returns (GPU, twin) keys.
+/// The chunk masks of `keys` (a bit per key present in each chunk), as plane_keys sets them.
+pub(crate) fn masks_of(keys: &[u32]) -> Vec<u32> {
+    let mut masks = vec![0u32; plane_sums_chunks(keys.len()) * CHUNK_MASK_WORDS];
+    for (ix, &k) in keys.iter().enumerate() {
+        if k != NO_LABEL {
+            masks[(ix / PLANE_SUMS_CHUNK_PX) * CHUNK_MASK_WORDS + k as usize / 32] |= 1 << (k % 32);
+        }
+    }
+    masks
+}
+
+/// The twin's keys and chunk masks.
+pub(crate) fn twin_keys(params: &PlaneKeysParams, source: &[u32], intervals: &[[u32; 4]], interval_count: &[u32], raw_depth_m: &[f32], planes: &[[f32; 4]]) -> (Vec<u32>, Vec<u32>) {
+    let n = (params.width_px * params.height_px) as usize;
+    let (mut keys, mut masks) = (vec![0u32; n], vec![0u32; plane_sums_chunks(n) * CHUNK_MASK_WORDS]);
+    cpu::plane_keys(params, source, intervals, interval_count, raw_depth_m, planes, &mut keys, &mut masks);
+    (keys, masks)
+}
+
+/// Runs plane_keys on the GPU and its twin; returns (GPU, twin) keys, after checking that each
+/// side's chunk masks are those of its keys.
 pub(crate) fn run(params: &PlaneKeysParams, source: &[u32], intervals: &[[u32; 4]], interval_count: &[u32], raw_depth_m: &[f32], planes: &[[f32; 4]]) -> (Vec<u32>, Vec<u32>) {
     let gpu = gpu();
     let n = (params.width_px * params.height_px) as usize;
+    let zeros = vec![0u32; plane_sums_chunks(n) * CHUNK_MASK_WORDS];
     let planes_buf: Vec<[f32; 4]> = if planes.is_empty() { vec![[0.0; 4]] } else { planes.to_vec() };
     let out = run_kernel_slots(
         &gpu,
@@ -122,13 +145,19 @@ pub(crate) fn run(params: &PlaneKeysParams, source: &[u32], intervals: &[[u32; 4
             Slot::In(bytemuck::cast_slice(raw_depth_m)),
             Slot::In(bytemuck::cast_slice(&planes_buf)),
             Slot::Out(4 * n),
+            Slot::InOut(bytemuck::cast_slice(&zeros)),
         ],
         [params.width_px, params.height_px, 1],
     );
     finish(&gpu);
-    let mut c = vec![0u32; n];
-    cpu::plane_keys(params, source, intervals, interval_count, raw_depth_m, &planes_buf, &mut c);
-    (cast(&out[0]), c)
+    let (g, g_masks): (Vec<u32>, Vec<u32>) = (cast(&out[0]), cast(&out[1]));
+    let (c, c_masks) = twin_keys(params, source, intervals, interval_count, raw_depth_m, &planes_buf);
+    assert_eq!(g_masks, masks_of(&g), "the GPU's chunk masks are its keys'");
+    assert_eq!(c_masks, masks_of(&c), "the twin's chunk masks are its keys'");
+    let mut missing = g_masks.clone();
+    missing[g_masks.iter().position(|&m| m != 0).expect("a keyed chunk")] = 0;
+    assert_ne!(missing, masks_of(&g), "the mask comparison can fail");
+    (g, c)
 }
 
 fn assert_same_with_controls(what: &str, g: &[u32], c: &[u32], per_mille: usize) {

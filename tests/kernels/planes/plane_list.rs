@@ -29,13 +29,12 @@ const TOL: Tolerance = Tolerance { absolute: 1e-6, relative: 1e-4 };
 fn inner_slots(scene: &PlaneScene) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
     let f = inner_fixture(scene, Some(3));
     let kp = inner_params(&f.level);
-    let mut keys = vec![0u32; f.assignment.len()];
-    cpu::plane_keys(&kp, &f.assignment, &f.intervals, &f.interval_count, &[0.0], &[[0.0; 4]], &mut keys);
+    let (keys, masks) = super::plane_keys::twin_keys(&kp, &f.assignment, &f.intervals, &f.interval_count, &[0.0], &[[0.0; 4]]);
     let chunks = plane_sums_chunks(keys.len());
     let mut peaks = f.peaks.clone();
     peaks.resize(MAX_NORMAL_PEAKS, [0.0, 0.0, 1.0, 0.0]);
     let mut partials = vec![[0.0f32; 4]; SLOTS * chunks * PLANE_MOMENT_VEC4S];
-    cpu::plane_sums(&sums_params(&kp, false, MAX_DISTANCE_PEAKS.trailing_zeros()), &keys, &f.level.vertex_in_camera, &f.level.normal_in_camera, &[0.0], &peaks, &mut partials, SLOTS as u32);
+    cpu::plane_sums(&sums_params(&kp, false, MAX_DISTANCE_PEAKS.trailing_zeros()), &keys, &f.level.vertex_in_camera, &f.level.normal_in_camera, &[0.0], &peaks, &mut partials, &masks, SLOTS as u32);
     let mut moments = vec![[0.0f32; 4]; SLOTS * PLANE_MOMENT_VEC4S];
     cpu::plane_sums_reduce(&PlaneSumsReduceParams { chunks: chunks as u32, ..Default::default() }, &partials, &mut moments, SLOTS as u32);
     let mut fits = vec![[0.0f32; 4]; SLOTS * PLANE_FIT_VEC4S];

@@ -15,7 +15,7 @@ use webfusion_core::planes::{MAX_DISTANCE_PEAKS, NO_LABEL, reference};
 use webfusion_core::sim::plane_scenes::PlaneScene;
 use webfusion_tests::{SENTINEL_F32, Slot, cast, finish, gpu, run_kernel_slots};
 
-use super::plane_keys::{inner_fixture, inner_params, label_params, real_fixture};
+use super::plane_keys::{inner_fixture, inner_params, label_params, masks_of, real_fixture, twin_keys};
 
 /// Compares sets of moments (see the module doc for the tolerances).
 pub(crate) fn compare_moments(what: &str, g: &[[f32; 4]], c: &[[f32; 4]]) -> Result<(), String> {
@@ -65,22 +65,24 @@ pub(crate) fn assert_moments_controls(what: &str, g: &[[f32; 4]], c: &[[f32; 4]]
     assert!(compare_moments(what, &bad, c).is_err(), "{what}: a sentinel accepted");
 }
 
-/// Runs plane_sums for `planes` planes on the GPU and its twin; returns (GPU, twin) partials.
+/// Runs plane_sums for `planes` planes on the GPU and its twin (with the chunk masks of
+/// `keys`); returns (GPU, twin) partials.
 #[expect(clippy::too_many_arguments, reason = "the kernel's bindings, in binding order")]
 pub(crate) fn run(params: &PlaneSumsParams, keys: &[u32], vertex: &[[f32; 4]], normal: &[[f32; 4]], raw: &[f32], normals: &[[f32; 4]], planes: u32) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
     let gpu = gpu();
+    let masks = masks_of(keys);
     let chunks = plane_sums_chunks((params.width_px * params.height_px) as usize);
     let size = planes as usize * chunks * PLANE_MOMENT_VEC4S;
     let out = run_kernel_slots(
         &gpu,
         &gpu.kernels.plane_sums,
         params,
-        &[Slot::In(bytemuck::cast_slice(keys)), Slot::In(bytemuck::cast_slice(vertex)), Slot::In(bytemuck::cast_slice(normal)), Slot::In(bytemuck::cast_slice(raw)), Slot::In(bytemuck::cast_slice(normals)), Slot::Out(16 * size)],
+        &[Slot::In(bytemuck::cast_slice(keys)), Slot::In(bytemuck::cast_slice(vertex)), Slot::In(bytemuck::cast_slice(normal)), Slot::In(bytemuck::cast_slice(raw)), Slot::In(bytemuck::cast_slice(normals)), Slot::Out(16 * size), Slot::In(bytemuck::cast_slice(&masks))],
         [(64 * chunks) as u32, planes, 1],
     );
     finish(&gpu);
     let mut c = vec![[0.0f32; 4]; size];
-    cpu::plane_sums(params, keys, vertex, normal, raw, normals, &mut c, planes);
+    cpu::plane_sums(params, keys, vertex, normal, raw, normals, &mut c, &masks, planes);
     (cast(&out[0]), c)
 }
 
@@ -91,8 +93,7 @@ pub(crate) fn sums_params(keys: &webfusion_core::kernels::plane_keys::PlaneKeysP
 /// The real frame's labelled keys (twin) with raw points: (params, keys).
 pub(crate) fn real_keys(pre: &webfusion_core::cpu::preprocess::chain::CpuPreprocessed, planes: &[[f32; 4]], labels: &[u32]) -> (PlaneSumsParams, Vec<u32>) {
     let kp = label_params(&pre.levels[0], true);
-    let mut keys = vec![0u32; labels.len()];
-    cpu::plane_keys(&kp, labels, &[[0; 4]], &[0], &pre.depth_unfiltered_m, planes, &mut keys);
+    let (keys, _) = twin_keys(&kp, labels, &[[0; 4]], &[0], &pre.depth_unfiltered_m, planes);
     (sums_params(&kp, true, 0), keys)
 }
 
@@ -119,8 +120,7 @@ fn a_real_frame_sums_like_the_twin() {
 fn inner_loop_sums_use_the_peaks_footprints() {
     let f = inner_fixture(&PlaneScene::box_on_floor(), Some(3));
     let kp = inner_params(&f.level);
-    let mut keys = vec![0u32; f.assignment.len()];
-    cpu::plane_keys(&kp, &f.assignment, &f.intervals, &f.interval_count, &[0.0], &[[0.0; 4]], &mut keys);
+    let (keys, _) = twin_keys(&kp, &f.assignment, &f.intervals, &f.interval_count, &[0.0], &[[0.0; 4]]);
     let params = sums_params(&kp, false, MAX_DISTANCE_PEAKS.trailing_zeros());
     let planes = (f.peaks.len() * MAX_DISTANCE_PEAKS) as u32;
     let (g, c) = run(&params, &keys, &f.level.vertex_in_camera, &f.level.normal_in_camera, &[0.0], &f.peaks, planes);

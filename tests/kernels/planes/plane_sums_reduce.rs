@@ -35,7 +35,7 @@ pub(crate) fn real_moments() -> (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<PlaneMoments>
     let full = &pre.levels[0];
     let chunks = plane_sums_chunks(keys.len());
     let mut partials = vec![[0.0f32; 4]; planes.len() * chunks * PLANE_MOMENT_VEC4S];
-    cpu::plane_sums(&params, &keys, &full.vertex_in_camera, &full.normal_in_camera, &pre.depth_unfiltered_m, &planes, &mut partials, planes.len() as u32);
+    cpu::plane_sums(&params, &keys, &full.vertex_in_camera, &full.normal_in_camera, &pre.depth_unfiltered_m, &planes, &mut partials, &super::plane_keys::masks_of(&keys), planes.len() as u32);
     let (g, c) = run(chunks, &partials, planes.len() as u32);
     let sets = c.chunks(PLANE_MOMENT_VEC4S).map(|m| m.try_into().unwrap()).collect();
     (g, c, sets)

@@ -32,27 +32,6 @@ pub fn plane_moments_point(p: [f32; 3], n: [f32; 3], area_m2: f32, noise_scale: 
     m
 }
 
-/// Twin of `plane_moments_add_point()`: adds one pixel to `m` in place.
-pub fn plane_moments_add_point(m: &mut PlaneMoments, p: [f32; 3], n: [f32; 3], area_m2: f32, noise_scale: f32) {
-    let na = m[0][0];
-    let count = na + 1.0;
-    let wb = 1.0 / count;
-    let f = na * wb;
-    let dp: [f32; 3] = std::array::from_fn(|i| p[i] - m[1][i]);
-    let dn: [f32; 3] = std::array::from_fn(|i| n[i] - m[2][i]);
-    let fp = dp.map(|d| f * d);
-    m[0] = [count, m[0][1] + area_m2, 0.0, 0.0];
-    m[1] = v4(std::array::from_fn(|i| m[1][i] + wb * dp[i]));
-    m[2] = v4(std::array::from_fn(|i| m[2][i] + wb * dn[i]));
-    m[3] = v4(std::array::from_fn(|i| m[3][i] + fp[i] * dp[i]));
-    m[4] = v4([m[4][0] + fp[0] * dp[1], m[4][1] + fp[0] * dp[2], m[4][2] + fp[1] * dp[2]]);
-    for r in 0..3 {
-        m[5 + r] = v4(std::array::from_fn(|i| m[5 + r][i] + dn[r] * fp[i]));
-    }
-    m[8] = v4(std::array::from_fn(|i| m[8][i] + noise_scale * p[i] * p[i]));
-    m[9] = v4([m[9][0] + noise_scale * (p[0] * p[1]), m[9][1] + noise_scale * (p[0] * p[2]), m[9][2] + noise_scale * (p[1] * p[2])]);
-}
-
 /// Twin of `plane_moments_combine()`: the moments of the union of two disjoint sets.
 pub fn plane_moments_combine(a: &PlaneMoments, b: &PlaneMoments) -> PlaneMoments {
     let (na, nb) = (a[0][0], b[0][0]);

@@ -4,6 +4,7 @@
 use crate::cpu::planes::distance_histogram::NO_ASSIGNMENT;
 use crate::cpu::shared::{is_valid_f32, kinect_sigma_m};
 use crate::kernels::plane_keys::PlaneKeysParams;
+use crate::cpu::planes::plane_sums::{CHUNK_MASK_WORDS, PLANE_SUMS_CHUNK_PX};
 use crate::planes::{MAX_DISTANCE_PEAKS, NO_LABEL};
 
 fn key_from_assignment(source: &[u32], intervals: &[[u32; 4]], interval_count: &[u32], ix: usize) -> u32 {
@@ -51,12 +52,17 @@ fn key_from_label(params: &PlaneKeysParams, source: &[u32], raw_depth_m: &[f32],
     l
 }
 
-/// Keys every pixel as the kernel's invocations do.
-pub fn plane_keys(params: &PlaneKeysParams, source: &[u32], intervals: &[[u32; 4]], interval_count: &[u32], raw_depth_m: &[f32], planes: &[[f32; 4]], keys: &mut [u32]) {
+/// Keys every pixel and sets the chunk masks' bits as the kernel's invocations do.
+#[expect(clippy::too_many_arguments, reason = "one argument per WGSL binding, in binding order")]
+pub fn plane_keys(params: &PlaneKeysParams, source: &[u32], intervals: &[[u32; 4]], interval_count: &[u32], raw_depth_m: &[f32], planes: &[[f32; 4]], keys: &mut [u32], chunk_masks: &mut [u32]) {
     for y in 0..params.height_px {
         for x in 0..params.width_px {
             let ix = (y * params.width_px + x) as usize;
-            keys[ix] = if params.mode == 0 { key_from_assignment(source, intervals, interval_count, ix) } else { key_from_label(params, source, raw_depth_m, planes, x, y) };
+            let key = if params.mode == 0 { key_from_assignment(source, intervals, interval_count, ix) } else { key_from_label(params, source, raw_depth_m, planes, x, y) };
+            keys[ix] = key;
+            if key != NO_LABEL {
+                chunk_masks[(ix / PLANE_SUMS_CHUNK_PX) * CHUNK_MASK_WORDS + key as usize / 32] |= 1 << (key % 32);
+            }
         }
     }
 }
