@@ -729,7 +729,7 @@ fn write_core_files(dir: &Path, kernels: &[KernelInfo], structs: &BTreeMap<Strin
     }
 
     // Must match `DEFERRED_CAPABILITIES` in core/src/kernels/mod.rs (checked there by a test).
-    let deferred = |k: &KernelInfo| k.capability == "mesh" || k.capability == "map";
+    let deferred = |k: &KernelInfo| k.capability == "mesh" || k.capability == "map" || k.capability == "planes";
     let mut code = String::new();
     writeln!(code, "/// Every kernel's pipeline, compiled once per device (in parallel natively; in the browser").unwrap();
     writeln!(code, "/// the deferred capabilities' on first use or by `compile_deferred`).").unwrap();

@@ -664,7 +664,7 @@ impl App {
         if self.poll_scheduled {
             return;
         }
-        let delay_ms = match (self.mode.frames_in_flight() > 0, self.mode.free_view_due_in_ms()) {
+        let delay_ms = match (self.mode.awaiting_gpu(), self.mode.free_view_due_in_ms()) {
             (true, _) => POLL_MS,
             (false, Some(ms)) => (ms.ceil() as i32).max(1),
             (false, None) => return,

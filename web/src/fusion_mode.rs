@@ -16,7 +16,7 @@
 //! With plane segmentation on (the default; `core::planes::gpu`), each frame whose views are
 //! drawn is also segmented on the GPU after its submission, its labels coloured over the frame
 //! in the plane view, and the plane table (a few kilobytes, not the labels) read back for the
-//! status.
+//! status a frame or so later, without waiting.
 
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -187,8 +187,13 @@ pub(crate) struct FusionMode {
     current_image: Option<FrameImage>,
     /// The last segmented frame's planes.
     plane_status: Option<PlaneStatus>,
-    /// Segmentation wall times per frame (submission to table), milliseconds.
+    /// Segmentation wall times per frame (submission to the table's arrival, which includes
+    /// the frame's own GPU work queued before it), milliseconds.
     plane_ms: Window,
+    /// A report was applied since the last `poll`.
+    reported: bool,
+    /// Frames segmented and when, until their plane table comes back.
+    planes_sent: VecDeque<(u64, Instant)>,
 }
 
 /// How a frame reached the page: its ground truth (if the source has it), when it arrived and
@@ -232,7 +237,8 @@ pub(crate) struct PlaneStatus {
     pub(crate) overflow: u32,
     /// Largest first: unit normal (camera frame, facing it), offset d of n·p + d = 0, pixels.
     pub(crate) planes: Vec<PlaneEntry>,
-    /// Median wall time per frame, submission to plane table.
+    /// Median wall time per frame, from the segmentation's submission to its table's arrival
+    /// (the frame's fusion work, queued before it, included).
     pub(crate) median_ms: f64,
 }
 
@@ -309,6 +315,8 @@ impl FusionMode {
             current_image: None,
             plane_status: None,
             plane_ms: Window::default(),
+            reported: false,
+            planes_sent: VecDeque::new(),
         }
     }
 
@@ -318,6 +326,7 @@ impl FusionMode {
         self.features = features;
         self.planes = planes;
         self.pipeline = None;
+        self.planes_sent.clear();
     }
 
     /// Drops everything built on the GPU (the device was lost, or the source changed); the
@@ -326,6 +335,7 @@ impl FusionMode {
     pub(crate) fn drop_pipeline(&mut self, keep_trajectory: bool) {
         self.pipeline = None;
         self.in_flight.clear();
+        self.planes_sent.clear();
         if keep_trajectory {
             self.run_origin = self.trajectory.last().map_or(Se3::IDENTITY, |p| p.world_from_camera);
         } else {
@@ -342,6 +352,7 @@ impl FusionMode {
             }
         }
         self.in_flight.clear();
+        self.planes_sent.clear();
         self.reset_run_state();
     }
 
@@ -373,9 +384,9 @@ impl FusionMode {
         self.last_submitted
     }
 
-    /// Frames submitted whose reports are still to come.
-    pub(crate) fn frames_in_flight(&self) -> usize {
-        self.in_flight.len()
+    /// Whether anything submitted is still to come back (frame reports, plane tables).
+    pub(crate) fn awaiting_gpu(&self) -> bool {
+        !self.in_flight.is_empty() || !self.planes_sent.is_empty()
     }
 
     /// The trajectory so far, TUM text (kept current as reports arrive).
@@ -427,12 +438,11 @@ impl FusionMode {
             draw_frame_views(gpu, p, frame)?;
         }
         let views_ms = t_views.elapsed().as_secs_f64() * 1e3;
-        if draw_views && let Some(planes) = &p.planes {
-            let started = Instant::now();
-            let status = segment_planes(gpu, planes, frame.index).await.map_err(|e| format!("frame {}: planes: {e}", frame.index))?;
-            self.plane_ms.push(started.elapsed().as_secs_f64() * 1e3);
-            ui::set_text("planes-caption", &format!("{} in frame {}", status.count, status.frame));
-            self.plane_status = Some(status);
+        // The plane kernels compile once the first frame is fused (they would hold it up).
+        if draw_views && gpu.kernels.deferred_compiled() && let Some(planes) = &mut p.planes {
+            if segment_planes(gpu, planes, frame.index).map_err(|e| format!("frame {}: planes: {e}", frame.index))? {
+                self.planes_sent.push_back((frame.index, Instant::now()));
+            }
         }
         self.in_flight.push_back(InFlight { index: frame.index, timestamp_ns: frame.depth_timestamp_ns, ground_truth, arrived, decode_ms, views_ms });
         self.last_submitted = Some(frame.index);
@@ -452,7 +462,7 @@ impl FusionMode {
                 self.apply(report);
             }
         }
-        Ok(())
+        self.collect_planes(gpu)
     }
 
     /// Shows the odometry view's next stage; past the last one it starts again from the first
@@ -464,18 +474,43 @@ impl FusionMode {
         wrapped
     }
 
-    /// Takes the reports that came back (never waits); true if any did.
+    /// Takes the reports (and plane tables) that came back (never waits); true if a report
+    /// did since the last call (including those `submit` took itself, with feature odometry on).
     pub(crate) fn poll(&mut self, gpu: &Gpu) -> Result<bool, String> {
-        let Some(p) = self.pipeline.as_mut() else { return Ok(false) };
+        let Some(p) = self.pipeline.as_mut() else { return Ok(std::mem::take(&mut self.reported)) };
         let reports = p.fusion.poll_reports(gpu).map_err(|e| e.to_string())?;
-        let any = !reports.is_empty();
         for report in reports {
             self.apply(report);
         }
-        Ok(any)
+        self.collect_planes(gpu)?;
+        Ok(std::mem::take(&mut self.reported))
+    }
+
+    /// Takes the plane tables that came back (never waits) into the status and the caption.
+    fn collect_planes(&mut self, gpu: &Gpu) -> Result<(), String> {
+        let Some(planes) = self.pipeline.as_mut().and_then(|p| p.planes.as_mut()) else { return Ok(()) };
+        for (frame, seg, stats) in planes.segmenter.collect_tables(gpu).map_err(|e| format!("planes: {e}"))? {
+            while self.planes_sent.front().is_some_and(|(f, _)| *f != frame) {
+                self.planes_sent.pop_front();
+            }
+            if let Some((_, sent)) = self.planes_sent.pop_front() {
+                self.plane_ms.push(sent.elapsed().as_secs_f64() * 1e3);
+            }
+            ui::set_text("planes-caption", &format!("{} in frame {frame}", seg.planes.len()));
+            self.plane_status = Some(PlaneStatus {
+                frame,
+                count: seg.planes.len(),
+                curved_rejected: seg.curved_rejected,
+                overflow: stats.overflow,
+                planes: seg.planes.iter().map(|p| PlaneEntry { normal: p.normal, offset_m: p.offset_m, pixels: p.pixels, area_m2: p.area_m2 }).collect(),
+                median_ms: 0.0,
+            });
+        }
+        Ok(())
     }
 
     fn apply(&mut self, report: FrameReport) {
+        self.reported = true;
         while self.in_flight.front().is_some_and(|f| f.index != report.index) {
             self.in_flight.pop_front();
         }
@@ -650,9 +685,11 @@ impl FusionMode {
     }
 }
 
-/// Segments the frame the pipeline just submitted (its preprocessed maps) into planes and
-/// colours its labels into the plane view, in one submission; then reads the plane table back.
-async fn segment_planes(gpu: &Gpu, planes: &PlaneViews, index: u64) -> Result<PlaneStatus, String> {
+/// Segments the frame the pipeline just submitted (its preprocessed maps) into planes, colours
+/// its labels into the plane view and copies the plane table for reading, in one submission;
+/// the table comes back a frame or so later ([`FusionMode::collect_planes`]): nothing waits.
+/// False when both table slots were still in flight (this frame's table is not read).
+fn segment_planes(gpu: &Gpu, planes: &mut PlaneViews, index: u64) -> Result<bool, String> {
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.planes") });
     planes.segmenter.encode(gpu, &mut encoder);
     {
@@ -660,17 +697,13 @@ async fn segment_planes(gpu: &Gpu, planes: &PlaneViews, index: u64) -> Result<Pl
         planes.view.dispatch_in(gpu, &mut pass);
     }
     let texture = planes.canvas.draw(&mut encoder, &planes.view.image)?;
-    gpu.submit([encoder.finish()]);
+    let slot = planes.segmenter.encode_table_copy(&mut encoder);
+    let submission = gpu.submit([encoder.finish()]);
     GpuCanvas::present(gpu, [texture]);
-    let (seg, stats) = planes.segmenter.read_table(gpu).await.map_err(|e| e.to_string())?;
-    Ok(PlaneStatus {
-        frame: index,
-        count: seg.planes.len(),
-        curved_rejected: seg.curved_rejected,
-        overflow: stats.overflow,
-        planes: seg.planes.iter().map(|p| PlaneEntry { normal: p.normal, offset_m: p.offset_m, pixels: p.pixels, area_m2: p.area_m2 }).collect(),
-        median_ms: 0.0,
-    })
+    if let Some(slot) = slot {
+        planes.segmenter.start_table_read(gpu, slot, submission, index);
+    }
+    Ok(slot.is_some())
 }
 
 /// Colours the frame's depth, normals and predicted model on the GPU and copies them into

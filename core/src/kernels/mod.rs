@@ -33,7 +33,7 @@ type KernelSpec = (&'static webfusion_shaders::Kernel, fn() -> Vec<wgpu::BindGro
 /// dense box never runs): in the browser their pipelines are created on first use or by
 /// [`Kernels::compile_deferred`] (the app calls it once the first frame is fused), so the GPU
 /// process does not compile them before the first frame's work unless that frame uses them.
-pub const DEFERRED_CAPABILITIES: &[&str] = &["mesh", "map"];
+pub const DEFERRED_CAPABILITIES: &[&str] = &["mesh", "map", "planes"];
 
 /// Compiles the kernels of `specs`, in order: natively all of them, spread over the available
 /// cores (pipeline creation is thread-safe and dominates start-up on software adapters); in

@@ -28,6 +28,7 @@ use crate::kernels::{
     Kernels, KernelPipeline, distance_histogram, distance_peaks, normal_histogram, normal_peaks, peak_realign, plane_extent, plane_fit, plane_keys, plane_label, plane_list, plane_relabel, plane_sums,
     plane_sums_reduce,
 };
+use crate::engine::ReadbackRing;
 use crate::preprocess::DepthPreprocessor;
 use crate::{Error, Gpu, PinholeIntrinsics, Result};
 
@@ -61,8 +62,13 @@ pub struct GpuPlaneSegmenter {
     state: wgpu::Buffer,
     extents: wgpu::Buffer,
     dispatch: wgpu::Buffer,
+    /// Plane tables on their way back, tagged with the frame index.
+    tables: ReadbackRing<u64>,
     _keep_alive: Vec<wgpu::Buffer>,
 }
+
+/// Bytes of a plane table readback: the state, the list's first MAX_PLANES records, the extents.
+const TABLE_BYTES: u64 = 4 * (PLANE_LIST_STATE + 4 * MAX_PLANES * PLANE_RECORD_VEC4S + 4 * MAX_PLANES) as u64;
 
 impl std::fmt::Debug for GpuPlaneSegmenter {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -276,7 +282,8 @@ impl GpuPlaneSegmenter {
 
         let keep_alive = [normal_hist, peaks, peak_count, realigned, assignment, distance_hist, normal_sums, intervals, interval_count, keys_inner, keys_full, masks_inner, masks_full, partials, moments, fits, planes, renumber, dummy];
         params_buffers.extend(keep_alive);
-        Ok(Self { full, steps, labels, list, state, extents, dispatch, _keep_alive: params_buffers })
+        let tables = ReadbackRing::new(gpu, "core.planes.table", TABLE_BYTES, 2);
+        Ok(Self { full, steps, labels, list, state, extents, dispatch, tables, _keep_alive: params_buffers })
     }
 
     /// Records the whole segmentation of the preprocessor's current frame into `encoder`:
@@ -373,32 +380,75 @@ impl GpuPlaneSegmenter {
             parts.push((&self.labels, n));
         }
         let words: Vec<u32> = gpu.read_buffers(&parts).await?;
-        let (state, rest) = words.split_at(PLANE_LIST_STATE);
-        let (list, rest) = rest.split_at(4 * MAX_PLANES * PLANE_RECORD_VEC4S);
-        let (extents, labels) = rest.split_at(4 * MAX_PLANES);
-        let count = (state[0] as usize).min(MAX_PLANES);
-        let f = |w: u32| f32::from_bits(w);
-        let planes = (0..count)
-            .map(|k| {
-                let record = &list[4 * k * PLANE_RECORD_VEC4S..4 * (k + 1) * PLANE_RECORD_VEC4S];
-                let v = |i: usize| -> [f32; 4] { std::array::from_fn(|c| f(record[4 * (PLANE_MOMENT_VEC4S + i) + c])) };
-                let (nd, c, t0, stats) = (v(0), v(1), v(2), v(4));
-                Plane {
-                    normal: [nd[0], nd[1], nd[2]],
-                    offset_m: nd[3],
-                    centroid_m: [c[0], c[1], c[2]],
-                    pixels: c[3] as u32,
-                    area_m2: stats[2],
-                    tangent: [t0[0], t0[1], t0[2]],
-                    extent_m: decode_extent(&extents[4 * k..4 * k + 4]),
-                    rms_m: stats[0],
-                    bend_deg: stats[1],
-                }
-            })
-            .collect();
-        // Labels past the table cannot occur (the last relabelling maps every dropped plane to
-        // none); clamped so a reader can index the table with any label.
-        let labels = labels.iter().map(|&l| if l == NO_LABEL || (l as usize) < count { l } else { NO_LABEL }).collect();
-        Ok((Segmentation { labels, planes, curved_rejected: state[1] }, GpuSegmentationStats { overflow: state[2] }))
+        Ok(parse_table(&words))
     }
+
+    /// Records a copy of the plane table into a free readback slot (after [`Self::encode`], in
+    /// the same encoder); `None` when both slots are still in flight (the table of this frame
+    /// is then not read).
+    pub fn encode_table_copy(&self, encoder: &mut wgpu::CommandEncoder) -> Option<usize> {
+        let (slot, buffer) = self.tables.free_slot()?;
+        let mut offset = 0;
+        for (source, bytes) in [(&self.state, 4 * PLANE_LIST_STATE), (&self.list, 16 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 16 * MAX_PLANES)] {
+            encoder.copy_buffer_to_buffer(source, 0, buffer, offset, bytes as u64);
+            offset += bytes as u64;
+        }
+        Some(slot)
+    }
+
+    /// Maps the slot [`Self::encode_table_copy`] filled once `submission` is done; the table
+    /// comes back through [`Self::collect_tables`] tagged with `frame`.
+    pub fn start_table_read(&mut self, gpu: &Gpu, slot: usize, submission: wgpu::SubmissionIndex, frame: u64) {
+        self.tables.start(gpu, slot, submission, frame);
+    }
+
+    /// The plane tables whose readback completed (oldest first, without waiting): frame, the
+    /// planes (no labels) and the stats.
+    ///
+    /// # Errors
+    /// A failed mapping or a lost device.
+    pub fn collect_tables(&mut self, gpu: &Gpu) -> Result<Vec<(u64, Segmentation, GpuSegmentationStats)>> {
+        Ok(self
+            .tables
+            .collect(gpu)?
+            .into_iter()
+            .map(|done| {
+                let words: Vec<u32> = bytemuck::pod_collect_to_vec(&done.bytes[..TABLE_BYTES as usize]);
+                let (seg, stats) = parse_table(&words);
+                (done.tag, seg, stats)
+            })
+            .collect())
+    }
+}
+
+/// A segmentation from the words of the state, the list's first MAX_PLANES records, the
+/// extents and (possibly none of) the labels, in that order.
+fn parse_table(words: &[u32]) -> (Segmentation, GpuSegmentationStats) {
+    let (state, rest) = words.split_at(PLANE_LIST_STATE);
+    let (list, rest) = rest.split_at(4 * MAX_PLANES * PLANE_RECORD_VEC4S);
+    let (extents, labels) = rest.split_at(4 * MAX_PLANES);
+    let count = (state[0] as usize).min(MAX_PLANES);
+    let f = |w: u32| f32::from_bits(w);
+    let planes = (0..count)
+        .map(|k| {
+            let record = &list[4 * k * PLANE_RECORD_VEC4S..4 * (k + 1) * PLANE_RECORD_VEC4S];
+            let v = |i: usize| -> [f32; 4] { std::array::from_fn(|c| f(record[4 * (PLANE_MOMENT_VEC4S + i) + c])) };
+            let (nd, c, t0, stats) = (v(0), v(1), v(2), v(4));
+            Plane {
+                normal: [nd[0], nd[1], nd[2]],
+                offset_m: nd[3],
+                centroid_m: [c[0], c[1], c[2]],
+                pixels: c[3] as u32,
+                area_m2: stats[2],
+                tangent: [t0[0], t0[1], t0[2]],
+                extent_m: decode_extent(&extents[4 * k..4 * k + 4]),
+                rms_m: stats[0],
+                bend_deg: stats[1],
+            }
+        })
+        .collect();
+    // Labels past the table cannot occur (the last relabelling maps every dropped plane to
+    // none); clamped so a reader can index the table with any label.
+    let labels = labels.iter().map(|&l| if l == NO_LABEL || (l as usize) < count { l } else { NO_LABEL }).collect();
+    (Segmentation { labels, planes, curved_rejected: state[1] }, GpuSegmentationStats { overflow: state[2] })
 }
