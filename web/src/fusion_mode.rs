@@ -439,10 +439,12 @@ impl FusionMode {
         }
         let views_ms = t_views.elapsed().as_secs_f64() * 1e3;
         // The plane kernels compile once the first frame is fused (they would hold it up).
-        if draw_views && gpu.kernels.deferred_compiled() && let Some(planes) = &mut p.planes {
-            if segment_planes(gpu, planes, frame.index).map_err(|e| format!("frame {}: planes: {e}", frame.index))? {
-                self.planes_sent.push_back((frame.index, Instant::now()));
-            }
+        if draw_views
+            && gpu.kernels.deferred_compiled()
+            && let Some(planes) = &mut p.planes
+            && segment_planes(gpu, planes, frame.index).map_err(|e| format!("frame {}: planes: {e}", frame.index))?
+        {
+            self.planes_sent.push_back((frame.index, Instant::now()));
         }
         self.in_flight.push_back(InFlight { index: frame.index, timestamp_ns: frame.depth_timestamp_ns, ground_truth, arrived, decode_ms, views_ms });
         self.last_submitted = Some(frame.index);

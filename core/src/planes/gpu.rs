@@ -45,6 +45,24 @@ enum Step {
     Indirect(fn(&Kernels) -> &KernelPipeline, wgpu::BindGroup, u64),
 }
 
+/// `plane_keys`' parameters for maps of intrinsics `k` in `mode` (0: the inner loop's
+/// intervals; 1: labels, with the fit margin and the raw-point test of `config`).
+pub fn plane_keys_params(k: &PinholeIntrinsics, mode: u32, config: &PlaneConfig) -> plane_keys::PlaneKeysParams {
+    plane_keys::PlaneKeysParams {
+        width_px: k.width_px,
+        height_px: k.height_px,
+        mode,
+        margin_px: config.fit_margin_px,
+        use_raw: 1,
+        min_distance_m: config.label_min_distance_m,
+        fx_px: k.fx_px,
+        fy_px: k.fy_px,
+        cx_px: k.cx_px,
+        cy_px: k.cy_px,
+        ..Default::default()
+    }
+}
+
 /// What a segmentation read back from the GPU holds besides the planes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct GpuSegmentationStats {
@@ -156,21 +174,8 @@ impl GpuPlaneSegmenter {
         );
         let p_realign = uniform("peak_realign", bytemuck::bytes_of(&peak_realign::PeakRealignParams { peak_slots: MAX_NORMAL_PEAKS as u32, ..Default::default() }));
         let p_dpeaks = uniform("distance_peaks", bytemuck::bytes_of(&distance_peaks::DistancePeaksParams { min_mass: min_inner as u32, reach_bins: (config.distance_reach_m / config.distance_bin_m).round() as u32, ..Default::default() }));
-        let keys_params = |k: &PinholeIntrinsics, mode: u32| plane_keys::PlaneKeysParams {
-            width_px: k.width_px,
-            height_px: k.height_px,
-            mode,
-            margin_px: config.fit_margin_px,
-            use_raw: 1,
-            min_distance_m: config.label_min_distance_m,
-            fx_px: k.fx_px,
-            fy_px: k.fy_px,
-            cx_px: k.cx_px,
-            cy_px: k.cy_px,
-            ..Default::default()
-        };
-        let p_keys_inner = uniform("plane_keys.inner", bytemuck::bytes_of(&keys_params(&inner, 0)));
-        let p_keys_full = uniform("plane_keys.full", bytemuck::bytes_of(&keys_params(&full, 1)));
+        let p_keys_inner = uniform("plane_keys.inner", bytemuck::bytes_of(&plane_keys_params(&inner, 0, config)));
+        let p_keys_full = uniform("plane_keys.full", bytemuck::bytes_of(&plane_keys_params(&full, 1, config)));
         let sums_params = |k: &PinholeIntrinsics, use_raw: u32, normal_shift: u32| plane_sums::PlaneSumsParams { width_px: k.width_px, height_px: k.height_px, use_raw, normal_shift, fx_px: k.fx_px, fy_px: k.fy_px, cx_px: k.cx_px, cy_px: k.cy_px };
         let p_sums_inner = uniform("plane_sums.inner", bytemuck::bytes_of(&sums_params(&inner, 0, MAX_DISTANCE_PEAKS.trailing_zeros())));
         let p_sums_full = uniform("plane_sums.full", bytemuck::bytes_of(&sums_params(&full, 1, 0)));

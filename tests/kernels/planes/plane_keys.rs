@@ -14,6 +14,7 @@ use webfusion_core::kernels::distance_histogram::DistanceHistogramParams;
 use webfusion_core::kernels::distance_peaks::DistancePeaksParams;
 use webfusion_core::kernels::plane_keys::PlaneKeysParams;
 use webfusion_core::kernels::plane_label::PlaneLabelParams;
+use webfusion_core::planes::gpu::plane_keys_params;
 use webfusion_core::planes::{DISTANCE_BINS, MAX_DISTANCE_PEAKS, MAX_NORMAL_PEAKS, NO_LABEL, PlaneConfig, reference};
 use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_core::sim::plane_scenes::{PlaneScene, UNITS_PER_METRE};
@@ -69,8 +70,7 @@ pub(crate) fn inner_fixture(scene: &PlaneScene, noise: Option<u32>) -> InnerFixt
 }
 
 pub(crate) fn inner_params(level: &CpuPyramidLevel) -> PlaneKeysParams {
-    let k = level.intrinsics;
-    PlaneKeysParams { width_px: k.width_px, height_px: k.height_px, mode: 0, fx_px: k.fx_px, fy_px: k.fy_px, cx_px: k.cx_px, cy_px: k.cy_px, ..Default::default() }
+    plane_keys_params(&level.intrinsics, 0, &PlaneConfig::default())
 }
 
 /// A real frame's preprocessing, the reference's planes (normal, offset) and the labels the
@@ -91,21 +91,7 @@ pub(crate) fn real_fixture() -> (CpuPreprocessed, Vec<[f32; 4]>, Vec<u32>) {
 }
 
 pub(crate) fn label_params(level: &CpuPyramidLevel, use_raw: bool) -> PlaneKeysParams {
-    let k = level.intrinsics;
-    let config = PlaneConfig::default();
-    PlaneKeysParams {
-        width_px: k.width_px,
-        height_px: k.height_px,
-        mode: 1,
-        margin_px: config.fit_margin_px,
-        use_raw: u32::from(use_raw),
-        min_distance_m: config.label_min_distance_m,
-        fx_px: k.fx_px,
-        fy_px: k.fy_px,
-        cx_px: k.cx_px,
-        cy_px: k.cy_px,
-        ..Default::default()
-    }
+    PlaneKeysParams { use_raw: u32::from(use_raw), ..plane_keys_params(&level.intrinsics, 1, &PlaneConfig::default()) }
 }
 
 /// The chunk masks of `keys` (a bit per key present in each chunk), as plane_keys sets them.

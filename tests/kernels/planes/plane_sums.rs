@@ -19,7 +19,7 @@ use super::plane_keys::{inner_fixture, inner_params, label_params, masks_of, rea
 
 /// Compares sets of moments (see the module doc for the tolerances).
 pub(crate) fn compare_moments(what: &str, g: &[[f32; 4]], c: &[[f32; 4]]) -> Result<(), String> {
-    if g.len() != c.len() || c.len() % PLANE_MOMENT_VEC4S != 0 {
+    if g.len() != c.len() || !c.len().is_multiple_of(PLANE_MOMENT_VEC4S) {
         return Err(format!("{what}: {} vs {} vec4", g.len(), c.len()));
     }
     for (set, (gm, cm)) in g.chunks(PLANE_MOMENT_VEC4S).zip(c.chunks(PLANE_MOMENT_VEC4S)).enumerate() {
@@ -67,7 +67,6 @@ pub(crate) fn assert_moments_controls(what: &str, g: &[[f32; 4]], c: &[[f32; 4]]
 
 /// Runs plane_sums for `planes` planes on the GPU and its twin (with the chunk masks of
 /// `keys`); returns (GPU, twin) partials.
-#[expect(clippy::too_many_arguments, reason = "the kernel's bindings, in binding order")]
 pub(crate) fn run(params: &PlaneSumsParams, keys: &[u32], vertex: &[[f32; 4]], normal: &[[f32; 4]], raw: &[f32], normals: &[[f32; 4]], planes: u32) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
     let gpu = gpu();
     let masks = masks_of(keys);
