@@ -24,10 +24,10 @@ use anyhow::Context as _;
 use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::io::format_timestamp_s;
 use webfusion_core::planes::{NO_LABEL, PlaneConfig, reference};
-use webfusion_core::cpu::shared::{depth_to_metres, plane_colour};
+use webfusion_core::cpu::shared::{pack_u16_pairs, plane_colour};
 use webfusion_core::planes::gpu::GpuPlaneSegmenter;
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
-use webfusion_core::{ColorImage, GpuOptions, Se3, codec::png};
+use webfusion_core::{ColorImage, Gpu, GpuOptions, Se3, codec::png};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, pose_driven::PoseDrivenMapper};
 use webfusion_core::io::trajectory::{PoseTimeline, TimedPose, read_tum_trajectory, write_tum_trajectory};
 use webfusion_core::mesh::Mesh;
@@ -96,9 +96,8 @@ struct WorldPoses {
 }
 
 /// Tracks (or fuses at the given poses) every frame of `range` on the GPU.
-fn world_poses(options: &GpuOptions, args: &PlanesArgs, range: std::ops::Range<usize>) -> anyhow::Result<WorldPoses> {
+fn world_poses(gpu: &Gpu, args: &PlanesArgs, range: std::ops::Range<usize>) -> anyhow::Result<WorldPoses> {
     let mut source = crate::open(&args.source, &args.calibration)?;
-    let gpu = crate::gpu(options)?;
     let config = FusionConfig::default();
     config.validate()?;
     let voxel_m = config.tsdf.voxel_size_m;
@@ -117,19 +116,19 @@ fn world_poses(options: &GpuOptions, args: &PlanesArgs, range: std::ops::Range<u
             };
             let m = match &mut mapper {
                 Some(m) => m,
-                None => mapper.insert(PoseDrivenMapper::new(&gpu, source.calibration(), config.preprocess, config.tsdf, &pose, false)?),
+                None => mapper.insert(PoseDrivenMapper::new(gpu, source.calibration(), config.preprocess, config.tsdf, &pose, false)?),
             };
-            pollster::block_on(m.submit_frame(&gpu, &frame, &pose)).with_context(|| format!("fusing frame {index}"))?;
+            pollster::block_on(m.submit_frame(gpu, &frame, &pose)).with_context(|| format!("fusing frame {index}"))?;
             poses.insert(frame.index, pose);
             eprint!("\rframe {index}: fused at its given pose   ");
         }
         eprintln!();
         let Some(mut mapper) = mapper else { anyhow::bail!("no frame of {} has a given pose (within 20 ms) in {}", source.name(), path.display()) };
-        pollster::block_on(mapper.flush(&gpu))?;
-        let mesh = pollster::block_on(mapper.extract_mesh(&gpu)).context("extracting the mesh")?;
+        pollster::block_on(mapper.flush(gpu))?;
+        let mesh = pollster::block_on(mapper.extract_mesh(gpu)).context("extracting the mesh")?;
         return Ok(WorldPoses { poses, mesh, voxel_m, origin: "given", left_out });
     }
-    let mut fusion = KinectFusion::new(&gpu, source.calibration(), config)?;
+    let mut fusion = KinectFusion::new(gpu, source.calibration(), config)?;
     let on_report = |r: FrameReport, poses: &mut HashMap<u64, Se3>, left_out: &mut Vec<u64>| {
         if r.state.is_lost() {
             left_out.push(r.index);
@@ -140,18 +139,18 @@ fn world_poses(options: &GpuOptions, args: &PlanesArgs, range: std::ops::Range<u
     };
     for index in range {
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
-        pollster::block_on(fusion.submit_frame(&gpu, &frame)).with_context(|| format!("tracking frame {index}"))?;
-        for r in fusion.poll_reports(&gpu)? {
+        pollster::block_on(fusion.submit_frame(gpu, &frame)).with_context(|| format!("tracking frame {index}"))?;
+        for r in fusion.poll_reports(gpu)? {
             on_report(r, &mut poses, &mut left_out);
         }
     }
-    for r in pollster::block_on(fusion.flush(&gpu))? {
+    for r in pollster::block_on(fusion.flush(gpu))? {
         on_report(r, &mut poses, &mut left_out);
     }
     eprintln!();
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
-    let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(&gpu)).context("extracting the mesh")?;
+    let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(gpu)).context("extracting the mesh")?;
     Ok(WorldPoses { poses, mesh, voxel_m, origin: "tracked", left_out })
 }
 
@@ -201,8 +200,14 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
     let px = args.texture_px_per_m;
     anyhow::ensure!(px.is_finite() && px >= 1.0 && (px as u32).is_power_of_two() && px.fract() == 0.0, "--texture-px-per-m {px}: a power of two, at least 1");
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    // One device for the world pass and the segmentation (the CPU reference without a world
+    // needs none).
+    let gpu = if args.cpu_reference && args.no_world { None } else { Some(crate::gpu(options)?) };
     let sw = Stopwatch::start();
-    let world_input = if args.no_world { None } else { Some(world_poses(options, args, range.clone())?) };
+    let world_input = match &gpu {
+        Some(gpu) if !args.no_world => Some(world_poses(gpu, args, range.clone())?),
+        _ => None,
+    };
     let gpu_pass_s = sw.ms() * 1e-3;
     let mut world = PlaneWorld::new(WorldConfig { px_per_m: px, ..WorldConfig::default() });
     let mut clipped_texels = 0u64;
@@ -214,14 +219,16 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
     let calibration = source.calibration();
     let k = calibration.intrinsics;
     let (pre_config, config) = (PreprocessConfig::default(), PlaneConfig::default());
-    let on_gpu = if args.cpu_reference {
-        None
-    } else {
-        let gpu = crate::gpu(options)?;
-        let pre = DepthPreprocessor::new(&gpu, calibration, pre_config)?;
-        let segmenter = GpuPlaneSegmenter::new(&gpu, &pre, &config)?;
-        Some((gpu, pre, segmenter))
+    let on_gpu = match &gpu {
+        Some(gpu) if !args.cpu_reference => {
+            let pre = DepthPreprocessor::new(gpu, calibration, pre_config)?;
+            let segmenter = GpuPlaneSegmenter::new(gpu, &pre, &config)?;
+            Some((gpu, pre, segmenter))
+        }
+        _ => None,
     };
+    // The labels leave the GPU only for the label images and the world model.
+    let read_labels = args.labels || world_input.is_some();
     let mut overflow = 0u32;
     let mut times = StageTimes::default();
     let mut frames = Vec::with_capacity(range.len());
@@ -240,7 +247,7 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
                 let preprocess_ms = sw.ms();
                 let sw = Stopwatch::start();
                 let seg = reference::segment(&pre.levels, Some(&pre.depth_unfiltered_m), &config);
-                (seg, pre.depth_unfiltered_m, preprocess_ms, sw.ms())
+                (seg, Some(pre.depth_unfiltered_m), preprocess_ms, sw.ms())
             }
             Some((gpu, pre, segmenter)) => {
                 // Two submissions, so that each stage's time is its own.
@@ -258,12 +265,9 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
                     segmenter.encode(gpu, &mut encoder);
                     gpu.submit(Some(encoder.finish()));
                 }
-                let (seg, stats) = pollster::block_on(segmenter.read(gpu))?;
+                let (seg, stats) = if read_labels { pollster::block_on(segmenter.read(gpu)) } else { pollster::block_on(segmenter.read_table(gpu)) }?;
                 overflow += stats.overflow;
-                let segment_ms = sw.ms();
-                let p = pre_config.depth_to_metres_params(&calibration);
-                let raw: Vec<f32> = frame.depth.units.iter().map(|&u| depth_to_metres(u32::from(u), p.metres_per_unit, p.min_depth_m, p.max_depth_m)).collect();
-                (seg, raw, preprocess_ms, segment_ms)
+                (seg, None, preprocess_ms, sw.ms())
             }
         };
         for (stage, ms) in [("read+decode", read_ms), ("preprocess", preprocess_ms), ("segment", segment_ms)] {
@@ -275,6 +279,12 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         if let Some(pose) = world_input.as_ref().and_then(|w| w.poses.get(&frame.index)) {
             trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: *pose });
             let sw = Stopwatch::start();
+            // The depth before filtering, by the first kernel's twin when the GPU kept its own.
+            let raw_depth_m = raw_depth_m.unwrap_or_else(|| {
+                let mut raw = vec![0.0; k.pixel_count()];
+                webfusion_core::cpu::depth_to_metres(&pre_config.depth_to_metres_params(&calibration), &pack_u16_pairs(&frame.depth.units), &mut raw);
+                raw
+            });
             let labels = complete_labels(&seg, &raw_depth_m, &k, &config, blend_reach_px(&pre_config));
             let view = PlaneView { index: frame.index, world_from_camera: *pose, segmentation: &seg, labels: &labels, colour: &frame.color, intrinsics: k };
             let association = world.add_frame(&view, &config);
