@@ -294,15 +294,20 @@ impl GpuPlaneSegmenter {
     /// Records the whole segmentation of the preprocessor's current frame into `encoder`:
     /// each run of kernels between two clears in one compute pass.
     pub fn encode(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder) {
+        self.encode_steps(gpu, encoder, &self.steps);
+    }
+
+    /// Records `steps`: clears as they come, each run of kernels between them in one pass.
+    fn encode_steps(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, steps: &[Step]) {
         let mut i = 0;
-        while i < self.steps.len() {
-            if let Step::Clear(buffer) = &self.steps[i] {
+        while i < steps.len() {
+            if let Step::Clear(buffer) = &steps[i] {
                 encoder.clear_buffer(buffer, 0, None);
                 i += 1;
                 continue;
             }
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.planes"), timestamp_writes: None });
-            while let Some(step) = self.steps.get(i) {
+            while let Some(step) = steps.get(i) {
                 match step {
                     Step::Clear(_) => break,
                     Step::Direct(kernel, bg, invocations) => kernel(&gpu.kernels).dispatch_in(&mut pass, bg, *invocations),
@@ -330,28 +335,13 @@ impl GpuPlaneSegmenter {
         for step in &self.steps {
             let started = std::time::Instant::now();
             let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.planes.profiled") });
-            let name = match step {
-                Step::Clear(buffer) => {
-                    encoder.clear_buffer(buffer, 0, None);
-                    "clear"
-                }
-                Step::Direct(kernel, bg, invocations) => {
-                    let pipeline = kernel(&gpu.kernels);
-                    pipeline.dispatch(&mut encoder, bg, *invocations);
-                    pipeline.kernel.name
-                }
-                Step::Indirect(kernel, bg, offset) => {
-                    let pipeline = kernel(&gpu.kernels);
-                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.planes"), timestamp_writes: None });
-                    pass.set_pipeline(&pipeline.pipeline);
-                    pass.set_bind_group(0, bg, &[]);
-                    pass.dispatch_workgroups_indirect(&self.dispatch, *offset);
-                    drop(pass);
-                    pipeline.kernel.name
-                }
-            };
+            self.encode_steps(gpu, &mut encoder, std::slice::from_ref(step));
             gpu.submit_and_wait(encoder).await?;
             let ms = started.elapsed().as_secs_f64() * 1e3;
+            let name = match step {
+                Step::Clear(_) => "clear",
+                Step::Direct(kernel, ..) | Step::Indirect(kernel, ..) => kernel(&gpu.kernels).kernel.name,
+            };
             match times.iter_mut().find(|(n, _)| *n == name) {
                 Some((_, t)) => *t += ms,
                 None => times.push((name, ms)),

@@ -1,12 +1,11 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/planes/plane_extent.wgsl`, and the decoding of its output.
 
+use crate::cpu::planes::moments::PLANE_MOMENT_VEC4S;
 use crate::cpu::planes::plane_list::PLANE_RECORD_VEC4S;
 use crate::cpu::shared::is_valid_f32;
 use crate::kernels::plane_extent::PlaneExtentParams;
 use crate::planes::NO_LABEL;
-
-const FIT_AT: usize = 10;
 
 /// `ordered_key()`: an encoding of f32 as u32 that grows with the value.
 pub fn ordered_key(f: f32) -> u32 {
@@ -33,7 +32,8 @@ pub fn plane_extent(params: &PlaneExtentParams, vertex_in_camera: &[[f32; 4]], l
             continue;
         }
         let l = l as usize;
-        let base = l * PLANE_RECORD_VEC4S + FIT_AT;
+        // The fit follows the moments in a record.
+        let base = l * PLANE_RECORD_VEC4S + PLANE_MOMENT_VEC4S;
         let c = list[base + 1];
         let rel = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
         for a in 0..2 {

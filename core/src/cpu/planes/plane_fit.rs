@@ -4,6 +4,7 @@
 //! ([`crate::planes::reference::fit`] is the f64 fit both are held to).
 
 use crate::cpu::planes::moments::{PLANE_MOMENT_VEC4S, PlaneMoments};
+use crate::cpu::shared::dot3 as dot;
 use crate::kernels::plane_fit::PlaneFitParams;
 
 /// vec4s per fitted plane.
@@ -75,10 +76,6 @@ fn quadratic(m: &M3, v: [f32; 3]) -> f32 {
 
 fn symmetric(diagonal: [f32; 4], off: [f32; 4], k: f32) -> M3 {
     [[diagonal[0] * k, off[0] * k, off[1] * k], [off[0] * k, diagonal[1] * k, off[2] * k], [off[1] * k, off[2] * k, diagonal[2] * k]]
-}
-
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// Twin of `plane_fit_moments()` in `shared/plane_fitting.wgsl`: the fit of one set of moments.
