@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
-//! Filters on the brute-force matches (`hamming_match`'s nearest and second-nearest).
+//! Filters on the brute-force matches (`hamming_match`'s nearest and second-nearest), applied
+//! on the GPU by `match_select` (and its twin on the CPU).
 
-use crate::cpu::shared::NO_MATCH;
+use crate::kernels::match_select::MatchSelectParams;
 use crate::{Error, Result};
 
 /// Which matches are kept.
@@ -43,6 +44,20 @@ impl MatchConfig {
         }
         Ok(())
     }
+
+    /// `match_select`'s parameters for frames of `slots` keypoint slots (an absent margin is
+    /// 0 bits, an absent keep-best fraction keeps all).
+    pub fn select_params(&self, slots: u32) -> MatchSelectParams {
+        MatchSelectParams {
+            slots,
+            mutual: u32::from(self.mutual),
+            max_distance_bits: self.max_distance_bits,
+            margin_bits: self.margin_bits.unwrap_or(0),
+            ratio: self.ratio,
+            keep_best_fraction: self.keep_best_fraction.unwrap_or(1.0),
+            ..Default::default()
+        }
+    }
 }
 
 /// A kept match: slot `query` of the current frame and slot `train` of the reference.
@@ -56,54 +71,39 @@ pub struct Match {
     pub distance_bits: u32,
 }
 
-/// The matches `forward` (per query: nearest train slot, its distance, the second distance)
-/// keeps under `config`; `backward` is the same from the train side, for the mutual check.
-/// Sorted by query slot (by distance when keep-best applies).
-pub fn filter_matches(config: &MatchConfig, forward: &[[u32; 4]], backward: &[[u32; 4]]) -> Vec<Match> {
-    let mut kept: Vec<Match> = forward
-        .iter()
-        .enumerate()
-        .filter_map(|(q, &[train, d1, d2, _])| {
-            if train == NO_MATCH || d1 > config.max_distance_bits || (d1 as f32) >= config.ratio * d2 as f32 {
-                return None;
-            }
-            if config.margin_bits.is_some_and(|m| d2 - d1 < m) {
-                return None;
-            }
-            if config.mutual && backward.get(train as usize).is_none_or(|b| b[0] != q as u32) {
-                return None;
-            }
-            Some(Match { query: q as u32, train, distance_bits: d1 })
-        })
-        .collect();
-    if let Some(f) = config.keep_best_fraction {
-        kept.sort_by_key(|m| (m.distance_bits, m.query));
-        kept.truncate(((kept.len() as f32 * f).ceil() as usize).min(kept.len()));
-    }
-    kept
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cpu;
+    use crate::cpu::shared::NO_MATCH;
+    use crate::kernels::gpu_data::{FeaturePair, RigidEstimate};
+
+    /// The current slots `match_select`'s twin keeps under `config` (every point valid).
+    fn kept(config: &MatchConfig, forward: &[[u32; 4]], backward: &[[u32; 4]]) -> Vec<u32> {
+        let points = vec![[0.1f32, 0.2, 1.5, 1.0]; forward.len().max(backward.len())];
+        let keypoints = vec![[0.0f32, 0.0, 0.0, 1.0]; points.len()];
+        let mut pairs = vec![FeaturePair::default(); forward.len()];
+        let mut estimate = RigidEstimate::default();
+        cpu::match_select(&config.select_params(forward.len() as u32), forward, backward, &keypoints, &points, &keypoints, &points, &mut pairs, &mut estimate);
+        pairs[..estimate.pairs as usize].iter().map(|p| p.slots[0]).collect()
+    }
 
     #[test]
     fn each_filter_drops_what_it_should() {
         // Query 0: clear and mutual; 1: ambiguous (ratio); 2: not mutual; 3: too far; 4: none.
-        let forward = [[5, 10, 60, 0], [6, 50, 55, 0], [7, 20, 80, 0], [8, 120, 200, 0], [NO_MATCH, 257, 257, 0]];
-        let mut backward = vec![[NO_MATCH, 257, 257, 0]; 9];
+        let forward = [[5, 10, 60, 0], [6, 50, 55, 0], [7, 20, 80, 0], [8, 120, 200, 0], [NO_MATCH, 257, 257, 0], [NO_MATCH, 257, 257, 0], [NO_MATCH, 257, 257, 0], [NO_MATCH, 257, 257, 0], [NO_MATCH, 257, 257, 0], [NO_MATCH, 257, 257, 0]];
+        let mut backward = vec![[NO_MATCH, 257, 257, 0]; 10];
         backward[5][0] = 0;
         backward[6][0] = 1;
         backward[7][0] = 9;
         backward[8][0] = 3;
-        let kept = filter_matches(&MatchConfig::default(), &forward, &backward);
-        assert_eq!(kept, vec![Match { query: 0, train: 5, distance_bits: 10 }]);
+        assert_eq!(kept(&MatchConfig::default(), &forward, &backward), vec![0]);
         let loose = MatchConfig { mutual: false, ..MatchConfig::default() };
-        assert_eq!(filter_matches(&loose, &forward, &backward).iter().map(|m| m.query).collect::<Vec<_>>(), vec![0, 2]);
+        assert_eq!(kept(&loose, &forward, &backward), vec![0, 2]);
         let margin = MatchConfig { mutual: false, margin_bits: Some(55), ..MatchConfig::default() };
-        assert_eq!(filter_matches(&margin, &forward, &backward).iter().map(|m| m.query).collect::<Vec<_>>(), vec![2]);
+        assert_eq!(kept(&margin, &forward, &backward), vec![2]);
         let best = MatchConfig { mutual: false, keep_best_fraction: Some(0.5), ..MatchConfig::default() };
-        assert_eq!(filter_matches(&best, &forward, &backward).iter().map(|m| m.query).collect::<Vec<_>>(), vec![0]);
+        assert_eq!(kept(&best, &forward, &backward), vec![0]);
         assert!(MatchConfig { ratio: f32::NAN, ..MatchConfig::default() }.validate().is_err());
         assert!(MatchConfig { keep_best_fraction: Some(0.0), ..MatchConfig::default() }.validate().is_err());
     }

@@ -1,4 +1,8 @@
 // SPDX-License-Identifier: MIT
+//! The f64 reference of the GPU's robust motion estimate (`match_select`, `ransac_hypotheses`,
+//! `ransac_refine`, which hold the same method in f32; the kernel tests hold them to it), and
+//! its settings.
+//!
 //! Rigid motion from 3D-3D correspondences: Kabsch (the rotation from the SVD of the
 //! cross-covariance, with the reflection fixed; Kabsch 1976, Umeyama 1991) on 3-point samples
 //! inside RANSAC scored by MSAC (Torr and Zisserman 2000), then Gauss-Newton refits of the
@@ -19,7 +23,9 @@ use glam::{DMat3, DQuat, DVec3};
 use nalgebra::{Matrix3, SVD};
 
 use crate::Se3;
+use crate::cpu::odometry::estimate::RANSAC_MAX_HYPOTHESES;
 use crate::cpu::shared::{kinect_sigma_m, pcg_hash};
+use crate::kernels::gpu_data::RansacParams;
 
 /// χ²(3 degrees of freedom) at 95 %.
 pub const CHI2_3DOF_95: f64 = 7.815;
@@ -77,6 +83,42 @@ pub struct RansacConfig {
 impl Default for RansacConfig {
     fn default() -> Self {
         Self { hypotheses: 256, min_inliers: 20, refits: 3, max_noise_scale: 4.0 }
+    }
+}
+
+/// Gauss-Newton steps per refit.
+pub const REFIT_ITERATIONS: u32 = 5;
+
+impl RansacConfig {
+    /// Checks the values: 3 ..= [`RANSAC_MAX_HYPOTHESES`] hypotheses (one GPU workgroup each,
+    /// chosen among by one workgroup), at least 3 inliers, a finite noise bound of at least 1.
+    pub fn validate(&self) -> crate::Result<()> {
+        let bad = |what: String| Err(crate::Error::InvalidConfig(format!("ransac: {what}")));
+        if !(1..=RANSAC_MAX_HYPOTHESES).contains(&self.hypotheses) {
+            return bad(format!("hypotheses must be in 1..={RANSAC_MAX_HYPOTHESES}, got {}", self.hypotheses));
+        }
+        if self.min_inliers < 3 {
+            return bad(format!("min_inliers must be at least 3, got {}", self.min_inliers));
+        }
+        if !(self.max_noise_scale >= 1.0 && self.max_noise_scale.is_finite()) {
+            return bad(format!("max_noise_scale must be finite and at least 1, got {}", self.max_noise_scale));
+        }
+        Ok(())
+    }
+
+    /// The GPU estimate's parameters (`ransac_hypotheses`, `ransac_refine`) for a camera of
+    /// focal length `f_px` and the sample stream `seed`.
+    pub fn params(&self, f_px: f32, seed: u32) -> RansacParams {
+        RansacParams {
+            hypotheses: self.hypotheses.min(RANSAC_MAX_HYPOTHESES),
+            seed,
+            min_inliers: self.min_inliers as u32,
+            refits: self.refits,
+            f_px,
+            max_noise_scale: self.max_noise_scale as f32,
+            iterations: REFIT_ITERATIONS,
+            ..Default::default()
+        }
     }
 }
 

@@ -4,9 +4,12 @@
 
 use glam::DVec3;
 
-use super::matching::{Match, MatchConfig, filter_matches};
-use super::rigid::{Correspondence, RansacConfig, RigidEstimate, ransac};
+use super::matching::{Match, MatchConfig};
+use super::rigid::{Correspondence, RansacConfig, RigidEstimate};
 use super::{FeatureConfig, Features};
+use crate::cpu;
+use crate::cpu::odometry::estimate::RANSAC_MAX_HYPOTHESES;
+use crate::kernels::gpu_data::{FeaturePair, RigidEstimate as GpuEstimate};
 use crate::{PinholeIntrinsics, Result, Se3};
 
 /// Feature odometry's settings.
@@ -24,7 +27,8 @@ impl OdometryConfig {
     /// Checks every part.
     pub fn validate(&self) -> Result<()> {
         self.features.validate()?;
-        self.matching.validate()
+        self.matching.validate()?;
+        self.ransac.validate()
     }
 }
 
@@ -53,7 +57,8 @@ impl MotionEstimate {
     }
 }
 
-/// The 3D pairs of `matched` (current → reference), with their noise.
+/// The 3D pairs of `matched` (current → reference), with their noise, for the f64 reference
+/// ([`super::rigid::ransac`]).
 pub fn correspondences(k0: &PinholeIntrinsics, current: &Features, reference: &Features, matched: &[Match]) -> Vec<Correspondence> {
     let f = f64::from(k0.fx_px.max(k0.fy_px));
     let v = |p: [f32; 4]| DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
@@ -66,13 +71,41 @@ pub fn correspondences(k0: &PinholeIntrinsics, current: &Features, reference: &F
         .collect()
 }
 
-/// The motion of `current` against `reference` from the matcher's nearest neighbours both
-/// ways (`forward`: per current slot; `backward`: per reference slot); `seed` seeds RANSAC.
+/// The focal length the estimate's lateral noise uses, pixels.
+pub fn focal_px(k0: &PinholeIntrinsics) -> f32 {
+    k0.fx_px.max(k0.fy_px)
+}
+
+/// A frame's outcome from what the GPU estimate (or its twins) wrote: the estimate, the first
+/// `estimate.pairs` pairs and their inlier flags; `keypoints` of the current frame.
+pub fn motion_from_estimate(keypoints: usize, estimate: &GpuEstimate, pairs: &[FeaturePair], inlier_flags: &[u32]) -> MotionEstimate {
+    let n = (estimate.pairs as usize).min(pairs.len()).min(inlier_flags.len());
+    let matched: Vec<Match> = pairs[..n].iter().map(|p| Match { query: p.slots[0], train: p.slots[1], distance_bits: p.slots[2] }).collect();
+    let rigid = (estimate.accepted == 1).then(|| RigidEstimate {
+        dst_from_src: Se3::from_cols_f32(&estimate.dst_from_src),
+        inliers: (0..n).filter(|&i| inlier_flags[i] == 1).collect(),
+        rmse_m: f64::from(estimate.rmse_m),
+        noise_scale: f64::from(estimate.noise_scale),
+    });
+    MotionEstimate { keypoints, matches: n, matched, rigid }
+}
+
+/// The motion of `current` against `reference` on the CPU, by the twins of the GPU's
+/// estimate (`match_select`, `ransac_hypotheses`, `ransac_refine`) from the matcher's nearest
+/// neighbours both ways (`forward`: per current slot; `backward`: per reference slot); `seed`
+/// seeds RANSAC.
 pub fn estimate_motion(config: &OdometryConfig, k0: &PinholeIntrinsics, current: &Features, reference: &Features, forward: &[[u32; 4]], backward: &[[u32; 4]], seed: u32) -> MotionEstimate {
-    let matched = filter_matches(&config.matching, forward, backward);
-    let corr = correspondences(k0, current, reference, &matched);
-    let rigid = ransac(&corr, &config.ransac, seed);
-    MotionEstimate { keypoints: current.keypoint_count(), matches: matched.len(), matched, rigid }
+    let slots = current.slots();
+    let mut pairs = vec![FeaturePair::default(); slots];
+    let mut estimate = GpuEstimate::default();
+    cpu::match_select(&config.matching.select_params(slots as u32), forward, backward, &current.keypoints, &current.points, &reference.keypoints, &reference.points, &mut pairs, &mut estimate);
+    let params = config.ransac.params(focal_px(k0), seed);
+    let mut hypotheses = vec![[[0.0f32; 4]; 4]; RANSAC_MAX_HYPOTHESES as usize];
+    let mut costs = vec![0.0f32; RANSAC_MAX_HYPOTHESES as usize];
+    cpu::ransac_hypotheses(&params, &pairs, &estimate, &mut hypotheses, &mut costs);
+    let (mut residuals, mut flags) = (vec![0.0f32; slots], vec![0u32; slots]);
+    cpu::ransac_refine(&params, &hypotheses, &costs, &pairs, &mut estimate, &mut residuals, &mut flags);
+    motion_from_estimate(current.keypoint_count(), &estimate, &pairs, &flags)
 }
 
 #[cfg(test)]
