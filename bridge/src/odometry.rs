@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 //! `webfusion odometry`: seed 002's feature-based visual odometry, frame to frame
-//! (`core::odometry`): keypoints, descriptors and matching on the GPU, RANSAC and the rigid
-//! fit on the host.
+//! (`core::odometry`): keypoints, descriptors, matching, RANSAC and the rigid fit on the GPU
+//! in one submission per frame; the host reads the estimate back and chains the poses.
 //!
 //! - `DIR/trajectory.txt`: the camera-to-world pose of every frame at its depth timestamp (TUM
 //!   format; the world is the first frame's camera). A frame whose motion is rejected keeps
@@ -19,8 +19,8 @@ use webfusion_core::Se3;
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::odometry::gpu::{FeatureExtractor, STAGES};
 use webfusion_core::odometry::matching::MatchConfig;
-use webfusion_core::odometry::tracker::{OdometryConfig, estimate_motion};
-use webfusion_core::odometry::{FeatureConfig, Features};
+use webfusion_core::odometry::tracker::OdometryConfig;
+use webfusion_core::odometry::FeatureConfig;
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
 
 use crate::calib::CalibrationArgs;
@@ -100,15 +100,14 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     anyhow::ensure!(!trajectory_path.exists(), "{} exists: choose another --out", trajectory_path.display());
     let gpu = crate::gpu(options)?;
     let calibration = source.calibration();
-    let k0 = calibration.intrinsics;
     // Odometry reads the intensity pyramid and the filtered depth, not the normals: their
     // gradient smoothing is left out.
     let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig { gradient_smoothing: None, ..PreprocessConfig::default() })?;
-    let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config.features)?;
-    // The keyframe and the previous tracked frame: features and camera-to-world pose; and the
-    // inliers of the keyframe's first tracked frame.
-    let mut keyframe: Option<(Features, Se3)> = None;
-    let mut previous: Option<(Features, Se3)> = None;
+    let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config)?;
+    // The keyframe's and the previous tracked frame's camera-to-world poses (their features
+    // stay on the GPU); and the inliers of the keyframe's first tracked frame.
+    let mut keyframe: Option<Se3> = None;
+    let mut previous: Option<Se3> = None;
     let mut first_inliers: Option<usize> = None;
     let mut trajectory = Vec::new();
     let mut times = StageTimes::default();
@@ -120,20 +119,18 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     for index in frames {
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         let total = Stopwatch::start();
-        let result = pollster::block_on(extractor.process(&gpu, &preprocessor, &frame)).with_context(|| format!("features of frame {index}"))?;
-        let estimation = Stopwatch::start();
+        let seed = index as u32;
+        let result = pollster::block_on(extractor.process(&gpu, &preprocessor, &frame, seed)).with_context(|| format!("features of frame {index}"))?;
         let keypoints = result.features.keypoint_count();
         let mut entry = serde_json::json!({ "index": index, "keypoints": keypoints });
         let pose = match (&keyframe, &previous) {
-            (Some((kf_features, world_from_kf)), Some((prev_features, world_from_prev))) => {
-                let seed = index as u32;
-                let mut e = estimate_motion(&config, &k0, &result.features, kf_features, &result.forward, &result.backward, seed);
+            (Some(world_from_kf), Some(world_from_prev)) => {
+                let mut e = result.motion.clone().context("the extractor holds a reference, so it estimated a motion")?;
                 let mut base = (*world_from_kf, "keyframe");
                 if e.rigid.is_none()
-                    && let Some((forward, backward)) = pollster::block_on(extractor.rematch_previous(&gpu))?
+                    && let Some(again) = pollster::block_on(extractor.rematch_previous(&gpu, keypoints, seed))?
                 {
                     // The keyframe failed: the previous tracked frame, nearer in time, may not.
-                    let again = estimate_motion(&config, &k0, &result.features, prev_features, &forward, &backward, seed);
                     if again.rigid.is_some() {
                         (e, base) = (again, (*world_from_prev, "previous"));
                         via_previous += 1;
@@ -155,9 +152,9 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                         let first = *first_inliers.get_or_insert(e.inliers());
                         let new_keyframe = base.1 == "previous" || args.keyframe_overlap == 0.0 || (e.inliers() as f64) < args.keyframe_overlap * first as f64;
                         extractor.accept(new_keyframe);
-                        previous = Some((result.features.clone(), pose));
+                        previous = Some(pose);
                         if new_keyframe {
-                            keyframe = Some((result.features.clone(), pose));
+                            keyframe = Some(pose);
                             first_inliers = None;
                         }
                         pose
@@ -170,8 +167,8 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                             // The stream has moved on from the reference (a gap, a cut): restart
                             // from this frame at the last pose; the motion missed is lost.
                             extractor.accept(true);
-                            keyframe = Some((result.features.clone(), pose));
-                            previous = keyframe.clone();
+                            keyframe = Some(pose);
+                            previous = keyframe;
                             first_inliers = None;
                             consecutive_rejected = 0;
                             reanchored += 1;
@@ -183,19 +180,17 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
             }
             _ => {
                 extractor.accept(true);
-                keyframe = Some((result.features.clone(), Se3::IDENTITY));
-                previous = keyframe.clone();
+                keyframe = Some(Se3::IDENTITY);
+                previous = keyframe;
                 Se3::IDENTITY
             }
         };
-        let estimation_ms = estimation.ms();
         keypoint_counts.push(keypoints as f64);
         match result.gpu_ms {
             Some(ms) => STAGES.iter().zip(ms).for_each(|(name, ms)| times.record(name, ms)),
             // Without timestamp queries only the whole submission can be timed.
-            None => times.record("update..matching (wall)", result.wall_ms),
+            None => times.record("update..estimation (wall)", result.wall_ms),
         }
-        times.record("estimation", estimation_ms);
         times.record("total", total.ms());
         trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: pose });
         frames_json.push(entry);

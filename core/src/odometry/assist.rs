@@ -31,11 +31,11 @@
 //! nearest other keyframe is closest) gives way, so the store keeps its spread over the room.
 
 use super::gpu::{FeatureExtractor, RELOCALISATION_CANDIDATES};
-use super::tracker::{MotionEstimate, OdometryConfig, estimate_motion};
+use super::tracker::{MotionEstimate, OdometryConfig};
 use super::Features;
 use crate::fusion::{FrameReport, KinectFusion};
 use crate::preprocess::DepthPreprocessor;
-use crate::{Gpu, PinholeIntrinsics, Result, RgbdFrame, Se3};
+use crate::{Gpu, Result, RgbdFrame, Se3};
 
 /// Translation between keyframes, metres.
 pub const KEYFRAME_SPACING_M: f64 = 0.10;
@@ -102,8 +102,6 @@ struct Keyframe {
 /// Feature odometry as the dense tracker's assistant.
 pub struct FeatureAssist {
     extractor: FeatureExtractor,
-    config: OdometryConfig,
-    k0: PinholeIntrinsics,
     /// The last accepted frame.
     reference: Option<Keyframe>,
     keyframes: Vec<Keyframe>,
@@ -135,8 +133,7 @@ pub struct PairView {
     pub reference: Vec<[f32; 4]>,
     /// Kept matches: (index into `current`, index into `reference`, RANSAC inlier).
     pub matches: Vec<(u32, u32, bool)>,
-    /// Milliseconds of [`PAIR_STAGES`] (GPU timestamps for the first four, NaN without them;
-    /// host time for the estimation).
+    /// Milliseconds of [`PAIR_STAGES`] (GPU timestamps; NaN without them).
     pub stages_ms: [f64; 5],
 }
 
@@ -191,9 +188,8 @@ impl FeatureAssist {
     /// Feature odometry reading `preprocessor` (the dense pipeline's: the feature pass uploads
     /// and preprocesses each frame, and the dense pipeline then skips both).
     pub fn new(gpu: &Gpu, preprocessor: &DepthPreprocessor, config: OdometryConfig) -> Result<Self> {
-        config.validate()?;
-        let extractor = FeatureExtractor::new(gpu, preprocessor, config.features)?;
-        Ok(Self { extractor, config, k0: preprocessor.levels[0].intrinsics, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new(), last_pair: None })
+        let extractor = FeatureExtractor::new(gpu, preprocessor, config)?;
+        Ok(Self { extractor, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new(), last_pair: None })
     }
 
     /// The dense tracker's largest plausible inter-frame translation and rotation: a feature
@@ -240,15 +236,11 @@ impl FeatureAssist {
     /// proposes the dense tracker's starting pose (see the module docs), waiting for the GPU.
     pub async fn guess(&mut self, gpu: &Gpu, preprocessor: &DepthPreprocessor, frame: &RgbdFrame) -> Result<Option<Guess>> {
         let started = web_time::Instant::now();
-        let result = self.extractor.process(gpu, preprocessor, frame).await?;
         let seed = frame.index as u32;
-        let estimated = web_time::Instant::now();
-        let estimate = self.reference.as_ref().map(|r| estimate_motion(&self.config, &self.k0, &result.features, &r.features, &result.forward, &result.backward, seed));
-        let estimation_ms = estimated.elapsed().as_secs_f64() * 1e3;
-        self.last_pair = self.reference.as_ref().zip(estimate.as_ref()).map(|(r, e)| {
-            let [update, detection, description, matching] = result.gpu_ms.unwrap_or([f64::NAN; 4]);
-            PairView::new(frame.index, r.frame, &result.features, &r.features, e, [update, detection, description, matching, estimation_ms])
-        });
+        let result = self.extractor.process(gpu, preprocessor, frame, seed).await?;
+        // The extractor estimated the motion against its reference, which is this one.
+        let estimate = if self.reference.is_some() { result.motion.clone() } else { None };
+        self.last_pair = self.reference.as_ref().zip(estimate.as_ref()).map(|(r, e)| PairView::new(frame.index, r.frame, &result.features, &r.features, e, result.gpu_ms.unwrap_or([f64::NAN; 5])));
         let against_reference = self.reference.as_ref().zip(estimate).and_then(|(r, e)| Some((e.reference_from_current()?, e.inliers(), r)));
         let guess = if self.lost_streak == 0 {
             against_reference.map(|(ref_from_cur, inliers, r)| {
@@ -258,7 +250,7 @@ impl FeatureAssist {
             })
         } else {
             let mut best = against_reference.map(|(ref_from_cur, inliers, r)| (inliers, r.world_from_camera.compose(&ref_from_cur), r.frame));
-            for (inliers, pose, keyframe) in self.match_keyframes(gpu, &result.features, seed).await? {
+            for (inliers, pose, keyframe) in self.match_keyframes(gpu, result.features.keypoint_count(), seed).await? {
                 if best.as_ref().is_none_or(|b| inliers > b.0) {
                     best = Some((inliers, pose, keyframe));
                 }
@@ -277,7 +269,7 @@ impl FeatureAssist {
 
     /// The accepted estimates of the last processed frame against this loss's window of
     /// keyframes: (inliers, camera-to-world pose, keyframe's frame index).
-    async fn match_keyframes(&mut self, gpu: &Gpu, current: &Features, seed: u32) -> Result<Vec<(usize, Se3, u64)>> {
+    async fn match_keyframes(&mut self, gpu: &Gpu, keypoints: usize, seed: u32) -> Result<Vec<(usize, Se3, u64)>> {
         let Some(last_good) = self.reference.as_ref().map(|r| r.world_from_camera) else { return Ok(Vec::new()) };
         let reference_frame = self.reference.as_ref().map(|r| r.frame);
         let mut order: Vec<usize> = (0..self.keyframes.len()).filter(|&k| Some(self.keyframes[k].frame) != reference_frame).collect();
@@ -288,13 +280,12 @@ impl FeatureAssist {
         let windows = order.len().div_ceil(RELOCALISATION_CANDIDATES);
         let start = ((self.lost_streak - 1) % windows) * RELOCALISATION_CANDIDATES;
         let window: Vec<usize> = order[start..(start + RELOCALISATION_CANDIDATES).min(order.len())].to_vec();
-        let matches = self.extractor.match_keyframes(gpu, &window).await?;
+        let estimates = self.extractor.match_keyframes(gpu, &window, keypoints, seed).await?;
         Ok(window
             .iter()
-            .zip(matches)
-            .filter_map(|(&k, (forward, backward))| {
+            .zip(estimates)
+            .filter_map(|(&k, e)| {
                 let kf = &self.keyframes[k];
-                let e: MotionEstimate = estimate_motion(&self.config, &self.k0, current, &kf.features, &forward, &backward, seed ^ (k as u32 + 1));
                 Some((e.inliers(), kf.world_from_camera.compose(&e.reference_from_current()?), kf.frame))
             })
             .collect())

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: MIT
 //! The feature chain on the GPU, recorded after the preprocessor in one submission:
 //! detection (`fast_score`, `keypoint_select` per level), description (`feature_smooth`,
-//! `orb_describe` per level) and matching against the reference frame (`hamming_match`,
-//! current → reference and back). Three keypoint sets rotate through three roles: the
+//! `orb_describe` per level), matching against the reference frame (`hamming_match`,
+//! current → reference and back, then `match_select`'s filters and 3D pairs) and the robust
+//! motion estimate (`ransac_hypotheses`, `ransac_refine`). Three keypoint sets rotate through three roles: the
 //! reference (a keyframe, or the last tracked frame), the previous tracked frame (matched on
 //! request when the reference fails, [`FeatureExtractor::rematch_previous`]) and the frame
 //! being written; [`FeatureExtractor::accept`] promotes the current frame.
@@ -11,21 +12,23 @@
 //! ([`FeatureExtractor::store_keyframe`]); [`FeatureExtractor::match_keyframes`] matches the
 //! last processed frame against up to [`RELOCALISATION_CANDIDATES`] of them in one submission.
 //!
-//! The host reads each frame's keypoints, points and matches back (one readback of
-//! 80 bytes per slot) and estimates the motion on the CPU; moving RANSAC onto the GPU, so that
-//! no frame waits for the host, is the next step of issue 14.
+//! The host reads each frame's keypoints, matches and estimate back in one readback; it
+//! computes nothing of the estimate itself.
 
 use web_time::Instant;
 
-use super::{FeatureConfig, Features, LevelLayout, descriptor_pattern, slot_count};
+use super::tracker::{MotionEstimate, OdometryConfig, focal_px, motion_from_estimate};
+use super::{Features, LevelLayout, descriptor_pattern, slot_count};
+use crate::cpu::odometry::estimate::RANSAC_MAX_HYPOTHESES;
 use crate::cpu::shared::DESCRIPTOR_WORDS;
 use crate::engine::{FrameEncoder, ReadbackRing, StageTimer};
-use crate::kernels::{fast_score, feature_smooth, hamming_match, keypoint_select, orb_describe};
+use crate::kernels::gpu_data::{FeaturePair, RigidEstimate};
+use crate::kernels::{fast_score, feature_smooth, hamming_match, keypoint_select, match_select, orb_describe, ransac_hypotheses, ransac_refine};
 use crate::preprocess::DepthPreprocessor;
 use crate::{Error, Gpu, Result, RgbdFrame};
 
 /// The stages a frame is timed by, in order.
-pub const STAGES: [&str; 4] = ["update", "detection", "description", "matching"];
+pub const STAGES: [&str; 5] = ["update", "detection", "description", "matching", "estimation"];
 
 /// Keyframes matched per [`FeatureExtractor::match_keyframes`].
 pub const RELOCALISATION_CANDIDATES: usize = 4;
@@ -33,8 +36,13 @@ pub const RELOCALISATION_CANDIDATES: usize = 4;
 /// Keypoint sets on the GPU: reference, previous, current.
 const SETS: usize = 3;
 
-/// Bytes read back per slot: keypoint, feature, point, forward and backward match.
-const SLOT_BYTES: u64 = 5 * 16;
+/// Bytes read back per slot: keypoint, feature, point, forward and backward match (16 each),
+/// the pair (48) and its inlier flag (4).
+const SLOT_BYTES: u64 = 5 * 16 + PAIR_BYTES + 4;
+/// Bytes of one [`FeaturePair`].
+const PAIR_BYTES: u64 = size_of::<FeaturePair>() as u64;
+/// Bytes of one [`RigidEstimate`].
+const ESTIMATE_BYTES: u64 = size_of::<RigidEstimate>() as u64;
 
 struct Set {
     keypoints: wgpu::Buffer,
@@ -43,10 +51,49 @@ struct Set {
     features: wgpu::Buffer,
 }
 
-/// A keyframe's copy of a set: what matching reads.
+/// A keyframe's copy of a set: what matching and the estimate read.
 struct StoredSet {
     keypoints: wgpu::Buffer,
+    points: wgpu::Buffer,
     descriptors: wgpu::Buffer,
+}
+
+/// Where one estimate goes (the frame's against its reference, or one relocalisation
+/// candidate's): its pairs, estimate and inlier flags, and the RANSAC bind groups that read and
+/// write them.
+struct EstimateTarget {
+    pairs: wgpu::Buffer,
+    estimate: wgpu::Buffer,
+    inlier_flags: wgpu::Buffer,
+    hypotheses: wgpu::BindGroup,
+    refine: wgpu::BindGroup,
+}
+
+/// The estimate's buffers shared by every target (its steps run one target at a time).
+struct EstimateScratch {
+    hypotheses: wgpu::Buffer,
+    costs: wgpu::Buffer,
+    residuals: wgpu::Buffer,
+}
+
+impl EstimateScratch {
+    fn new(gpu: &Gpu, slots: usize) -> Self {
+        let h = RANSAC_MAX_HYPOTHESES as usize;
+        Self {
+            hypotheses: gpu.storage_buffer::<[[f32; 4]; 4]>("core.ransac_hypotheses.hypotheses", h),
+            costs: gpu.storage_buffer::<f32>("core.ransac_hypotheses.costs", h),
+            residuals: gpu.storage_buffer::<f32>("core.ransac_refine.residuals", slots),
+        }
+    }
+
+    fn target(&self, gpu: &Gpu, label: &str, slots: usize, params: &wgpu::Buffer) -> EstimateTarget {
+        let pairs = gpu.storage_buffer::<FeaturePair>(&format!("core.match_select.pairs[{label}]"), slots);
+        let estimate = gpu.storage_buffer::<RigidEstimate>(&format!("core.match_select.estimate[{label}]"), 1);
+        let inlier_flags = gpu.storage_buffer::<u32>(&format!("core.ransac_refine.inlier_flags[{label}]"), slots);
+        let hypotheses = ransac_hypotheses::Bindings { params, pairs: &pairs, estimate: &estimate, hypotheses: &self.hypotheses, costs: &self.costs }.bind_group(gpu);
+        let refine = ransac_refine::Bindings { params, hypotheses: &self.hypotheses, costs: &self.costs, pairs: &pairs, estimate: &estimate, residuals: &self.residuals, inlier_flags: &inlier_flags }.bind_group(gpu);
+        EstimateTarget { pairs, estimate, inlier_flags, hypotheses, refine }
+    }
 }
 
 struct Level {
@@ -59,7 +106,7 @@ struct Level {
     describe: [wgpu::BindGroup; SETS],
 }
 
-/// One frame's features and matches against the reference, as read back.
+/// One frame's features, matches and motion against the reference, as read back.
 #[derive(Clone, Debug)]
 pub struct FrameFeatures {
     /// Keypoints, features and points (descriptors stay on the GPU).
@@ -69,15 +116,19 @@ pub struct FrameFeatures {
     pub forward: Vec<[u32; 4]>,
     /// Per reference slot: (current slot, distance, second distance, 0).
     pub backward: Vec<[u32; 4]>,
+    /// The motion against the reference (`None` without a reference).
+    pub motion: Option<MotionEstimate>,
     /// GPU milliseconds per stage of [`STAGES`] (`None` without timestamp queries).
-    pub gpu_ms: Option<[f64; 4]>,
+    pub gpu_ms: Option<[f64; 5]>,
     /// Host milliseconds from upload to the readback's arrival.
     pub wall_ms: f64,
 }
 
 /// Detects, describes and matches keypoints on the GPU.
 pub struct FeatureExtractor {
-    config: FeatureConfig,
+    config: OdometryConfig,
+    /// The focal length of the estimate's noise model, pixels.
+    f_px: f32,
     slots: usize,
     levels: Vec<Level>,
     sets: [Set; SETS],
@@ -86,6 +137,17 @@ pub struct FeatureExtractor {
     /// At `current * SETS + reference`: (forward, backward) matching of two different sets.
     matching: Vec<Option<[wgpu::BindGroup; 2]>>,
     match_params: wgpu::Buffer,
+    /// At `current * SETS + reference`: `match_select` of two different sets into `estimate`.
+    select: Vec<Option<wgpu::BindGroup>>,
+    select_params: wgpu::Buffer,
+    /// RANSAC's parameters for the frame's estimate and for relocalisation candidates (their
+    /// seeds are written before each submission).
+    ransac_params: wgpu::Buffer,
+    candidate_ransac_params: wgpu::Buffer,
+    /// Held for the bind groups that use it.
+    _scratch: EstimateScratch,
+    estimate: EstimateTarget,
+    candidate_estimates: Vec<EstimateTarget>,
     _pattern: wgpu::Buffer,
     readback: ReadbackRing<()>,
     /// Stored keyframes, by keyframe slot.
@@ -110,8 +172,9 @@ impl std::fmt::Debug for FeatureExtractor {
 
 impl FeatureExtractor {
     /// An extractor reading `preprocessor`'s intensity pyramid and level-0 depth.
-    pub fn new(gpu: &Gpu, preprocessor: &DepthPreprocessor, config: FeatureConfig) -> Result<Self> {
-        config.validate()?;
+    pub fn new(gpu: &Gpu, preprocessor: &DepthPreprocessor, odometry: OdometryConfig) -> Result<Self> {
+        odometry.validate()?;
+        let config = odometry.features;
         let k0 = preprocessor.levels[0].intrinsics;
         let layout = config.layout(&k0);
         if layout.is_empty() {
@@ -165,14 +228,41 @@ impl FeatureExtractor {
                 })
             })
             .collect();
-        let readback = ReadbackRing::new(gpu, "core.features", SLOT_BYTES * slots as u64 + StageTimer::BYTES, 1);
+        let select_params = gpu.uniform_buffer("core.match_select.params", &odometry.matching.select_params(slots as u32));
+        let ransac_params = gpu.uniform_buffer("core.ransac.params", &odometry.ransac.params(focal_px(&k0), 0));
+        let candidate_ransac_params = gpu.uniform_buffer("core.ransac.candidate_params", &odometry.ransac.params(focal_px(&k0), 0));
+        let scratch = EstimateScratch::new(gpu, slots);
+        let estimate = scratch.target(gpu, "frame", slots, &ransac_params);
+        let candidate_estimates = (0..RELOCALISATION_CANDIDATES).map(|c| scratch.target(gpu, &format!("candidate{c}"), slots, &candidate_ransac_params)).collect();
+        let select = (0..SETS * SETS)
+            .map(|i| {
+                let (cur, reference) = (i / SETS, i % SETS);
+                (cur != reference).then(|| {
+                    let (c, r) = (&sets[cur], &sets[reference]);
+                    match_select::Bindings {
+                        params: &select_params,
+                        forward: &forward,
+                        backward: &backward,
+                        current_keypoints: &c.keypoints,
+                        current_points: &c.points,
+                        reference_keypoints: &r.keypoints,
+                        reference_points: &r.points,
+                        pairs: &estimate.pairs,
+                        estimate: &estimate.estimate,
+                    }
+                    .bind_group(gpu)
+                })
+            })
+            .collect();
+        let readback = ReadbackRing::new(gpu, "core.features", SLOT_BYTES * slots as u64 + ESTIMATE_BYTES + StageTimer::BYTES, 1);
         let timer = StageTimer::new(gpu, "core.features");
         let candidate_matches = (0..RELOCALISATION_CANDIDATES)
             .map(|c| ["forward", "backward"].map(|d| gpu.storage_buffer::<[u32; 4]>(&format!("core.hamming_match.candidate[{c}].{d}"), slots)))
             .collect();
-        let candidate_readback = ReadbackRing::new(gpu, "core.features.candidates", 2 * 16 * (RELOCALISATION_CANDIDATES * slots) as u64, 1);
+        let candidate_readback = ReadbackRing::new(gpu, "core.features.candidates", (ESTIMATE_BYTES + (PAIR_BYTES + 4) * slots as u64) * RELOCALISATION_CANDIDATES as u64, 1);
         Ok(Self {
-            config,
+            config: odometry,
+            f_px: focal_px(&k0),
             slots,
             levels,
             sets,
@@ -180,6 +270,13 @@ impl FeatureExtractor {
             backward,
             matching,
             match_params,
+            select,
+            select_params: select_params,
+            ransac_params,
+            candidate_ransac_params,
+            _scratch: scratch,
+            estimate,
+            candidate_estimates,
             _pattern: pattern,
             readback,
             keyframes: Vec::new(),
@@ -193,7 +290,7 @@ impl FeatureExtractor {
     }
 
     /// The settings.
-    pub fn config(&self) -> &FeatureConfig {
+    pub fn config(&self) -> &OdometryConfig {
         &self.config
     }
 
@@ -233,7 +330,8 @@ impl FeatureExtractor {
     }
 
     /// Records, after [`Self::begin_frame`], detection and description of the frame in the
-    /// preprocessor's buffers, and its matching against the reference when there is one.
+    /// preprocessor's buffers, and its matching against the reference and the motion estimate
+    /// when there is a reference ([`Self::set_seed`] first).
     pub fn encode(&self, gpu: &Gpu, fe: &mut FrameEncoder<'_>) {
         let s = self.current;
         {
@@ -250,37 +348,87 @@ impl FeatureExtractor {
                 gpu.kernels.orb_describe.dispatch_in(&mut pass, &l.describe[s], [l.layout.slot_count(), 1, 1]);
             }
         }
-        let mut pass = fe.stage("matching");
-        if let Some(r) = self.reference {
-            self.encode_matching(gpu, &mut pass, r);
+        {
+            let mut pass = fe.stage("matching");
+            if let Some(r) = self.reference {
+                self.encode_matching(gpu, &mut pass, r);
+            }
+        }
+        let mut pass = fe.stage("estimation");
+        if self.reference.is_some() {
+            self.encode_estimate(gpu, &mut pass, &self.estimate);
         }
     }
 
-    fn encode_matching(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, reference: usize) {
-        let n = self.slots as u32;
-        let groups = self.matching[self.current * SETS + reference].as_ref().expect("the current set is never a reference");
-        gpu.kernels.hamming_match.dispatch_in(pass, &groups[0], [n, 1, 1]);
-        gpu.kernels.hamming_match.dispatch_in(pass, &groups[1], [n, 1, 1]);
+    /// The seed of the next frame's (or rematch's) RANSAC sample stream: each frame draws its
+    /// own samples, reproducibly.
+    pub fn set_seed(&self, gpu: &Gpu, seed: u32) {
+        gpu.write_buffer(&self.ransac_params, &[self.config.ransac.params(self.f_px, seed)]);
     }
 
-    /// Matches the last processed frame against the previous tracked frame (when there is one
-    /// other than the reference) and waits: (forward, backward) as in [`FrameFeatures`].
-    pub async fn rematch_previous(&mut self, gpu: &Gpu) -> Result<Option<(Vec<[u32; 4]>, Vec<[u32; 4]>)>> {
+    /// Matching of the current set against set `reference` and `match_select` into the frame's
+    /// estimate target.
+    fn encode_matching(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, reference: usize) {
+        let n = self.slots as u32;
+        let at = self.current * SETS + reference;
+        let groups = self.matching[at].as_ref().expect("the current set is never a reference");
+        gpu.kernels.hamming_match.dispatch_in(pass, &groups[0], [n, 1, 1]);
+        gpu.kernels.hamming_match.dispatch_in(pass, &groups[1], [n, 1, 1]);
+        let select = self.select[at].as_ref().expect("the current set is never a reference");
+        gpu.kernels.match_select.dispatch_in(pass, select, [gpu.kernels.match_select.kernel.workgroup_size[0], 1, 1]);
+    }
+
+    /// RANSAC and the refinement of `target`'s pairs (one workgroup per hypothesis, then one).
+    fn encode_estimate(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, target: &EstimateTarget) {
+        let hypotheses = self.config.ransac.hypotheses.min(RANSAC_MAX_HYPOTHESES);
+        let [wg, _, _] = gpu.kernels.ransac_hypotheses.kernel.workgroup_size;
+        gpu.kernels.ransac_hypotheses.dispatch_in(pass, &target.hypotheses, [wg * hypotheses, 1, 1]);
+        gpu.kernels.ransac_refine.dispatch_in(pass, &target.refine, [gpu.kernels.ransac_refine.kernel.workgroup_size[0], 1, 1]);
+    }
+
+    /// Bytes [`Self::copy_estimate`] copies.
+    fn estimate_bytes(&self) -> u64 {
+        ESTIMATE_BYTES + (PAIR_BYTES + 4) * self.slots as u64
+    }
+
+    /// Records copies of `target`'s estimate, pairs and inlier flags into `buffer` at `offset`
+    /// (estimate, then `slots` pairs, then `slots` flags).
+    fn copy_estimate(&self, encoder: &mut wgpu::CommandEncoder, target: &EstimateTarget, buffer: &wgpu::Buffer, offset: u64) {
+        let n = self.slots as u64;
+        encoder.copy_buffer_to_buffer(&target.estimate, 0, buffer, offset, ESTIMATE_BYTES);
+        encoder.copy_buffer_to_buffer(&target.pairs, 0, buffer, offset + ESTIMATE_BYTES, PAIR_BYTES * n);
+        encoder.copy_buffer_to_buffer(&target.inlier_flags, 0, buffer, offset + ESTIMATE_BYTES + PAIR_BYTES * n, 4 * n);
+    }
+
+    /// The motion read back by [`Self::copy_estimate`] from `bytes`, for a current frame of
+    /// `keypoints` keypoints.
+    fn read_estimate(&self, bytes: &[u8], keypoints: usize) -> MotionEstimate {
+        let n = self.slots;
+        let e = ESTIMATE_BYTES as usize;
+        let estimate: RigidEstimate = bytemuck::pod_read_unaligned(&bytes[..e]);
+        let pairs: Vec<FeaturePair> = bytemuck::pod_collect_to_vec(&bytes[e..e + PAIR_BYTES as usize * n]);
+        let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[e + PAIR_BYTES as usize * n..e + (PAIR_BYTES as usize + 4) * n]);
+        motion_from_estimate(keypoints, &estimate, &pairs, &flags)
+    }
+
+    /// Matches the last processed frame (of `keypoints` keypoints) against the previous tracked
+    /// frame (when there is one other than the reference), estimates the motion with `seed`
+    /// and waits for it.
+    pub async fn rematch_previous(&mut self, gpu: &Gpu, keypoints: usize, seed: u32) -> Result<Option<MotionEstimate>> {
         let Some(p) = self.previous.filter(|p| Some(*p) != self.reference) else { return Ok(None) };
+        self.set_seed(gpu, seed);
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.features.rematch") });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("matching"), timestamp_writes: None });
             self.encode_matching(gpu, &mut pass, p);
+            self.encode_estimate(gpu, &mut pass, &self.estimate);
         }
         let (slot, buffer) = self.readback.free_slot().ok_or_else(|| Error::Poll("the feature readback is still in flight".into()))?;
-        let n = self.slots as u64 * 16;
-        encoder.copy_buffer_to_buffer(&self.forward, 0, buffer, 0, n);
-        encoder.copy_buffer_to_buffer(&self.backward, 0, buffer, n, n);
+        self.copy_estimate(&mut encoder, &self.estimate, buffer, 0);
         let submission = gpu.submit([encoder.finish()]);
         self.readback.start(gpu, slot, submission, ());
         let done = self.readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the feature readback vanished".into()))?;
-        let bytes = &done.bytes;
-        Ok(Some((bytemuck::pod_collect_to_vec(&bytes[..n as usize]), bytemuck::pod_collect_to_vec(&bytes[n as usize..2 * n as usize]))))
+        Ok(Some(self.read_estimate(&done.bytes, keypoints)))
     }
 
     /// Copies the last processed frame's keypoints and descriptors into keyframe slot `slot`
@@ -292,59 +440,76 @@ impl FeatureExtractor {
         if slot == self.keyframes.len() {
             self.keyframes.push(StoredSet {
                 keypoints: gpu.storage_buffer::<[f32; 4]>(&format!("core.features.keyframe[{slot}].keypoints"), self.slots),
+                points: gpu.storage_buffer::<[f32; 4]>(&format!("core.features.keyframe[{slot}].points"), self.slots),
                 descriptors: gpu.storage_buffer::<u32>(&format!("core.features.keyframe[{slot}].descriptors"), self.slots * DESCRIPTOR_WORDS),
             });
         }
         let (set, stored) = (&self.sets[self.current], &self.keyframes[slot]);
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.features.store_keyframe") });
         encoder.copy_buffer_to_buffer(&set.keypoints, 0, &stored.keypoints, 0, set.keypoints.size());
+        encoder.copy_buffer_to_buffer(&set.points, 0, &stored.points, 0, set.points.size());
         encoder.copy_buffer_to_buffer(&set.descriptors, 0, &stored.descriptors, 0, set.descriptors.size());
         gpu.submit([encoder.finish()]);
         Ok(())
     }
 
-    /// Matches the last processed frame against the stored keyframes `slots` (at most
-    /// [`RELOCALISATION_CANDIDATES`]) in one submission and waits: per keyframe, (forward,
-    /// backward) as in [`FrameFeatures`], the keyframe in the reference's role.
-    pub async fn match_keyframes(&mut self, gpu: &Gpu, slots: &[usize]) -> Result<Vec<(Vec<[u32; 4]>, Vec<[u32; 4]>)>> {
+    /// Matches the last processed frame (of `keypoints` keypoints) against the stored keyframes
+    /// `slots` (at most [`RELOCALISATION_CANDIDATES`]) and estimates the motion against each
+    /// (RANSAC seeded by `seed`; the keyframe in the reference's role), in one submission, and
+    /// waits: one estimate per keyframe.
+    pub async fn match_keyframes(&mut self, gpu: &Gpu, slots: &[usize], keypoints: usize, seed: u32) -> Result<Vec<MotionEstimate>> {
         if slots.len() > RELOCALISATION_CANDIDATES {
             return Err(Error::InvalidConfig(format!("features: {} keyframes asked for, at most {RELOCALISATION_CANDIDATES} per submission", slots.len())));
         }
         if let Some(&bad) = slots.iter().find(|&&k| k >= self.keyframes.len()) {
             return Err(Error::InvalidConfig(format!("features: keyframe slot {bad} past the {} stored", self.keyframes.len())));
         }
+        gpu.write_buffer(&self.candidate_ransac_params, &[self.config.ransac.params(self.f_px, seed)]);
         let n = self.slots as u32;
         let c = &self.sets[self.current];
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.features.match_keyframes") });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("matching"), timestamp_writes: None });
             for (i, &k) in slots.iter().enumerate() {
-                let (kf, [forward, backward]) = (&self.keyframes[k], &self.candidate_matches[i]);
+                let (kf, [forward, backward], target) = (&self.keyframes[k], &self.candidate_matches[i], &self.candidate_estimates[i]);
                 let fwd = hamming_match::Bindings { params: &self.match_params, query_keypoints: &c.keypoints, query_descriptors: &c.descriptors, train_keypoints: &kf.keypoints, train_descriptors: &kf.descriptors, matches: forward }.bind_group(gpu);
                 let bwd = hamming_match::Bindings { params: &self.match_params, query_keypoints: &kf.keypoints, query_descriptors: &kf.descriptors, train_keypoints: &c.keypoints, train_descriptors: &c.descriptors, matches: backward }.bind_group(gpu);
+                let select = match_select::Bindings {
+                    params: &self.select_params,
+                    forward,
+                    backward,
+                    current_keypoints: &c.keypoints,
+                    current_points: &c.points,
+                    reference_keypoints: &kf.keypoints,
+                    reference_points: &kf.points,
+                    pairs: &target.pairs,
+                    estimate: &target.estimate,
+                }
+                .bind_group(gpu);
                 gpu.kernels.hamming_match.dispatch_in(&mut pass, &fwd, [n, 1, 1]);
                 gpu.kernels.hamming_match.dispatch_in(&mut pass, &bwd, [n, 1, 1]);
+                gpu.kernels.match_select.dispatch_in(&mut pass, &select, [gpu.kernels.match_select.kernel.workgroup_size[0], 1, 1]);
+                self.encode_estimate(gpu, &mut pass, target);
             }
         }
-        let (slot, buffer) = self.candidate_readback.free_slot().ok_or_else(|| Error::Poll("the keyframe matches' readback is still in flight".into()))?;
-        let bytes_per = u64::from(n) * 16;
-        for (i, pair) in self.candidate_matches.iter().take(slots.len()).enumerate() {
-            encoder.copy_buffer_to_buffer(&pair[0], 0, buffer, 2 * i as u64 * bytes_per, bytes_per);
-            encoder.copy_buffer_to_buffer(&pair[1], 0, buffer, (2 * i as u64 + 1) * bytes_per, bytes_per);
+        let (slot, buffer) = self.candidate_readback.free_slot().ok_or_else(|| Error::Poll("the keyframe estimates' readback is still in flight".into()))?;
+        let per = self.estimate_bytes();
+        for (i, target) in self.candidate_estimates.iter().take(slots.len()).enumerate() {
+            self.copy_estimate(&mut encoder, target, buffer, i as u64 * per);
         }
         let submission = gpu.submit([encoder.finish()]);
         self.candidate_readback.start(gpu, slot, submission, ());
-        let done = self.candidate_readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the keyframe matches' readback vanished".into()))?;
-        let part = |j: usize| bytemuck::pod_collect_to_vec(&done.bytes[j * bytes_per as usize..(j + 1) * bytes_per as usize]);
-        Ok((0..slots.len()).map(|i| (part(2 * i), part(2 * i + 1))).collect())
+        let done = self.candidate_readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the keyframe estimates' readback vanished".into()))?;
+        Ok((0..slots.len()).map(|i| self.read_estimate(&done.bytes[i * per as usize..(i + 1) * per as usize], keypoints)).collect())
     }
 
-    /// Uploads and preprocesses `frame`, extracts its features and matches them against the
-    /// reference, and waits for the result.
-    pub async fn process(&mut self, gpu: &Gpu, preprocessor: &DepthPreprocessor, frame: &RgbdFrame) -> Result<FrameFeatures> {
+    /// Uploads and preprocesses `frame`, extracts its features, matches them against the
+    /// reference and estimates the motion (RANSAC seeded by `seed`), and waits for the result.
+    pub async fn process(&mut self, gpu: &Gpu, preprocessor: &DepthPreprocessor, frame: &RgbdFrame, seed: u32) -> Result<FrameFeatures> {
         gpu.check_lost()?;
         let started = Instant::now();
         preprocessor.upload(gpu, frame)?;
+        self.set_seed(gpu, seed);
         self.begin_frame();
         let mut fe = FrameEncoder::new(gpu, "core.features.frame", self.timer.as_ref());
         preprocessor.encode_in(gpu, &mut fe.stage("update"));
@@ -356,7 +521,9 @@ impl FeatureExtractor {
         for (i, b) in [&set.keypoints, &set.features, &set.points, &self.forward, &self.backward].into_iter().enumerate() {
             fe.encoder().copy_buffer_to_buffer(b, 0, buffer, i as u64 * n, n);
         }
-        let (commands, stages) = fe.finish(Some((buffer, 5 * n)));
+        let estimate_bytes = self.estimate_bytes();
+        self.copy_estimate(fe.encoder(), &self.estimate, buffer, 5 * n);
+        let (commands, stages) = fe.finish(Some((buffer, 5 * n + estimate_bytes)));
         let submission = gpu.submit([commands]);
         self.readback.start(gpu, slot, submission, ());
         let done = self.readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the feature readback vanished".into()))?;
@@ -364,10 +531,11 @@ impl FeatureExtractor {
         let part = |i: usize| &bytes[i * n as usize..(i + 1) * n as usize];
         let features = Features { keypoints: bytemuck::pod_collect_to_vec(part(0)), features: bytemuck::pod_collect_to_vec(part(1)), points: bytemuck::pod_collect_to_vec(part(2)), descriptors: Vec::new() };
         let (forward, backward) = if has_reference { (bytemuck::pod_collect_to_vec(part(3)), bytemuck::pod_collect_to_vec(part(4))) } else { (Vec::new(), Vec::new()) };
+        let motion = has_reference.then(|| self.read_estimate(&bytes[5 * n as usize..], features.keypoint_count()));
         let gpu_ms = self.timer.as_ref().map(|timer| {
-            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[5 * n as usize..][..16 * stages.len()]);
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[(5 * n + estimate_bytes) as usize..][..16 * stages.len()]);
             let times = timer.stage_times(&stages, &ticks);
-            let mut out = [0.0; 4];
+            let mut out = [0.0; 5];
             for t in times {
                 if let Some(i) = STAGES.iter().position(|s| *s == t.name) {
                     out[i] += t.gpu_ms;
@@ -375,6 +543,6 @@ impl FeatureExtractor {
             }
             out
         });
-        Ok(FrameFeatures { features, forward, backward, gpu_ms, wall_ms: started.elapsed().as_secs_f64() * 1e3 })
+        Ok(FrameFeatures { features, forward, backward, motion, gpu_ms, wall_ms: started.elapsed().as_secs_f64() * 1e3 })
     }
 }

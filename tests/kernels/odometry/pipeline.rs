@@ -1,14 +1,17 @@
 // SPDX-License-Identifier: MIT
 //! The feature pipeline as composed (`odometry::gpu::FeatureExtractor`: preprocessing,
-//! detection, description and matching in one submission, three keypoint sets rotating through
-//! their roles) against the CPU chain of twins (`odometry::reference::extract` and
-//! `hamming_match`) on four frames of the sample. The GPU's preprocessing is held to its twin
-//! within tolerances (bilateral filter), so a keypoint at a threshold may fall either way: at
-//! least 98 % of the slots and of the matches must be identical.
+//! detection, description, matching and the motion estimate in one submission, three keypoint
+//! sets rotating through their roles) against the CPU chain of twins
+//! (`odometry::reference::extract`, `hamming_match` and `tracker::estimate_motion`) on four
+//! frames of the sample. The GPU's preprocessing is held to its twin within tolerances
+//! (bilateral filter), so a keypoint at a threshold may fall either way: at least 98 % of the
+//! slots and of the matches must be identical, and the motions agree within 2 mm and 0.2°
+//! (the same method on nearly the same pairs).
 
 use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::odometry::gpu::FeatureExtractor;
 use webfusion_core::odometry::reference::matches as cpu_matches;
+use webfusion_core::odometry::tracker::{MotionEstimate, OdometryConfig, estimate_motion};
 use webfusion_core::odometry::{FeatureConfig, Features, reference};
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
 use webfusion_tests::{compare_u32_mostly, finish, gpu, sample_frame};
@@ -39,18 +42,40 @@ fn assert_matches_close(what: &str, g: &[[u32; 4]], c: &[[u32; 4]]) {
     assert!(compare_u32_mostly(what, &shifted, &nearest(c), 20).is_err(), "{what}: shifted matches passed");
 }
 
+/// Both accepted, within 2 mm and 0.2°, inlier counts within 10 %; and a motion moved by 5 mm
+/// fails the same check (negative control).
+fn assert_motions_close(what: &str, g: &MotionEstimate, c: &MotionEstimate) {
+    let close = |g: &MotionEstimate| -> Result<(f64, f64), String> {
+        let (Some(gm), Some(cm)) = (g.reference_from_current(), c.reference_from_current()) else { return Err(format!("{what}: accepted {} vs twin {}", g.rigid.is_some(), c.rigid.is_some())) };
+        let d = cm.inverse().compose(&gm);
+        let (t_mm, r_deg) = (d.translation_m.length() * 1e3, d.rotation_angle_rad().to_degrees());
+        let (gi, ci) = (g.inliers() as f64, c.inliers() as f64);
+        if t_mm <= 2.0 && r_deg <= 0.2 && (gi - ci).abs() <= 0.1 * ci + 1.0 { Ok((t_mm, r_deg)) } else { Err(format!("{what}: {t_mm} mm, {r_deg}° apart; inliers {gi} vs {ci}")) }
+    };
+    let (t_mm, r_deg) = close(g).unwrap();
+    eprintln!("{what}: {} pairs, {} inliers (twin {}, {}); {t_mm:.3} mm {r_deg:.4}° apart", g.matches, g.inliers(), c.matches, c.inliers());
+    let mut moved = g.clone();
+    if let Some(r) = moved.rigid.as_mut() {
+        r.dst_from_src.translation_m.x += 0.005;
+    }
+    assert!(close(&moved).is_err(), "{what}: a motion 5 mm off passed");
+}
+
 #[test]
 fn the_composed_pipeline_matches_the_twins_through_its_set_rotation() {
     let gpu = gpu();
     let calibration = sample_frame(0).0;
     let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig::default()).expect("preprocessor");
-    let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, FeatureConfig::default()).expect("extractor");
+    let config = OdometryConfig::default();
+    let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config).expect("extractor");
     let c: Vec<Features> = (0..4).map(cpu_features).collect();
-    let process = |extractor: &mut FeatureExtractor, index: usize| pollster::block_on(extractor.process(&gpu, &preprocessor, &sample_frame(index).1)).expect("process");
+    let process = |extractor: &mut FeatureExtractor, index: usize| pollster::block_on(extractor.process(&gpu, &preprocessor, &sample_frame(index).1, index as u32)).expect("process");
+    let k0 = calibration.intrinsics;
+    let cpu_motion = |current: usize, reference: usize| estimate_motion(&config, &k0, &c[current], &c[reference], &cpu_matches(&c[current], &c[reference]), &cpu_matches(&c[reference], &c[current]), current as u32);
 
     // Frame 0: no reference, no matches.
     let f0 = process(&mut extractor, 0);
-    assert!(f0.forward.is_empty());
+    assert!(f0.forward.is_empty() && f0.motion.is_none());
     assert_keypoints_close("frame 0", &f0.features, &c[0]);
     extractor.accept(true);
     // Frame 1 against 0, then rejected: the reference stays frame 0.
@@ -58,17 +83,18 @@ fn the_composed_pipeline_matches_the_twins_through_its_set_rotation() {
     assert_keypoints_close("frame 1", &f1.features, &c[1]);
     assert_matches_close("1 -> 0", &f1.forward, &cpu_matches(&c[1], &c[0]));
     assert_matches_close("0 -> 1", &f1.backward, &cpu_matches(&c[0], &c[1]));
+    assert_motions_close("motion 1 -> 0", f1.motion.as_ref().expect("a motion"), &cpu_motion(1, 0));
     // Frame 2 against 0; the previous tracked frame is the reference itself: no rematch.
     let f2 = process(&mut extractor, 2);
     assert_matches_close("2 -> 0", &f2.forward, &cpu_matches(&c[2], &c[0]));
-    assert!(pollster::block_on(extractor.rematch_previous(&gpu)).expect("rematch").is_none());
+    assert!(pollster::block_on(extractor.rematch_previous(&gpu, f2.features.keypoint_count(), 2)).expect("rematch").is_none());
     // Frame 2 tracked but not a keyframe: frame 3 is matched against 0, and on request 2.
     extractor.accept(false);
     let f3 = process(&mut extractor, 3);
     assert_keypoints_close("frame 3", &f3.features, &c[3]);
     assert_matches_close("3 -> 0", &f3.forward, &cpu_matches(&c[3], &c[0]));
-    let (forward, backward) = pollster::block_on(extractor.rematch_previous(&gpu)).expect("rematch").expect("a previous frame");
-    assert_matches_close("3 -> 2", &forward, &cpu_matches(&c[3], &c[2]));
-    assert_matches_close("2 -> 3", &backward, &cpu_matches(&c[2], &c[3]));
+    assert_motions_close("motion 3 -> 0", f3.motion.as_ref().expect("a motion"), &cpu_motion(3, 0));
+    let again = pollster::block_on(extractor.rematch_previous(&gpu, f3.features.keypoint_count(), 3)).expect("rematch").expect("a previous frame");
+    assert_motions_close("motion 3 -> 2", &again, &cpu_motion(3, 2));
     finish(&gpu);
 }

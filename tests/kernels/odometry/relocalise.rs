@@ -72,7 +72,7 @@ fn a_return_after_a_jump_is_relocalised_against_a_keyframe_and_confirmed_by_icp(
     assert_eq!((pair.frame, pair.reference_frame), (15, 14));
     assert!(inliers >= 20 && pair.matches.iter().all(|&(q, t, _)| (q as usize) < pair.current.len() && (t as usize) < pair.reference.len()), "{} matches, {inliers} inliers", pair.matches.len());
     assert!(pair.current.iter().chain(&pair.reference).all(|k| k[0] >= 0.0 && k[0] < 640.0 && k[1] >= 0.0 && k[1] < 480.0), "keypoints in full-resolution pixels");
-    assert!(pair.stages_ms[4] >= 0.0, "the estimation is timed");
+    assert!(pair.stages_ms[4] >= 0.0 || !gpu.has_timestamps, "the estimation is timed on the GPU");
     finish(&gpu);
 }
 
