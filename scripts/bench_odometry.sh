@@ -15,7 +15,7 @@
 #   --out DIR     where both runs write (default: target/bench-odometry)
 #
 # webfusion's stages are GPU timestamps (update = upload + preprocessing, detection,
-# description, matching) plus host estimation; OpenCV's are wall-clock (detect = ORB
+# description, matching, estimation); OpenCV's are wall-clock (detect = ORB
 # detect+compute, match, estimate = PnP). Env: WEBFUSION_BIN (default target/release/webfusion,
 # built when missing).
 set -euo pipefail
@@ -65,7 +65,7 @@ s = wf["stages_ms"]
 m = lambda k: s[k]["median"] if k in s else float("nan")
 print(f"{wf['frames']} frames (every {wf['every']}); per-frame median ms")
 print(f"{'':26}{'update':>8}{'detect':>8}{'describe':>9}{'match':>8}{'estimate':>9}{'total':>8}  keypoints/matches/inliers  rejected")
-print(f"{'webfusion (GPU + host)':26}{m('update'):8.1f}{m('detection'):8.1f}{m('description'):9.1f}{m('matching'):8.1f}{m('estimation'):9.1f}{m('total'):8.1f}"
+print(f"{'webfusion (GPU)':26}{m('update'):8.1f}{m('detection'):8.1f}{m('description'):9.1f}{m('matching'):8.1f}{m('estimation'):9.1f}{m('total'):8.1f}"
       f"  {wf['median_keypoints']:.0f}/{wf['median_matches']:.0f}/{wf['median_inliers']:.0f}  {wf['rejected']} ({wf['reanchored']} restarts)")
 c = cv["stages_ms"]; n = cv["median_counts"]
 print(f"{'OpenCV ORB + PnP (CPU)':26}{'':8}{c['detect']['median']:8.1f}{'':9}{c['match']['median']:8.1f}{c['estimate']['median']:9.1f}{c['frame']['median']:8.1f}"
