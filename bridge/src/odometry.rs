@@ -100,10 +100,10 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     anyhow::ensure!(!trajectory_path.exists(), "{} exists: choose another --out", trajectory_path.display());
     let gpu = crate::gpu(options)?;
     let calibration = source.calibration();
-    // Odometry reads the intensity pyramid and the filtered depth, not the normals: their
-    // gradient smoothing is left out.
+    // Odometry reads the intensity pyramid and the filtered depth, not the vertex and normal
+    // maps: only the image stages run (`images_only`).
     let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig { gradient_smoothing: None, ..PreprocessConfig::default() })?;
-    let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config)?;
+    let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config)?.images_only();
     // The keyframe's and the previous tracked frame's camera-to-world poses (their features
     // stay on the GPU); and the inliers of the keyframe's first tracked frame.
     let mut keyframe: Option<Se3> = None;

@@ -212,6 +212,9 @@ pub struct Stage {
     pipeline: fn(&Kernels) -> &KernelPipeline,
     bind_group: wgpu::BindGroup,
     invocations: [u32; 3],
+    /// Whether it builds the depth pyramid or the vertex and normal maps (which image-feature
+    /// consumers do not read).
+    geometry: bool,
     _params: wgpu::Buffer,
 }
 
@@ -272,7 +275,8 @@ impl DepthPreprocessor {
         use crate::kernels::{bilateral_filter, color_to_float, depth_pyramid_down, depth_to_metres, gradient_smooth, intensity_pyramid_down, normal_map, vertex_gradients, vertex_map};
         let mut stages = Vec::new();
         let mut push = |name: String, pipeline: fn(&Kernels) -> &KernelPipeline, params: wgpu::Buffer, bind_group: wgpu::BindGroup, invocations: [u32; 3]| {
-            stages.push(Stage { name, pipeline, bind_group, invocations, _params: params });
+            let geometry = ["depth_pyramid_down", "vertex_map", "vertex_gradients", "gradient_smooth", "normal_map"].iter().any(|k| name.starts_with(k));
+            stages.push(Stage { name, pipeline, bind_group, invocations, geometry, _params: params });
         };
         let (w0, h0) = (k0.width_px, k0.height_px);
         let to_metres_out = depth_unfiltered_m.as_ref().unwrap_or(&levels[0].depth_m);
@@ -373,6 +377,16 @@ impl DepthPreprocessor {
     /// stage).
     pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
         for s in &self.stages {
+            (s.pipeline)(&gpu.kernels).dispatch_in(pass, &s.bind_group, s.invocations);
+        }
+    }
+
+    /// Records into one open compute pass only the stages image features read: the metric and
+    /// filtered full-resolution depth, the colour and the intensity pyramid; the depth pyramid
+    /// and the vertex and normal maps are left out (feature odometry on a preprocessor of its
+    /// own).
+    pub fn encode_images_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        for s in self.stages.iter().filter(|s| !s.geometry) {
             (s.pipeline)(&gpu.kernels).dispatch_in(pass, &s.bind_group, s.invocations);
         }
     }

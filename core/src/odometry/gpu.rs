@@ -156,6 +156,9 @@ pub struct FeatureExtractor {
     candidate_matches: Vec<[wgpu::Buffer; 2]>,
     candidate_readback: ReadbackRing<()>,
     timer: Option<StageTimer>,
+    /// Whether [`Self::process`] runs only the preprocessing stages the features read (the
+    /// preprocessor is this extractor's alone; [`Self::images_only`]).
+    images_only: bool,
     /// The set the last frame was written to.
     current: usize,
     /// The reference's set.
@@ -283,10 +286,19 @@ impl FeatureExtractor {
             candidate_matches,
             candidate_readback,
             timer,
+            images_only: false,
             current: 0,
             reference: None,
             previous: None,
         })
+    }
+
+    /// The preprocessor is this extractor's alone: [`Self::process`] records only the stages
+    /// the features read (no depth pyramid, vertex or normal maps). Not for a preprocessor
+    /// shared with a dense tracker, which needs them.
+    pub fn images_only(mut self) -> Self {
+        self.images_only = true;
+        self
     }
 
     /// The settings.
@@ -512,7 +524,14 @@ impl FeatureExtractor {
         self.set_seed(gpu, seed);
         self.begin_frame();
         let mut fe = FrameEncoder::new(gpu, "core.features.frame", self.timer.as_ref());
-        preprocessor.encode_in(gpu, &mut fe.stage("update"));
+        {
+            let mut pass = fe.stage("update");
+            if self.images_only {
+                preprocessor.encode_images_in(gpu, &mut pass);
+            } else {
+                preprocessor.encode_in(gpu, &mut pass);
+            }
+        }
         self.encode(gpu, &mut fe);
         let (slot, buffer) = self.readback.free_slot().ok_or_else(|| Error::Poll("the feature readback is still in flight".into()))?;
         let n = self.slots as u64 * 16;
