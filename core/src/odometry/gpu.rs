@@ -274,7 +274,7 @@ impl FeatureExtractor {
             matching,
             match_params,
             select,
-            select_params: select_params,
+            select_params,
             ransac_params,
             candidate_ransac_params,
             _scratch: scratch,

@@ -118,13 +118,13 @@ mod tests {
     use crate::{PinholeIntrinsics, RgbdCalibration};
 
     /// The synthetic room (exact depth and a view-independent texture) at consecutive poses of
-    /// its loop: the whole CPU chain (twins of every kernel, then RANSAC and the refinement)
-    /// recovers each motion within 2.5 mm and 0.2°. Measured: 1.4-2.3 mm, 0.04-0.07°; issue
-    /// 14's target is 2 mm. Keypoints sit on whole level pixels: a parabola fit on the FAST
-    /// score reached 0.8-1.9 mm here but made the real sequences worse (FAST's score is too
-    /// rough to interpolate), so it is not used.
+    /// its loop: the whole CPU chain (twins of every kernel, the GPU's estimate included)
+    /// recovers each motion within issue 14's 2 mm and 0.2°. Measured: 1.93, 1.38, 1.43 mm and
+    /// 0.04-0.05° (the f64 host estimate it replaced: 1.4-2.3 mm). Keypoints sit on whole level
+    /// pixels: a parabola fit on the FAST score reached 0.8-1.9 mm here but made the real
+    /// sequences worse (FAST's score is too rough to interpolate), so it is not used.
     #[test]
-    fn exact_synthetic_motions_are_recovered_within_2_5_mm_and_0_2_degrees() {
+    fn exact_synthetic_motions_are_recovered_within_2_mm_and_0_2_degrees() {
         let k = PinholeIntrinsics { fx_px: 525.0, fy_px: 525.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 };
         let calibration = RgbdCalibration { intrinsics: k, depth_units_per_metre: 5000.0 };
         let room = SyntheticRoom::new(6.0, 3.0, 6.0);
@@ -145,7 +145,7 @@ mod tests {
             let error = truth.inverse().compose(&got);
             let (t_mm, r_deg) = (error.translation_m.length() * 1e3, error.rotation_angle_rad().to_degrees());
             eprintln!("frame {i}: {} keypoints, {} matches, {} inliers, error {t_mm:.3} mm {r_deg:.4}°", e.keypoints, e.matches, e.inliers());
-            assert!(t_mm < 2.5 && r_deg < 0.2, "frame {i}: error {t_mm} mm, {r_deg}°");
+            assert!(t_mm < 2.0 && r_deg < 0.2, "frame {i}: error {t_mm} mm, {r_deg}°");
             previous = current;
         }
     }

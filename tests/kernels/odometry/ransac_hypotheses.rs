@@ -137,8 +137,6 @@ fn too_few_pairs_give_no_usable_hypothesis() {
     let (g, c) = run(&p, &pairs, &estimate_of(pairs.len()));
     assert_eq!(compare("19 pairs", &g, &c).unwrap(), 0);
     assert!(g.1.iter().all(|&v| v == RANSAC_NO_COST));
-    assert_eq!(p.hypotheses, 32);
-    assert!(RANSAC_MAX_HYPOTHESES >= 256);
 }
 
 #[test]
