@@ -29,7 +29,7 @@ use webfusion_core::planes::gpu::GpuPlaneSegmenter;
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
 use webfusion_core::{ColorImage, Gpu, GpuOptions, Se3, codec::png};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, pose_driven::PoseDrivenMapper};
-use webfusion_core::io::trajectory::{PoseTimeline, TimedPose, read_tum_trajectory, write_tum_trajectory};
+use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::mesh::Mesh;
 use webfusion_core::planes::export::{scene_obj, write_scene_glb};
 use webfusion_core::planes::mesh::{PlaneMesh, blend_reach_px, complete_labels};
@@ -58,12 +58,12 @@ pub(crate) struct PlanesArgs {
     /// Skip damaged frames of a recording (counted) instead of stopping at the first.
     #[arg(long)]
     skip_corrupt: bool,
-    /// Camera-to-world poses for the world model, a TUM trajectory file (`timestamp tx ty tz
-    /// qx qy qz qw`; each frame at the pose at its depth timestamp, interpolated when the
-    /// nearest is within 20 ms; frames without one are left out of the world). Without it the
-    /// frames are tracked by KinectFusion (the world is then the first camera's frame).
-    #[arg(long)]
-    poses: Option<PathBuf>,
+    /// Camera-to-world poses for the world model (`--poses` TUM, or seed 000's
+    /// `--robot-poses`, as `reconstruct` takes them; frames without one are left out of the
+    /// world). Without them the frames are tracked by KinectFusion (the world is then the
+    /// first camera's frame).
+    #[command(flatten)]
+    given: crate::pose_args::PoseFileArgs,
     /// Per-frame planes only: no world model, no tracking or fusion.
     #[arg(long)]
     no_world: bool,
@@ -79,9 +79,6 @@ pub(crate) struct PlanesArgs {
     #[arg(long, default_value_t = WorldConfig::default().px_per_m)]
     texture_px_per_m: f32,
 }
-
-/// Maximum gap to a given pose, as `reconstruct --poses`.
-const MAX_POSE_GAP_NS: i64 = 20_000_000;
 
 /// The world model's inputs from the GPU pass: each frame's pose (by source index) and the
 /// fused map's mesh.
@@ -104,13 +101,13 @@ fn world_poses(gpu: &Gpu, args: &PlanesArgs, range: std::ops::Range<usize>) -> a
     let mut poses = HashMap::new();
     let mut left_out = Vec::new();
     let mut skipped = Vec::new();
-    if let Some(path) = &args.poses {
-        let given = read_tum_trajectory(path).with_context(|| format!("reading the given poses {}", path.display()))?;
-        let timeline = PoseTimeline::new(given).with_context(|| format!("the given poses {}", path.display()))?;
+    if let Some(given) = args.given.read()? {
+        let path = args.given.file().map(|p| p.display().to_string()).unwrap_or_default();
         let mut mapper: Option<PoseDrivenMapper> = None;
+        let start = range.start;
         for index in range {
             let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
-            let Some(pose) = timeline.pose_at(frame.depth_timestamp_ns, MAX_POSE_GAP_NS) else {
+            let Some(pose) = given.pose_for(index - start, frame.depth_timestamp_ns) else {
                 left_out.push(index as u64);
                 continue;
             };
@@ -123,7 +120,7 @@ fn world_poses(gpu: &Gpu, args: &PlanesArgs, range: std::ops::Range<usize>) -> a
             eprint!("\rframe {index}: fused at its given pose   ");
         }
         eprintln!();
-        let Some(mut mapper) = mapper else { anyhow::bail!("no frame of {} has a given pose (within 20 ms) in {}", source.name(), path.display()) };
+        let Some(mut mapper) = mapper else { anyhow::bail!("no frame of {} has a given pose (within 20 ms, or in the per-frame list) in {path}", source.name()) };
         pollster::block_on(mapper.flush(gpu))?;
         let mesh = pollster::block_on(mapper.extract_mesh(gpu)).context("extracting the mesh")?;
         return Ok(WorldPoses { poses, mesh, voxel_m, origin: "given", left_out });

@@ -1,12 +1,14 @@
 // SPDX-License-Identifier: MIT
 //! `--poses` / `--robot-poses` / `--robot-pose-form`: camera poses given on the command line,
-//! shared by `reconstruct` (fuse at them) and `simulate` (render at them).
+//! shared by `reconstruct` (fuse at them), `simulate` (render at them) and `planes` (build the
+//! world model at them).
 
 use std::path::PathBuf;
 
 use anyhow::Context as _;
+use webfusion_core::Se3;
 use webfusion_core::io::robot_poses::{RobotPose, RobotPoseForm, read_robot_poses};
-use webfusion_core::io::trajectory::{TimedPose, read_tum_trajectory};
+use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, PoseTimeline, TimedPose, read_tum_trajectory};
 
 #[derive(clap::Args, Clone, Debug)]
 pub(crate) struct PoseFileArgs {
@@ -43,5 +45,47 @@ impl PoseFileArgs {
     /// `--robot-poses`, read.
     pub(crate) fn robot(&self) -> anyhow::Result<Option<Vec<RobotPose>>> {
         self.robot_poses.as_ref().map(|path| read_robot_poses(path, self.robot_pose_form).with_context(|| format!("reading the robot poses {}", path.display()))).transpose()
+    }
+}
+
+/// Poses given on the command line: by time (TUM `--poses`, or `--robot-poses` with
+/// timestamps) or one per frame in frame order (`--robot-poses` without).
+pub(crate) enum GivenPoses {
+    Timeline(PoseTimeline),
+    FrameOrder(Vec<Se3>),
+}
+
+impl GivenPoses {
+    /// The pose of the `position`-th frame of the run (at depth time `t_ns`).
+    pub(crate) fn pose_for(&self, position: usize, t_ns: i64) -> Option<Se3> {
+        match self {
+            Self::Timeline(t) => t.pose_at(t_ns, MAX_POSE_GAP_NS),
+            Self::FrameOrder(poses) => poses.get(position).copied(),
+        }
+    }
+
+    /// The first given pose.
+    pub(crate) fn first(&self) -> Option<Se3> {
+        match self {
+            Self::Timeline(t) => t.poses().first().map(|p| p.world_from_camera),
+            Self::FrameOrder(poses) => poses.first().copied(),
+        }
+    }
+}
+
+impl PoseFileArgs {
+    /// The given poses of `--poses` or `--robot-poses`, read and checked (`None` without
+    /// either).
+    pub(crate) fn read(&self) -> anyhow::Result<Option<GivenPoses>> {
+        if let Some(poses) = self.tum()? {
+            return Ok(Some(GivenPoses::Timeline(PoseTimeline::new(poses).with_context(|| format!("the given poses {}", self.file().map(|p| p.display().to_string()).unwrap_or_default()))?)));
+        }
+        let Some(path) = &self.robot_poses else { return Ok(None) };
+        let poses = self.robot()?.unwrap_or_default();
+        if poses.iter().all(|p| p.timestamp_ns.is_some()) {
+            let timed = poses.iter().map(|p| TimedPose { timestamp_ns: p.timestamp_ns.unwrap_or_default(), world_from_camera: p.world_from_camera }).collect();
+            return Ok(Some(GivenPoses::Timeline(PoseTimeline::new(timed).with_context(|| format!("the robot poses {}", path.display()))?)));
+        }
+        Ok(Some(GivenPoses::FrameOrder(poses.iter().map(|p| p.world_from_camera).collect())))
     }
 }

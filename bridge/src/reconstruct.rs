@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, TrackingState};
-use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, PoseTimeline, TimedPose, write_tum_trajectory};
+use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, TimedPose, write_tum_trajectory};
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, TsdfStore as _, VolumePlacement};
 use webfusion_core::fusion::mapper::Mapper;
 use webfusion_core::map::{MapKind, MapStats};
@@ -16,6 +16,7 @@ use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::{GpuOptions, Se3};
 
 use crate::calib::CalibrationArgs;
+use crate::pose_args::GivenPoses;
 use crate::timing::StageTimes;
 
 #[derive(clap::Args)]
@@ -149,31 +150,6 @@ impl ReconstructArgs {
     }
 }
 
-/// Poses given on the command line: by time (TUM `--poses`, or `--robot-poses` with
-/// timestamps) or one per frame in frame order (`--robot-poses` without).
-enum GivenPoses {
-    Timeline(PoseTimeline),
-    FrameOrder(Vec<Se3>),
-}
-
-impl GivenPoses {
-    /// The pose of the `position`-th frame of the run (at depth time `t_ns`).
-    fn pose_for(&self, position: usize, t_ns: i64) -> Option<Se3> {
-        match self {
-            Self::Timeline(t) => t.pose_at(t_ns, MAX_POSE_GAP_NS),
-            Self::FrameOrder(poses) => poses.get(position).copied(),
-        }
-    }
-
-    /// The first given pose.
-    fn first(&self) -> Option<Se3> {
-        match self {
-            Self::Timeline(t) => t.poses().first().map(|p| p.world_from_camera),
-            Self::FrameOrder(poses) => poses.first().copied(),
-        }
-    }
-}
-
 impl ReconstructArgs {
     /// The file of `--poses` or `--robot-poses`.
     fn pose_file(&self) -> Option<&PathBuf> {
@@ -184,16 +160,7 @@ impl ReconstructArgs {
 /// The given poses of `--poses` or `--robot-poses`, read and checked.
 fn given_poses(args: &ReconstructArgs) -> anyhow::Result<Option<GivenPoses>> {
     anyhow::ensure!(args.pose_file().is_some() || !(args.refine || args.load_map.is_some()), "--refine and --load-map need --poses or --robot-poses (relocalising into a map needs feature odometry, not built yet)");
-    if let Some(poses) = args.given.tum()? {
-        return Ok(Some(GivenPoses::Timeline(PoseTimeline::new(poses).with_context(|| format!("the given poses {}", args.pose_file().map(|p| p.display().to_string()).unwrap_or_default()))?)));
-    }
-    let Some(path) = &args.given.robot_poses else { return Ok(None) };
-    let poses = args.given.robot()?.unwrap_or_default();
-    if poses.iter().all(|p| p.timestamp_ns.is_some()) {
-        let timed = poses.iter().map(|p| TimedPose { timestamp_ns: p.timestamp_ns.unwrap_or_default(), world_from_camera: p.world_from_camera }).collect();
-        return Ok(Some(GivenPoses::Timeline(PoseTimeline::new(timed).with_context(|| format!("the robot poses {}", path.display()))?)));
-    }
-    Ok(Some(GivenPoses::FrameOrder(poses.iter().map(|p| p.world_from_camera).collect())))
+    args.given.read()
 }
 
 /// `--load-map`'s file, read (strictly, or keeping its intact blocks with --skip-corrupt).

@@ -204,6 +204,40 @@ fn a_posed_room_corner_becomes_three_textured_world_planes() {
     for line in mtl.lines().filter_map(|l| l.strip_prefix("map_Kd ")) {
         assert!(out.join(line).is_file(), "{line} missing");
     }
+    // The same poses as seed 000's robot poses (x y z in cm, α β γ with R = Rz(α) Ry(β) Rx(γ) ·
+    // (Eq. 5.3's axis change)⁻¹), one per frame in frame order: the same world planes.
+    let camera_from_sensor = glam::DMat3::from_cols(DVec3::X, -DVec3::Z, DVec3::Y).transpose();
+    let robot: String = poses
+        .iter()
+        .map(|p| {
+            let sensor = glam::DMat3::from_quat(p.world_from_camera.rotation) * camera_from_sensor;
+            let (a, b, g) = DQuat::from_mat3(&sensor).to_euler(glam::EulerRot::ZYX);
+            let t = p.world_from_camera.translation_m * 100.0;
+            format!("{} {} {} {a} {b} {g}\n", t.x, t.y, t.z)
+        })
+        .collect();
+    let robot_file = dir.join("robot.txt");
+    std::fs::write(&robot_file, robot).expect("robot poses");
+    let robot_out = dir.join("robot-out");
+    let o = webfusion(&["planes", recording.to_str().expect("utf-8"), "--out", robot_out.to_str().expect("utf-8"), "--robot-poses", robot_file.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "planes --robot-poses failed: {}", String::from_utf8_lossy(&o.stderr));
+    let robot_json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(robot_out.join("planes.json")).expect("planes.json")).expect("json");
+    assert_eq!(robot_json["poses"], "given");
+    let robot_planes = robot_json["planes"].as_array().expect("planes");
+    assert_eq!(robot_planes.len(), planes.len());
+    for (r, p) in robot_planes.iter().zip(planes) {
+        let (rn, pn) = (vec3(&r["normal"]), vec3(&p["normal"]));
+        let cos = rn[0] * pn[0] + rn[1] * pn[1] + rn[2] * pn[2];
+        assert!(cos > 0.01f64.to_radians().cos() && (r["offset_m"].as_f64().expect("offset") - p["offset_m"].as_f64().expect("offset")).abs() < 1e-3, "{r} vs {p}");
+    }
+    // Fewer robot poses than frames: the frames past the list are left out of the world.
+    let short: String = std::fs::read_to_string(&robot_file).expect("read").lines().take(4).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&robot_file, short).expect("write");
+    let o = webfusion(&["planes", recording.to_str().expect("utf-8"), "--out", dir.join("robot-short").to_str().expect("utf-8"), "--robot-poses", robot_file.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "planes --robot-poses (short) failed: {}", String::from_utf8_lossy(&o.stderr));
+    let short_json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("robot-short/planes.json")).expect("planes.json")).expect("json");
+    assert_eq!(short_json["frames_with_pose"], 4);
+    assert_eq!(short_json["frames_left_out"], serde_json::json!([4, 5]));
 }
 
 #[test]
