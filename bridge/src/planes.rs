@@ -208,6 +208,7 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
     let gpu_pass_s = sw.ms() * 1e-3;
     let mut world = PlaneWorld::new(WorldConfig { px_per_m: px, ..WorldConfig::default() });
     let mut clipped_texels = 0u64;
+    let mut merged_planes = 0usize;
     // The pose of each frame added to the world, at its depth timestamp.
     let mut trajectory = Vec::new();
     if args.labels {
@@ -286,6 +287,7 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
             let view = PlaneView { index: frame.index, world_from_camera: *pose, segmentation: &seg, labels: &labels, colour: &frame.color, intrinsics: k };
             let association = world.add_frame(&view, &config);
             clipped_texels += association.clipped_texels;
+            merged_planes += association.merged;
             world_ids = Some(association.world_plane);
             let ms = sw.ms();
             times.record("world model", ms);
@@ -326,6 +328,14 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         eprint!("\rframe {index}: {} planes", seg.planes.len());
     }
     eprintln!();
+    // A world plane merged into another after a frame named it: name the plane it is part of.
+    for frame in &mut frames {
+        for p in frame["planes"].as_array_mut().into_iter().flatten() {
+            if let Some(j) = p["world_plane"].as_u64() {
+                p["world_plane"] = world.resolve(j as usize).into();
+            }
+        }
+    }
     let json = serde_json::json!({
         "source": source.name(),
         "implementation": if args.cpu_reference { "cpu-reference" } else { "gpu" },
@@ -350,13 +360,13 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
     if let Some(input) = world_input {
         let path = args.out.join("trajectory.txt");
         write_tum_trajectory(&path, &trajectory).with_context(|| format!("writing {}", path.display()))?;
-        write_world(args, &world, &input, clipped_texels, gpu_pass_s)?;
+        write_world(args, &world, &input, clipped_texels, merged_planes, gpu_pass_s)?;
     }
     Ok(())
 }
 
 /// Writes the world model: `planes.json`, `scene.glb` and `scene.obj` (+ `.mtl`, textures).
-fn write_world(args: &PlanesArgs, world: &PlaneWorld, input: &WorldPoses, clipped_texels: u64, gpu_pass_s: f64) -> anyhow::Result<()> {
+fn write_world(args: &PlanesArgs, world: &PlaneWorld, input: &WorldPoses, clipped_texels: u64, merged_planes: usize, gpu_pass_s: f64) -> anyhow::Result<()> {
     let sw = Stopwatch::start();
     let meshes: Vec<Option<PlaneMesh>> = (0..world.planes.len()).map(|j| world.mesh(j)).collect();
     let planar: Vec<PlaneMesh> = meshes.iter().flatten().cloned().collect();
@@ -386,6 +396,7 @@ fn write_world(args: &PlanesArgs, world: &PlaneWorld, input: &WorldPoses, clippe
         .iter()
         .zip(&meshes)
         .enumerate()
+        .filter(|(_, (w, _))| w.merged_into.is_none())
         .map(|(j, (w, m))| {
             serde_json::json!({
                 "id": j,
@@ -411,6 +422,7 @@ fn write_world(args: &PlanesArgs, world: &PlaneWorld, input: &WorldPoses, clippe
         "frames_left_out": input.left_out,
         "texel_grid_px_per_m": world.config.px_per_m,
         "clipped_texels": clipped_texels,
+        "merged_planes": merged_planes,
         "planes": planes,
         "remainder": {"voxel_m": input.voxel_m, "triangles": rest.triangles.len()},
         "compactness": {
@@ -422,8 +434,8 @@ fn write_world(args: &PlanesArgs, world: &PlaneWorld, input: &WorldPoses, clippe
     });
     write("planes.json", serde_json::to_string_pretty(&json)?.as_bytes())?;
     println!(
-        "world: {} planes from {} posed frames ({}); {planar_triangles} planar triangles replace {replaced} marching-cubes triangles ({:.0}x fewer), textures {:.1} MB, remainder {} triangles",
-        world.planes.len(),
+        "world: {} planes ({merged_planes} merged into others) from {} posed frames ({}); {planar_triangles} planar triangles replace {replaced} marching-cubes triangles ({:.0}x fewer), textures {:.1} MB, remainder {} triangles",
+        world.live().count(),
         input.poses.len(),
         input.origin,
         replaced as f64 / planar_triangles.max(1) as f64,

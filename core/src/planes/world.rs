@@ -19,6 +19,17 @@
 //!   the frame (003's destination-driven rectification, [`super::mesh::rectify`]: no gaps
 //!   whatever the view's distance) and takes the colour of the pixel it lands on when that
 //!   pixel carries the view's label.
+//! - **Merging**: world planes drift as views add up (a plane first seen at a grazing angle or
+//!   from a poorly tracked pose settles later), so two may come to describe one surface. After
+//!   each frame, a plane the frame touched merges with another whose normal is within the
+//!   association angle and where each passes the other's centroid within the labelling
+//!   distance at that centroid's depth in the frame's camera (the association's own test, made
+//!   symmetric, so a whiteboard beside its wall stays apart). The plane with fewer pixels is
+//!   folded into the other: its views, pixels and normal and centroid sums are added, and its
+//!   texels are resampled into the survivor's grid (each survivor texel over the merged
+//!   plane's observed box takes the sums of the texel its centre falls in). It is kept, emptied,
+//!   with [`WorldPlane::merged_into`] naming the survivor, so indices handed out before stay
+//!   valid ([`PlaneWorld::resolve`]).
 
 use super::mesh::{PlaneFrame, PlaneMesh, TexelGrid, geometry_shift_for, pixel_box, rectify};
 use super::{PlaneConfig, Segmentation};
@@ -119,6 +130,9 @@ pub struct WorldPlane {
     pub frames: [u64; 2],
     /// Its texel grid's frame (fixed at creation).
     pub frame: PlaneFrame,
+    /// The plane it was merged into (which holds its views and texels now), or `None` while it
+    /// is a plane of the world.
+    pub merged_into: Option<usize>,
     sum_normal: DVec3,
     sum_centroid: DVec3,
     texels: Texels,
@@ -162,6 +176,8 @@ pub struct FrameAssociation {
     pub world_plane: Vec<usize>,
     /// Of those, how many started a new world plane.
     pub created: usize,
+    /// World planes merged into another after this frame.
+    pub merged: usize,
     /// Texels outside [`WorldConfig::max_grid_texels`], not stored.
     pub clipped_texels: u64,
 }
@@ -204,7 +220,7 @@ impl PlaneWorld {
                 .planes
                 .iter()
                 .enumerate()
-                .filter(|(_, w)| to_dvec(w.normal).dot(n_w) >= f64::from(cos_assoc))
+                .filter(|(_, w)| w.merged_into.is_none() && to_dvec(w.normal).dot(n_w) >= f64::from(cos_assoc))
                 .map(|(j, w)| (j, (to_dvec(w.normal).dot(c_w) + f64::from(w.offset_m)).abs()))
                 .filter(|&(_, e)| e <= tol)
                 .min_by(|a, b| a.1.total_cmp(&b.1))
@@ -223,6 +239,7 @@ impl PlaneWorld {
                         pixels: 0,
                         frames: [frame_index, frame_index],
                         frame,
+                        merged_into: None,
                         sum_normal: DVec3::ZERO,
                         sum_centroid: DVec3::ZERO,
                         texels: Texels::default(),
@@ -243,7 +260,123 @@ impl PlaneWorld {
             out.clipped_texels += Self::add_texels(w, i as u32, view, &camera_from_world, self.config);
             out.world_plane.push(j);
         }
+        let mut touched = out.world_plane.clone();
+        touched.sort_unstable();
+        touched.dedup();
+        let (merged, clipped) = self.merge_planes(&touched, &camera_from_world, plane_config);
+        out.merged = merged;
+        out.clipped_texels += clipped;
+        out.world_plane = out.world_plane.iter().map(|&j| self.resolve(j)).collect();
         out
+    }
+
+    /// The plane of the world that plane `j` is part of now (itself unless merged).
+    pub fn resolve(&self, mut j: usize) -> usize {
+        while let Some(k) = self.planes[j].merged_into {
+            j = k;
+        }
+        j
+    }
+
+    /// Indices of the planes of the world (not merged into another).
+    pub fn live(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.planes.len()).filter(|&j| self.planes[j].merged_into.is_none())
+    }
+
+    /// Merges the planes `touched` by a frame (seen from `camera_from_world`) with the others
+    /// that describe the same surface (see the module docs), until none does; returns the
+    /// merges and the texels clipped by the survivors' grid limit.
+    fn merge_planes(&mut self, touched: &[usize], camera_from_world: &Se3, plane_config: &PlaneConfig) -> (usize, u64) {
+        let cos_assoc = f64::from(self.config.association_angle_deg.to_radians().cos());
+        let (mut merges, mut clipped) = (0, 0);
+        loop {
+            let same = |a: &WorldPlane, b: &WorldPlane| {
+                let within = |p: &WorldPlane, q: &WorldPlane| {
+                    let c = to_dvec(q.centroid_m);
+                    let z = camera_from_world.transform_point(c).z.abs() as f32;
+                    (to_dvec(p.normal).dot(c) + f64::from(p.offset_m)).abs() <= f64::from(plane_config.label_distance_m(z))
+                };
+                to_dvec(a.normal).dot(to_dvec(b.normal)) >= cos_assoc && within(a, b) && within(b, a)
+            };
+            let pair = touched.iter().map(|&a| self.resolve(a)).find_map(|a| self.live().find(|&b| b != a && same(&self.planes[a], &self.planes[b])).map(|b| (a, b)));
+            let Some((a, b)) = pair else { break };
+            let (keep, fold) = if (self.planes[a].pixels, b) >= (self.planes[b].pixels, a) { (a, b) } else { (b, a) };
+            clipped += self.fold(keep, fold);
+            merges += 1;
+        }
+        (merges, clipped)
+    }
+
+    /// Folds plane `fold` into plane `keep` (see the module docs); returns the texels clipped.
+    fn fold(&mut self, keep: usize, fold: usize) -> u64 {
+        let res = self.config.px_per_m;
+        let src = std::mem::take(&mut self.planes[fold].texels);
+        let (sf, sum_normal, sum_centroid, views, pixels, frames) = {
+            let f = &mut self.planes[fold];
+            f.merged_into = Some(keep);
+            (f.frame, f.sum_normal, f.sum_centroid, f.views, f.pixels, f.frames)
+        };
+        let max_texels = self.config.max_grid_texels;
+        let k = &mut self.planes[keep];
+        k.sum_normal += sum_normal;
+        k.sum_centroid += sum_centroid;
+        k.views += views;
+        k.pixels += pixels;
+        k.frames = [k.frames[0].min(frames[0]), k.frames[1].max(frames[1])];
+        let n = k.sum_normal.normalize();
+        let c = k.sum_centroid / (k.pixels as f64);
+        (k.normal, k.centroid_m, k.offset_m) = (to_f32(n), to_f32(c), -n.dot(c) as f32);
+        // The folded plane's observed texels, as a box of corners in the world.
+        let observed: Vec<usize> = (0..src.count.len()).filter(|&i| src.count[i] > 0).collect();
+        if observed.is_empty() {
+            return 0;
+        }
+        let texel_xy = |i: usize| [src.first[0] + (i as u32 % src.size[0]) as i32, src.first[1] + (i as u32 / src.size[0]) as i32];
+        let (mut lo, mut hi) = ([i32::MAX; 2], [i32::MIN; 2]);
+        for &i in &observed {
+            let xy = texel_xy(i);
+            for a in 0..2 {
+                lo[a] = lo[a].min(xy[a]);
+                hi[a] = hi[a].max(xy[a] + 1);
+            }
+        }
+        let on = |f: &PlaneFrame, uv: [f64; 2]| to_dvec(f.origin_m) + uv[0] * to_dvec(f.u_axis) + uv[1] * to_dvec(f.v_axis);
+        let in_frame = |f: &PlaneFrame, p: DVec3| [(p - to_dvec(f.origin_m)).dot(to_dvec(f.u_axis)), (p - to_dvec(f.origin_m)).dot(to_dvec(f.v_axis))];
+        let r = f64::from(res);
+        let (mut dlo, mut dhi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for corner in [[lo[0], lo[1]], [hi[0], lo[1]], [lo[0], hi[1]], [hi[0], hi[1]]] {
+            let uv = in_frame(&k.frame, on(&sf, [f64::from(corner[0]) / r, f64::from(corner[1]) / r]));
+            for a in 0..2 {
+                dlo[a] = dlo[a].min(uv[a] * r);
+                dhi[a] = dhi[a].max(uv[a] * r);
+            }
+        }
+        let want_lo = [dlo[0].floor() as i32, dlo[1].floor() as i32];
+        let want_hi = [dhi[0].ceil() as i32, dhi[1].ceil() as i32];
+        let want = i64::from(want_hi[0] - want_lo[0]) * i64::from(want_hi[1] - want_lo[1]);
+        let (glo, ghi) = k.texels.grow(want_lo, want_hi, max_texels);
+        let held = i64::from((ghi[0] - glo[0]).max(0)) * i64::from((ghi[1] - glo[1]).max(0));
+        let stride = k.texels.size[0] as i32;
+        for y in glo[1]..ghi[1] {
+            for x in glo[0]..ghi[0] {
+                let centre = on(&k.frame, [(f64::from(x) + 0.5) / r, (f64::from(y) + 0.5) / r]);
+                let uv = in_frame(&sf, centre);
+                let (sx, sy) = ((uv[0] * r).floor() as i32 - src.first[0], (uv[1] * r).floor() as i32 - src.first[1]);
+                if sx < 0 || sy < 0 || sx >= src.size[0] as i32 || sy >= src.size[1] as i32 {
+                    continue;
+                }
+                let s = (sy * src.size[0] as i32 + sx) as usize;
+                if src.count[s] == 0 {
+                    continue;
+                }
+                let t = ((y - k.texels.first[1]) * stride + (x - k.texels.first[0])) as usize;
+                for (sum, v) in k.texels.sum[t].iter_mut().zip(src.sum[s]) {
+                    *sum += v;
+                }
+                k.texels.count[t] += src.count[s];
+            }
+        }
+        (want - held).max(0) as u64
     }
 
     /// Accumulates the colours of frame plane `label` into `w`'s texels: every texel in the
@@ -377,6 +510,48 @@ mod tests {
             let seen = renders.iter().filter(|(_, r)| r.plane_of_pixel.iter().filter(|&&l| l == s as u32).count() * 50 > K.pixel_count()).count();
             assert!(w.views as usize >= seen, "seen well in {seen} views, associated in {}", w.views);
         }
+    }
+
+    /// A wall seen first at 1.03 m, then from nearer poses at 1.00 m (3 cm: beyond the
+    /// labelling distance at 1 m, so a second plane starts), then from 3 m away, where the
+    /// sensor's noise makes 3 cm one surface (3σ(3 m) = 4.2 cm): the two planes merge into one
+    /// whose texels are the union of both, and earlier indices resolve to it. A whiteboard
+    /// 2.5 cm in front of the wall, seen from 1 m, stays a plane of its own.
+    #[test]
+    fn planes_that_come_to_describe_one_surface_merge_and_a_whiteboard_stays_apart() {
+        let config = PlaneConfig::default();
+        let k = PinholeIntrinsics { fx_px: 100.0, fy_px: 100.0, cx_px: 49.5, cy_px: 49.5, width_px: 100, height_px: 100 };
+        let colour = ColorImage::new(100, 100, vec![200; 100 * 100 * 3]).expect("colour");
+        let mut world = PlaneWorld::new(WorldConfig::default());
+        // A view from a camera `back_m` behind the origin (looking along +z) of the wall at
+        // world depth `z_m` over the image's columns `cols`.
+        let add = |world: &mut PlaneWorld, index: u64, back_m: f64, z_m: f32, cols: std::ops::Range<usize>, pixels: u32| {
+            let labels: Vec<u32> = (0..100 * 100).map(|i| if cols.contains(&(i % 100)) { 0 } else { crate::planes::NO_LABEL }).collect();
+            let z_cam = z_m + back_m as f32;
+            let plane = crate::planes::Plane { normal: [0.0, 0.0, -1.0], offset_m: z_cam, centroid_m: [0.0, 0.0, z_cam], pixels, area_m2: 0.0, tangent: [1.0, 0.0, 0.0], extent_m: [[0.0; 2]; 2], rms_m: 0.0, bend_deg: 0.0 };
+            let seg = Segmentation { labels: labels.clone(), planes: vec![plane], curved_rejected: 0 };
+            let view = PlaneView { index, world_from_camera: Se3::new(glam::DQuat::IDENTITY, DVec3::new(0.0, 0.0, -back_m)), segmentation: &seg, labels: &labels, colour: &colour, intrinsics: k };
+            let a = world.add_frame(&view, &config);
+            (a, world.live().collect::<Vec<_>>(), world.planes.clone())
+        };
+        let (a, _, _) = add(&mut world, 0, 0.0, 1.03, 0..50, 1000);
+        assert_eq!((a.created, a.merged), (1, 0));
+        let (a, live, planes) = add(&mut world, 1, 0.0, 1.0, 50..100, 1000);
+        assert_eq!((a.created, a.merged, live.len()), (1, 0, 2), "3 cm apart at 1 m: two planes");
+        let texels_before: usize = planes.iter().map(WorldPlane::observed_texels).sum();
+        let (a, live, planes) = add(&mut world, 2, 2.0, 1.015, 0..100, 1000);
+        eprintln!("after the far view: {:?}", planes.iter().map(|p| (p.offset_m, p.views, p.merged_into)).collect::<Vec<_>>());
+        assert_eq!((a.created, a.merged, live.len()), (0, 1, 1), "from 3 m the two are one surface");
+        let w = &planes[live[0]];
+        assert_eq!((w.views, w.pixels), (3, 3000));
+        assert!((w.offset_m - 1.015).abs() < 1e-3, "the pixel-weighted plane: {}", w.offset_m);
+        assert!(w.observed_texels() >= texels_before, "the merged plane keeps both planes' texels: {} < {texels_before}", w.observed_texels());
+        assert_eq!(a.world_plane, vec![live[0]]);
+        assert!((0..planes.len()).all(|j| world.resolve(j) == live[0]));
+        assert!(world.mesh(live[0]).is_some());
+        // A whiteboard 2.5 cm in front of the merged wall, seen from 1 m: its own plane.
+        let (wb, live, _) = add(&mut world, 3, 0.0, 0.99, 40..60, 500);
+        assert_eq!((wb.created, wb.merged, live.len()), (1, 0, 2));
     }
 
     #[test]
