@@ -581,3 +581,44 @@ pub fn plane_colour(label: u32) -> [f32; 3] {
     };
     c.map(|v| (40.0 + 215.0 * v) / 255.0)
 }
+
+/// Twin of `cholesky_solve6()` (shared/linear_solve.wgsl): the solution of `s x = y` for the
+/// symmetric row-major 6 × 6 `s`, or `None` when a pivot is not above `min_pivot`.
+pub fn cholesky_solve6(s: &[f32; 36], y: &[f32; 6], min_pivot: f32) -> Option<[f32; 6]> {
+    let mut l = [0.0f32; 36];
+    for j in 0..6 {
+        let mut diag = s[j * 7];
+        for k in 0..j {
+            diag -= l[j * 6 + k] * l[j * 6 + k];
+        }
+        if !(diag > min_pivot) {
+            return None;
+        }
+        let ljj = diag.sqrt();
+        l[j * 7] = ljj;
+        for i in j + 1..6 {
+            let mut v = s[i * 6 + j];
+            for k in 0..j {
+                v -= l[i * 6 + k] * l[j * 6 + k];
+            }
+            l[i * 6 + j] = v / ljj;
+        }
+    }
+    let mut g = [0.0f32; 6];
+    for i in 0..6 {
+        let mut v = y[i];
+        for k in 0..i {
+            v -= l[i * 6 + k] * g[k];
+        }
+        g[i] = v / l[i * 7];
+    }
+    let mut x = [0.0f32; 6];
+    for i in (0..6).rev() {
+        let mut v = g[i];
+        for k in i + 1..6 {
+            v -= l[k * 6 + i] * x[k];
+        }
+        x[i] = v / l[i * 7];
+    }
+    Some(x)
+}

@@ -18,6 +18,7 @@
 //! (|t| + |ω| · reference depth), or when the system is not positive definite.
 #import invalid
 #import camera
+#import linear_solve
 #import rigid
 #import track_state
 
@@ -152,46 +153,17 @@ fn main(@builtin(local_invocation_index) lid: u32) {
         stats.translation_condition = condition_number(t, 3u);
         ok = stats.condition <= params.max_condition && stats.translation_condition <= params.max_translation_condition;
     }
-    // Cholesky s = L Lᵀ (lower triangle of `l`), then L g = y, Lᵀ z = g.
-    var l: array<f32, 36>;
-    for (var j = 0u; j < 6u && ok; j++) {
-        var diag = s[j * 7u];
-        for (var k = 0u; k < j; k++) {
-            diag -= l[j * 6u + k] * l[j * 6u + k];
-        }
-        if !(diag > 1e-12) {
-            stats.condition = CONDITION_SINGULAR;
-            ok = false;
-            break;
-        }
-        let ljj = sqrt(diag);
-        l[j * 7u] = ljj;
-        for (var i = j + 1u; i < 6u; i++) {
-            var v = s[i * 6u + j];
-            for (var k = 0u; k < j; k++) {
-                v -= l[i * 6u + k] * l[j * 6u + k];
-            }
-            l[i * 6u + j] = v / ljj;
-        }
-    }
+    // Cholesky s = L Lᵀ, then L g = y, Lᵀ z = g (shared/linear_solve.wgsl).
     var xi: array<f32, 6>;
     if ok {
-        var g: array<f32, 6>;
-        for (var i = 0u; i < 6u; i++) {
-            var v = y[i];
-            for (var k = 0u; k < i; k++) {
-                v -= l[i * 6u + k] * g[k];
-            }
-            g[i] = v / l[i * 7u];
+        let solved = cholesky_solve6(s, y, 1e-12);
+        ok = solved.ok;
+        if !ok {
+            stats.condition = CONDITION_SINGULAR;
         }
-        for (var ii = 0u; ii < 6u; ii++) {
-            let i = 5u - ii;
-            var v = g[i];
-            for (var k = i + 1u; k < 6u; k++) {
-                v -= l[k * 6u + i] * xi[k];
-            }
-            xi[i] = v / l[i * 7u];
-        }
+        xi = solved.x;
+    }
+    if ok {
         for (var i = 0u; i < 6u; i++) {
             xi[i] *= d[i];
             ok = ok && is_valid_f32(xi[i]);

@@ -17,6 +17,7 @@
 //! 5. accepted when at least `min_inliers` remain and no system was singular; the inliers'
 //!    RMS residual. The result goes into `estimate` (its pair count kept). Mirrors
 //!    core/src/cpu/odometry/ransac_refine.rs.
+#import linear_solve
 #import rigid
 #import rigid_estimate
 
@@ -196,43 +197,20 @@ fn solve_step() {
         }
         d[i] = 1.0 / sqrt(a[i * 7u]);
     }
-    var l: array<f32, 36>;
-    for (var j = 0u; j < 6u; j++) {
-        var diag = a[j * 7u] * d[j] * d[j];
-        for (var k = 0u; k < j; k++) {
-            diag -= l[j * 6u + k] * l[j * 6u + k];
-        }
-        if !(diag > GN_MIN_PIVOT) {
-            sh_state = REFINE_REJECTED;
-            return;
-        }
-        let ljj = sqrt(diag);
-        l[j * 7u] = ljj;
-        for (var i = j + 1u; i < 6u; i++) {
-            var v = a[i * 6u + j] * d[i] * d[j];
-            for (var k = 0u; k < j; k++) {
-                v -= l[i * 6u + k] * l[j * 6u + k];
-            }
-            l[i * 6u + j] = v / ljj;
-        }
-    }
-    var z: array<f32, 6>;
+    var sc: array<f32, 36>;
+    var y: array<f32, 6>;
     for (var i = 0u; i < 6u; i++) {
-        var v = -d[i] * g[i];
-        for (var k = 0u; k < i; k++) {
-            v -= l[i * 6u + k] * z[k];
+        for (var j = 0u; j < 6u; j++) {
+            sc[i * 6u + j] = a[i * 6u + j] * d[i] * d[j];
         }
-        z[i] = v / l[i * 7u];
+        y[i] = -d[i] * g[i];
     }
-    var xi: array<f32, 6>;
-    for (var ii = 0u; ii < 6u; ii++) {
-        let i = 5u - ii;
-        var v = z[i];
-        for (var k = i + 1u; k < 6u; k++) {
-            v -= l[k * 6u + i] * xi[k];
-        }
-        xi[i] = v / l[i * 7u];
+    let solved = cholesky_solve6(sc, y, GN_MIN_PIVOT);
+    if !solved.ok {
+        sh_state = REFINE_REJECTED;
+        return;
     }
+    var xi = solved.x;
     var norm2 = 0.0;
     for (var i = 0u; i < 6u; i++) {
         xi[i] *= d[i];

@@ -2,7 +2,7 @@
 //! CPU reference of `shaders/wgsl/fusion/track_solve.wgsl`, statement by statement in f32: the
 //! same sum order over the partials, scaling, cyclic Jacobi eigenvalues, Cholesky and update.
 
-use crate::cpu::shared::{is_valid_f32, orthonormalised, mat4_mul, twist_exp_mat};
+use crate::cpu::shared::{cholesky_solve6, is_valid_f32, mat4_mul, orthonormalised, twist_exp_mat};
 use crate::kernels::track_solve::{TrackDispatch, TrackParams, TrackState};
 
 /// Twin of `CONDITION_SINGULAR`.
@@ -121,47 +121,17 @@ pub fn track_solve(params: &TrackParams, partial_sums: &[f32], state: &mut Track
         stats.translation_condition = condition_number(&t, 3);
         ok = stats.condition <= params.max_condition && stats.translation_condition <= params.max_translation_condition;
     }
-    let mut l = [0.0f32; 36];
-    for j in 0..6 {
-        if !ok {
-            break;
-        }
-        let mut diag = s[j * 7];
-        for k in 0..j {
-            diag -= l[j * 6 + k] * l[j * 6 + k];
-        }
-        if !(diag > 1e-12) {
-            stats.condition = CONDITION_SINGULAR;
-            ok = false;
-            break;
-        }
-        let ljj = diag.sqrt();
-        l[j * 7] = ljj;
-        for i in j + 1..6 {
-            let mut v = s[i * 6 + j];
-            for k in 0..j {
-                v -= l[i * 6 + k] * l[j * 6 + k];
-            }
-            l[i * 6 + j] = v / ljj;
-        }
-    }
     let mut xi = [0.0f32; 6];
     if ok {
-        let mut g = [0.0f32; 6];
-        for i in 0..6 {
-            let mut v = y[i];
-            for k in 0..i {
-                v -= l[i * 6 + k] * g[k];
+        match cholesky_solve6(&s, &y, 1e-12) {
+            Some(x) => xi = x,
+            None => {
+                stats.condition = CONDITION_SINGULAR;
+                ok = false;
             }
-            g[i] = v / l[i * 7];
         }
-        for i in (0..6).rev() {
-            let mut v = g[i];
-            for k in i + 1..6 {
-                v -= l[k * 6 + i] * xi[k];
-            }
-            xi[i] = v / l[i * 7];
-        }
+    }
+    if ok {
         for i in 0..6 {
             xi[i] *= d[i];
             ok = ok && is_valid_f32(xi[i]);

@@ -4,7 +4,7 @@
 //! combined in its tree.
 
 use crate::cpu::odometry::estimate::{CHI2_3DOF_95, CHI2_3DOF_MEDIAN, IDENTITY, RANSAC_MAX_HYPOTHESES, RANSAC_NO_COST, m3_mul_vec, pair_information, pair_normalised_residual, pair_residual};
-use crate::cpu::shared::{Mat4, dot3, is_valid_f32, mat4_mul, orthonormalised, transform_point, twist_exp_mat};
+use crate::cpu::shared::{Mat4, cholesky_solve6, dot3, is_valid_f32, mat4_mul, orthonormalised, transform_point, twist_exp_mat};
 use crate::kernels::gpu_data::{FeaturePair, RansacParams, RigidEstimate};
 
 /// Twin of `RANSAC_REFINE_WORKGROUP`.
@@ -117,41 +117,15 @@ fn solve_step(sums: &[f32; GN_FLOATS], pose: &Mat4) -> Option<(Mat4, bool)> {
         }
         d[i] = 1.0 / a[i * 7].sqrt();
     }
-    let mut l = [0.0f32; 36];
-    for j in 0..6 {
-        let mut diag = a[j * 7] * d[j] * d[j];
-        for k in 0..j {
-            diag -= l[j * 6 + k] * l[j * 6 + k];
-        }
-        if !(diag > GN_MIN_PIVOT) {
-            return None;
-        }
-        let ljj = diag.sqrt();
-        l[j * 7] = ljj;
-        for i in j + 1..6 {
-            let mut v = a[i * 6 + j] * d[i] * d[j];
-            for k in 0..j {
-                v -= l[i * 6 + k] * l[j * 6 + k];
-            }
-            l[i * 6 + j] = v / ljj;
-        }
-    }
-    let mut z = [0.0f32; 6];
+    let mut sc = [0.0f32; 36];
+    let mut y = [0.0f32; 6];
     for i in 0..6 {
-        let mut v = -d[i] * g[i];
-        for k in 0..i {
-            v -= l[i * 6 + k] * z[k];
+        for j in 0..6 {
+            sc[i * 6 + j] = a[i * 6 + j] * d[i] * d[j];
         }
-        z[i] = v / l[i * 7];
+        y[i] = -d[i] * g[i];
     }
-    let mut xi = [0.0f32; 6];
-    for i in (0..6).rev() {
-        let mut v = z[i];
-        for k in i + 1..6 {
-            v -= l[k * 6 + i] * xi[k];
-        }
-        xi[i] = v / l[i * 7];
-    }
+    let mut xi = cholesky_solve6(&sc, &y, GN_MIN_PIVOT)?;
     let mut norm2 = 0.0f32;
     for i in 0..6 {
         xi[i] *= d[i];
