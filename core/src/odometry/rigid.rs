@@ -76,7 +76,8 @@ pub struct RansacConfig {
     pub min_inliers: usize,
     /// Refits on the inliers after the best hypothesis.
     pub refits: u32,
-    /// The largest noise scale (times the sensor model's σ) a frame may show.
+    /// The largest noise scale (times the sensor model's σ) a frame may show: the inlier bound
+    /// stops growing there, and a frame whose pairs are noisier still is rejected.
     pub max_noise_scale: f64,
 }
 
@@ -131,7 +132,7 @@ pub struct RigidEstimate {
     pub inliers: Vec<usize>,
     /// Root mean square residual of the inliers, metres.
     pub rmse_m: f64,
-    /// The frame's noise relative to the sensor model (≥ 1).
+    /// The frame's noise relative to the sensor model (1 ..= the configured maximum).
     pub noise_scale: f64,
 }
 
@@ -280,17 +281,18 @@ pub fn ransac(corr: &[Correspondence], config: &RansacConfig, seed: u32) -> Opti
         }
         let mid = e.len() / 2;
         let (_, median, _) = e.select_nth_unstable_by(mid, f64::total_cmp);
-        (*median / CHI2_3DOF_MEDIAN).sqrt().clamp(1.0, config.max_noise_scale)
+        (*median / CHI2_3DOF_MEDIAN).sqrt().max(1.0)
     };
+    let bound = |scale: f64| scale.min(config.max_noise_scale);
     let mut scale = scale_of(&t);
-    let (mut inliers, _) = classify(&t, corr, CHI2_3DOF_95 * scale * scale);
+    let (mut inliers, _) = classify(&t, corr, CHI2_3DOF_95 * bound(scale).powi(2));
     for _ in 0..config.refits {
         if inliers.len() < config.min_inliers {
             return None;
         }
-        let refit = refine_mahalanobis(corr, &inliers, &t, 5, scale)?;
+        let refit = refine_mahalanobis(corr, &inliers, &t, 5, bound(scale))?;
         scale = scale_of(&refit);
-        let (next_inliers, _) = classify(&refit, corr, CHI2_3DOF_95 * scale * scale);
+        let (next_inliers, _) = classify(&refit, corr, CHI2_3DOF_95 * bound(scale).powi(2));
         let unchanged = next_inliers == inliers;
         t = refit;
         inliers = next_inliers;
@@ -298,7 +300,9 @@ pub fn ransac(corr: &[Correspondence], config: &RansacConfig, seed: u32) -> Opti
             break;
         }
     }
-    if inliers.len() < config.min_inliers {
+    // 002's rejection of poor residuals: pairs noisier than the bound are no motion the sensor
+    // model vouches for.
+    if inliers.len() < config.min_inliers || scale > config.max_noise_scale {
         return None;
     }
     let rmse_m = (inliers.iter().map(|&i| (corr[i].dst - t.transform_point(corr[i].src)).length_squared()).sum::<f64>() / inliers.len() as f64).sqrt();

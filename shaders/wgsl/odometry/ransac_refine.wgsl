@@ -5,17 +5,18 @@
 //! 1. the hypothesis of least MSAC cost (the lower index among equals);
 //! 2. the frame's noise scale: the median squared Mahalanobis residual of the pairs within the
 //!    loose bound χ²(3, 95 %) · max_noise_scale², found exactly by bisection on its f32 bit
-//!    pattern (32 rounds of counting with a workgroup atomic), over χ²₃'s median, square-rooted
-//!    and clamped to [1, max_noise_scale] (fast motion puts the colour and depth instants apart,
-//!    so a frame may be noisier than the sensor model; never less);
-//! 3. the inliers: pairs within χ²(3, 95 %) · scale²;
+//!    pattern (32 rounds of counting with a workgroup atomic), over χ²₃'s median, square-rooted,
+//!    at least 1 (fast motion puts the colour and depth instants apart, so a frame may be
+//!    noisier than the sensor model; never less);
+//! 3. the inliers: pairs within χ²(3, 95 %) · s², s the scale capped at max_noise_scale;
 //! 4. up to `refits` times: Gauss-Newton (`iterations` steps) on Σ ρ(rᵢᵀ Ωᵢ rᵢ) over the inliers
-//!    (Ω the residual's information at the current estimate, ρ Huber at √χ² · scale, the update
+//!    (Ω the residual's information at the current estimate, ρ Huber at √χ² · s, the update
 //!    exp(ξ) on the left, the 6 × 6 system Jacobi-scaled and Cholesky-factored by invocation 0,
 //!    stopping once |ξ| < GN_CONVERGED_STEP), then the scale and the inliers again, until
 //!    the inlier set no longer changes;
-//! 5. accepted when at least `min_inliers` remain and no system was singular; the inliers'
-//!    RMS residual. The result goes into `estimate` (its pair count kept). Mirrors
+//! 5. accepted when at least `min_inliers` remain, no system was singular and the noise scale
+//!    is within max_noise_scale (002's rejection of poor residuals: pairs noisier than that
+//!    bound are not a motion the sensor model can vouch for); the inliers' RMS residual. The result goes into `estimate` (its pair count kept). Mirrors
 //!    core/src/cpu/odometry/ransac_refine.rs.
 #import linear_solve
 #import rigid
@@ -105,7 +106,7 @@ fn noise_scale(lid: u32, n: u32, loose: f32) -> f32 {
     if m == 0u {
         return 1.0;
     }
-    return clamp(sqrt(bitcast<f32>(lo) / CHI2_3DOF_MEDIAN), 1.0, params.max_noise_scale);
+    return max(sqrt(bitcast<f32>(lo) / CHI2_3DOF_MEDIAN), 1.0);
 }
 
 // Flags this invocation's pairs within `bound` (when `write`) and returns (inliers, flags
@@ -267,7 +268,8 @@ fn main(@builtin(local_invocation_index) lid: u32) {
     // 2, 3. The scale and the inliers of the best hypothesis.
     compute_residuals(lid, n, sh_pose);
     var scale = noise_scale(lid, n, loose);
-    var counts = classify(lid, n, CHI2_3DOF_95 * scale * scale, true);
+    var bound = min(scale, params.max_noise_scale);
+    var counts = classify(lid, n, CHI2_3DOF_95 * bound * bound, true);
     if lid == 0u {
         sh_scale = scale;
         sh_inliers = counts.x;
@@ -280,7 +282,7 @@ fn main(@builtin(local_invocation_index) lid: u32) {
         }
         workgroupBarrier();
         let running = sh_state == REFINE_RUNNING;
-        let huber = sqrt(CHI2_3DOF_95) * sh_scale;
+        let huber = sqrt(CHI2_3DOF_95) * min(sh_scale, params.max_noise_scale);
         if lid == 0u {
             sh_converged = 0u;
         }
@@ -304,7 +306,8 @@ fn main(@builtin(local_invocation_index) lid: u32) {
             compute_residuals(lid, n, sh_pose);
         }
         scale = noise_scale(lid, n, loose);
-        counts = classify(lid, n, CHI2_3DOF_95 * scale * scale, still);
+        bound = min(scale, params.max_noise_scale);
+        counts = classify(lid, n, CHI2_3DOF_95 * bound * bound, still);
         workgroupBarrier();
         if lid == 0u && still {
             sh_scale = scale;
@@ -330,7 +333,7 @@ fn main(@builtin(local_invocation_index) lid: u32) {
     sh_sums[lid] = acc;
     reduce_sums(lid);
     if lid == 0u {
-        let accepted = sh_state != REFINE_REJECTED && sh_inliers >= params.min_inliers;
+        let accepted = sh_state != REFINE_REJECTED && sh_inliers >= params.min_inliers && sh_scale <= params.max_noise_scale;
         if accepted {
             estimate.dst_from_src = pose;
         }

@@ -48,11 +48,13 @@ struct RigidEstimate {
     pairs: u32,
     // Pairs within the inlier bound of the final estimate.
     inliers: u32,
-    // 1: accepted (at least `min_inliers` inliers and a non-singular refinement).
+    // 1: accepted (at least `min_inliers` inliers, a non-singular refinement and a noise scale
+    // within max_noise_scale).
     accepted: u32,
     // The hypothesis RANSAC chose (RANSAC_MAX_HYPOTHESES when none was usable).
     best_hypothesis: u32,
-    // The frame's noise relative to the sensor model (1 ..= max_noise_scale).
+    // The frame's noise relative to the sensor model (≥ 1; beyond max_noise_scale the frame
+    // is rejected).
     noise_scale: f32,
     // Root mean square residual of the inliers, metres.
     rmse_m: f32,

@@ -3,8 +3,9 @@
 //! against the CPU twin on the same hypotheses (acceptance equal, inlier flags at most 1 %
 //! apart, poses within 0.05 mm and 0.005°), with negative controls; on a synthetic scene with
 //! 70 % outliers it returns exactly the inliers and the motion, with Kinect-model noise it
-//! lands within 0.3 mm and 0.02° of the f64 reference (`odometry::rigid::ransac`), and all
-//! outliers are rejected; on real frames the GPU's f32 estimate agrees with the twin, lies
+//! lands within 0.3 mm and 0.02° of the f64 reference (`odometry::rigid::ransac`), all
+//! outliers are rejected, 3× the modelled noise is measured as a scale near 3 and 8× (beyond
+//! the bound of 4) is rejected; on real frames the GPU's f32 estimate agrees with the twin, lies
 //! within 0.05 mm and 0.005° of the f64 optimum of the same cost on its inliers, and within 3×
 //! its inlier RMS of the f64 RANSAC (whose own samples pick a slightly different inlier set).
 
@@ -152,6 +153,57 @@ fn sensor_noise_lands_near_the_f64_reference_and_outliers_alone_are_rejected() {
     compare("outliers", &g, &c).unwrap();
     assert_eq!(g.0.accepted, 0, "no motion from outliers alone: {:?}", g.0);
     assert_eq!(g.0.dst_from_src, webfusion_core::cpu::odometry::estimate::IDENTITY);
+}
+
+/// The scene's reference points moved by `k` times each pair's modelled residual noise (a
+/// draw from the residual's covariance R Σsrc Rᵀ + Σdst under the true motion).
+fn noisy_scene(k: f32, seed: u32) -> Vec<FeaturePair> {
+    use webfusion_core::cpu::odometry::estimate::{m3_mul, m3_transpose, point_covariance, rotation_of};
+    let truth_m = truth().to_cols_f32();
+    let r = rotation_of(&truth_m);
+    let mut state = seed;
+    scene(300, &truth(), 0, seed)
+        .into_iter()
+        .map(|mut p| {
+            let c = point_covariance([p.src[0], p.src[1], p.src[2]], 0.0, 525.0);
+            let d = point_covariance([p.dst[0], p.dst[1], p.dst[2]], 0.0, 525.0);
+            let rc = m3_mul(&m3_mul(&r, &c), &m3_transpose(&r));
+            let cov: [[f32; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| rc[i][j] + d[i][j]));
+            // Cholesky of the symmetric 3 × 3 (columns as rows: it is symmetric).
+            let l00 = cov[0][0].sqrt();
+            let l10 = cov[0][1] / l00;
+            let l20 = cov[0][2] / l00;
+            let l11 = (cov[1][1] - l10 * l10).sqrt();
+            let l21 = (cov[1][2] - l20 * l10) / l11;
+            let l22 = (cov[2][2] - l20 * l20 - l21 * l21).sqrt();
+            let (g01, g2) = (random_gauss2(&mut state), random_gauss2(&mut state));
+            let g = [g01[0], g01[1], g2[0]];
+            let e = [l00 * g[0], l10 * g[0] + l11 * g[1], l20 * g[0] + l21 * g[1] + l22 * g[2]];
+            for a in 0..3 {
+                p.dst[a] += k * e[a];
+            }
+            p
+        })
+        .collect()
+}
+
+#[test]
+fn pairs_noisier_than_the_bound_are_rejected_and_the_scale_is_measured() {
+    // 3× the model: accepted, the scale measured near 3 (within 15 %).
+    let pairs = noisy_scene(3.0, 21);
+    let (g, c) = run(&params(5), &pairs, &estimate_of(pairs.len()));
+    assert_close_with_controls("3x noise", &g, &c);
+    eprintln!("3x noise: accepted {}, scale {}, {} inliers", g.0.accepted, g.0.noise_scale, g.0.inliers);
+    assert_eq!(g.0.accepted, 1);
+    assert!((g.0.noise_scale - 3.0).abs() < 0.45, "scale {}", g.0.noise_scale);
+    // 8× the model (beyond max_noise_scale = 4): rejected on both sides, as by the f64 reference.
+    let pairs = noisy_scene(8.0, 22);
+    let (g, c) = run(&params(5), &pairs, &estimate_of(pairs.len()));
+    compare("8x noise", &g, &c).unwrap();
+    eprintln!("8x noise: accepted {}, scale {}, {} inliers", g.0.accepted, g.0.noise_scale, g.0.inliers);
+    assert!(g.0.accepted == 0 && g.0.noise_scale > 4.0, "{:?}", g.0);
+    let corr: Vec<Correspondence> = pairs.iter().map(|p| Correspondence::new(DVec3::new(p.src[0].into(), p.src[1].into(), p.src[2].into()), 0, DVec3::new(p.dst[0].into(), p.dst[1].into(), p.dst[2].into()), 0, 525.0)).collect();
+    assert!(ransac(&corr, &RansacConfig::default(), 5).is_none(), "the f64 reference rejects it too");
 }
 
 #[test]

@@ -28,16 +28,16 @@ fn owned(lid: usize, n: usize) -> impl Iterator<Item = usize> {
     (lid..n).step_by(RANSAC_REFINE_WORKGROUP)
 }
 
-/// Twin of `noise_scale()`: the exact k-th smallest residual within `loose` (the bisection on
-/// bit patterns finds exactly this value).
-fn noise_scale(residuals: &[f32], n: usize, loose: f32, max_noise_scale: f32) -> f32 {
+/// Twin of `noise_scale()`: from the exact k-th smallest residual within `loose` (the bisection
+/// on bit patterns finds exactly this value), at least 1.
+fn noise_scale(residuals: &[f32], n: usize, loose: f32) -> f32 {
     let mut within: Vec<f32> = residuals[..n].iter().copied().filter(|&e| e <= loose).collect();
     if within.is_empty() {
         return 1.0;
     }
     let k = within.len() / 2;
     let (_, median, _) = within.select_nth_unstable_by(k, f32::total_cmp);
-    (*median / CHI2_3DOF_MEDIAN).sqrt().clamp(1.0, max_noise_scale)
+    (*median / CHI2_3DOF_MEDIAN).sqrt().max(1.0)
 }
 
 /// Twin of `classify()`: (inliers, flags changed).
@@ -176,15 +176,16 @@ pub fn ransac_refine(params: &RansacParams, hypotheses: &[Mat4], costs: &[f32], 
     };
     // 2, 3.
     compute(&pose, residuals);
-    let mut scale = noise_scale(residuals, n, loose, params.max_noise_scale);
-    let (mut inliers, _) = classify(residuals, inlier_flags, n, CHI2_3DOF_95 * scale * scale, true);
+    let mut scale = noise_scale(residuals, n, loose);
+    let bound = scale.min(params.max_noise_scale);
+    let (mut inliers, _) = classify(residuals, inlier_flags, n, CHI2_3DOF_95 * bound * bound, true);
     // 4.
     for _ in 0..params.refits {
         if state == State::Running && inliers < params.min_inliers {
             state = State::Rejected;
         }
         let running = state == State::Running;
-        let huber = CHI2_3DOF_95.sqrt() * scale;
+        let huber = CHI2_3DOF_95.sqrt() * scale.min(params.max_noise_scale);
         let mut converged = false;
         for _ in 0..params.iterations {
             if !(running && state == State::Running && !converged) {
@@ -203,8 +204,9 @@ pub fn ransac_refine(params: &RansacParams, hypotheses: &[Mat4], costs: &[f32], 
         if still {
             compute(&pose, residuals);
         }
-        let next_scale = noise_scale(residuals, n, loose, params.max_noise_scale);
-        let (next_inliers, changed) = classify(residuals, inlier_flags, n, CHI2_3DOF_95 * next_scale * next_scale, still);
+        let next_scale = noise_scale(residuals, n, loose);
+        let bound = next_scale.min(params.max_noise_scale);
+        let (next_inliers, changed) = classify(residuals, inlier_flags, n, CHI2_3DOF_95 * bound * bound, still);
         if still {
             scale = next_scale;
             inliers = next_inliers;
@@ -228,7 +230,7 @@ pub fn ransac_refine(params: &RansacParams, hypotheses: &[Mat4], costs: &[f32], 
         })
         .collect();
     let sq = reduce_sums(&mut sums)[0];
-    let accepted = state != State::Rejected && inliers >= params.min_inliers;
+    let accepted = state != State::Rejected && inliers >= params.min_inliers && scale <= params.max_noise_scale;
     if accepted {
         estimate.dst_from_src = pose;
     }
