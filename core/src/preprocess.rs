@@ -274,19 +274,22 @@ impl DepthPreprocessor {
 
         use crate::kernels::{bilateral_filter, color_to_float, depth_pyramid_down, depth_to_metres, gradient_smooth, intensity_pyramid_down, normal_map, vertex_gradients, vertex_map};
         let mut stages = Vec::new();
-        let mut push = |name: String, pipeline: fn(&Kernels) -> &KernelPipeline, params: wgpu::Buffer, bind_group: wgpu::BindGroup, invocations: [u32; 3]| {
-            let geometry = ["depth_pyramid_down", "vertex_map", "vertex_gradients", "gradient_smooth", "normal_map"].iter().any(|k| name.starts_with(k));
+        // Whether a stage builds the geometry (depth pyramid, vertex and normal maps) or the
+        // images (metric depth, colour, intensity pyramid).
+        const GEOMETRY: bool = true;
+        const IMAGES: bool = false;
+        let mut push = |geometry: bool, name: String, pipeline: fn(&Kernels) -> &KernelPipeline, params: wgpu::Buffer, bind_group: wgpu::BindGroup, invocations: [u32; 3]| {
             stages.push(Stage { name, pipeline, bind_group, invocations, geometry, _params: params });
         };
         let (w0, h0) = (k0.width_px, k0.height_px);
         let to_metres_out = depth_unfiltered_m.as_ref().unwrap_or(&levels[0].depth_m);
         let params = gpu.uniform_buffer("core.depth_to_metres.params", &config.depth_to_metres_params(&calibration));
         let bg = depth_to_metres::Bindings { params: &params, depth_raw: &depth_raw, depth_m: to_metres_out }.bind_group(gpu);
-        push("depth_to_metres".into(), |k| &k.depth_to_metres, params, bg, [w0, h0, 1]);
+        push(IMAGES, "depth_to_metres".into(), |k| &k.depth_to_metres, params, bg, [w0, h0, 1]);
         if let (Some(b), Some(unfiltered)) = (config.bilateral, &depth_unfiltered_m) {
             let params = gpu.uniform_buffer("core.bilateral_filter.params", &b.params(&k0));
             let bg = bilateral_filter::Bindings { params: &params, depth_in_m: unfiltered, depth_out_m: &levels[0].depth_m }.bind_group(gpu);
-            push("bilateral_filter".into(), |k| &k.bilateral_filter, params, bg, [w0, h0, 1]);
+            push(IMAGES, "bilateral_filter".into(), |k| &k.bilateral_filter, params, bg, [w0, h0, 1]);
         }
         for l in 1..levels.len() {
             let (fine, coarse) = (&levels[l - 1], &levels[l]);
@@ -294,41 +297,41 @@ impl DepthPreprocessor {
             let inv = [p.dst_width_px, p.dst_height_px, 1];
             let params = gpu.uniform_buffer("core.depth_pyramid_down.params", &p);
             let bg = depth_pyramid_down::Bindings { params: &params, depth_fine_m: &fine.depth_m, depth_coarse_m: &coarse.depth_m }.bind_group(gpu);
-            push(format!("depth_pyramid_down[{l}]"), |k| &k.depth_pyramid_down, params, bg, inv);
+            push(GEOMETRY, format!("depth_pyramid_down[{l}]"), |k| &k.depth_pyramid_down, params, bg, inv);
         }
         for (l, level) in levels.iter().enumerate() {
             let k = level.intrinsics;
             let inv = [k.width_px, k.height_px, 1];
             let params = gpu.uniform_buffer("core.vertex_map.params", &VertexMapParams { intrinsics: GpuIntrinsics::from(k) });
             let bg = vertex_map::Bindings { params: &params, depth_m: &level.depth_m, vertex_in_camera: &level.vertex_in_camera }.bind_group(gpu);
-            push(format!("vertex_map[{l}]"), |k| &k.vertex_map, params, bg, inv);
+            push(GEOMETRY, format!("vertex_map[{l}]"), |k| &k.vertex_map, params, bg, inv);
             let p = VertexGradientsParams { width_px: k.width_px, height_px: k.height_px, ..Default::default() };
             let params = gpu.uniform_buffer("core.vertex_gradients.params", &p);
             let bg = vertex_gradients::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x: &level.grad_x, grad_y: &level.grad_y }.bind_group(gpu);
-            push(format!("vertex_gradients[{l}]"), |k| &k.vertex_gradients, params, bg, inv);
+            push(GEOMETRY, format!("vertex_gradients[{l}]"), |k| &k.vertex_gradients, params, bg, inv);
             if let (Some(g), Some((tmp_x, tmp_y))) = (config.gradient_smoothing, &grad_tmp) {
                 for axis in 0..2u32 {
                     let params = gpu.uniform_buffer("core.gradient_smooth.params", &g.params(&k, axis));
                     let [grad_x_in, grad_y_in, grad_x_out, grad_y_out]: [&wgpu::Buffer; 4] =
                         if axis == 0 { [&level.grad_x, &level.grad_y, tmp_x, tmp_y] } else { [tmp_x, tmp_y, &level.grad_x, &level.grad_y] };
                     let bg = gradient_smooth::Bindings { params: &params, grad_x_in, grad_y_in, grad_x_out, grad_y_out }.bind_group(gpu);
-                    push(format!("gradient_smooth[{l}].{}", ["x", "y"][axis as usize]), |k| &k.gradient_smooth, params, bg, inv);
+                    push(GEOMETRY, format!("gradient_smooth[{l}].{}", ["x", "y"][axis as usize]), |k| &k.gradient_smooth, params, bg, inv);
                 }
             }
             let params = gpu.uniform_buffer("core.normal_map.params", &config.normal_map_params(&k));
             let bg = normal_map::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x: &level.grad_x, grad_y: &level.grad_y, normal_in_camera: &level.normal_in_camera }
                 .bind_group(gpu);
-            push(format!("normal_map[{l}]"), |k| &k.normal_map, params, bg, inv);
+            push(GEOMETRY, format!("normal_map[{l}]"), |k| &k.normal_map, params, bg, inv);
         }
         let params = gpu.uniform_buffer("core.color_to_float.params", &ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() });
         let bg = color_to_float::Bindings { params: &params, rgb8: &rgb8, color: &color, intensity: &intensity }.bind_group(gpu);
-        push("color_to_float".into(), |k| &k.color_to_float, params, bg, [w0, h0, 1]);
+        push(IMAGES, "color_to_float".into(), |k| &k.color_to_float, params, bg, [w0, h0, 1]);
         for l in 1..levels.len() {
             let (fine, coarse) = (&levels[l - 1], &levels[l]);
             let p = IntensityPyramidDownParams { src_width_px: fine.intrinsics.width_px, src_height_px: fine.intrinsics.height_px, dst_width_px: coarse.intrinsics.width_px, dst_height_px: coarse.intrinsics.height_px };
             let params = gpu.uniform_buffer("core.intensity_pyramid_down.params", &p);
             let bg = intensity_pyramid_down::Bindings { params: &params, src: &fine.intensity, dst: &coarse.intensity }.bind_group(gpu);
-            push(format!("intensity_pyramid_down[{l}]"), |k| &k.intensity_pyramid_down, params, bg, [p.dst_width_px, p.dst_height_px, 1]);
+            push(IMAGES, format!("intensity_pyramid_down[{l}]"), |k| &k.intensity_pyramid_down, params, bg, [p.dst_width_px, p.dst_height_px, 1]);
         }
 
         Ok(Self { calibration, config, depth_raw, rgb8, depth_unfiltered_m, color, intensity, levels, stages })

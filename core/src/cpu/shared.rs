@@ -470,7 +470,8 @@ pub fn mat4_mul(a: &Mat4, b: &Mat4) -> Mat4 {
     std::array::from_fn(|c| mat4_mul_vec4(a, b[c]))
 }
 
-fn normalize3(v: [f32; 3]) -> [f32; 3] {
+/// `v / |v|`.
+pub fn normalize3(v: [f32; 3]) -> [f32; 3] {
     let len = dot3(v, v).sqrt();
     v.map(|c| c / len)
 }

@@ -137,8 +137,8 @@ pub struct PairView {
     pub stages_ms: [f64; 5],
 }
 
-/// The stages of a [`PairView`], seed 002's.
-pub const PAIR_STAGES: [&str; 5] = ["update", "detection", "description", "matching", "estimation"];
+/// The stages of a [`PairView`], seed 002's: the feature submission's ([`super::gpu::STAGES`]).
+pub const PAIR_STAGES: [&str; 5] = super::gpu::STAGES;
 
 impl PairView {
     fn new(frame: u64, reference_frame: u64, current: &Features, reference: &Features, estimate: &MotionEstimate, stages_ms: [f64; 5]) -> Self {

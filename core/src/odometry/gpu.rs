@@ -381,12 +381,18 @@ impl FeatureExtractor {
     /// Matching of the current set against set `reference` and `match_select` into the frame's
     /// estimate target.
     fn encode_matching(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, reference: usize) {
-        let n = self.slots as u32;
         let at = self.current * SETS + reference;
-        let groups = self.matching[at].as_ref().expect("the current set is never a reference");
-        gpu.kernels.hamming_match.dispatch_in(pass, &groups[0], [n, 1, 1]);
-        gpu.kernels.hamming_match.dispatch_in(pass, &groups[1], [n, 1, 1]);
+        let [forward, backward] = self.matching[at].as_ref().expect("the current set is never a reference");
         let select = self.select[at].as_ref().expect("the current set is never a reference");
+        self.dispatch_matching(gpu, pass, forward, backward, select);
+    }
+
+    /// Both matching directions (`hamming_match`, one invocation per slot) and `match_select`
+    /// (one workgroup) with these bind groups.
+    fn dispatch_matching(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, forward: &wgpu::BindGroup, backward: &wgpu::BindGroup, select: &wgpu::BindGroup) {
+        let n = self.slots as u32;
+        gpu.kernels.hamming_match.dispatch_in(pass, forward, [n, 1, 1]);
+        gpu.kernels.hamming_match.dispatch_in(pass, backward, [n, 1, 1]);
         gpu.kernels.match_select.dispatch_in(pass, select, [gpu.kernels.match_select.kernel.workgroup_size[0], 1, 1]);
     }
 
@@ -477,7 +483,6 @@ impl FeatureExtractor {
             return Err(Error::InvalidConfig(format!("features: keyframe slot {bad} past the {} stored", self.keyframes.len())));
         }
         gpu.write_buffer(&self.candidate_ransac_params, &[self.config.ransac.params(self.f_px, seed)]);
-        let n = self.slots as u32;
         let c = &self.sets[self.current];
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.features.match_keyframes") });
         {
@@ -498,9 +503,7 @@ impl FeatureExtractor {
                     estimate: &target.estimate,
                 }
                 .bind_group(gpu);
-                gpu.kernels.hamming_match.dispatch_in(&mut pass, &fwd, [n, 1, 1]);
-                gpu.kernels.hamming_match.dispatch_in(&mut pass, &bwd, [n, 1, 1]);
-                gpu.kernels.match_select.dispatch_in(&mut pass, &select, [gpu.kernels.match_select.kernel.workgroup_size[0], 1, 1]);
+                self.dispatch_matching(gpu, &mut pass, &fwd, &bwd, &select);
                 self.encode_estimate(gpu, &mut pass, target);
             }
         }

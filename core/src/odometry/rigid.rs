@@ -25,7 +25,7 @@ use nalgebra::{Matrix3, SVD};
 use crate::Se3;
 use crate::cpu::odometry::estimate::RANSAC_MAX_HYPOTHESES;
 use crate::cpu::shared::{kinect_sigma_m, pcg_hash};
-use crate::kernels::gpu_data::RansacParams;
+use crate::kernels::gpu_data::{FeaturePair, RansacParams};
 
 /// χ²(3 degrees of freedom) at 95 %.
 pub const CHI2_3DOF_95: f64 = 7.815;
@@ -50,6 +50,13 @@ impl Correspondence {
     pub fn new(src: DVec3, src_level: u32, dst: DVec3, dst_level: u32, f_px: f64) -> Self {
         Self { src, dst, src_cov: point_covariance(src, src_level, f_px), dst_cov: point_covariance(dst, dst_level, f_px) }
     }
+}
+
+/// The f64 reference's pairs for the GPU estimate's pairs (`match_select`'s output: points
+/// and pyramid levels), each with its points' Kinect noise, for a camera of focal length `f_px`.
+pub fn correspondences(pairs: &[FeaturePair], f_px: f64) -> Vec<Correspondence> {
+    let v = |p: [f32; 4]| DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+    pairs.iter().map(|p| Correspondence::new(v(p.src), p.src[3] as u32, v(p.dst), p.dst[3] as u32, f_px)).collect()
 }
 
 /// The covariance of a point `p` (camera frame, metres) measured at pyramid `level` with focal

@@ -2,10 +2,8 @@
 //! Frame-to-frame feature odometry: each frame's motion against the reference frame (the last
 //! one tracked), from the matched keypoints' 3D points.
 
-use glam::DVec3;
-
 use super::matching::{Match, MatchConfig};
-use super::rigid::{Correspondence, RansacConfig, RigidEstimate};
+use super::rigid::{RansacConfig, RigidEstimate};
 use super::{FeatureConfig, Features};
 use crate::cpu;
 use crate::cpu::odometry::estimate::RANSAC_MAX_HYPOTHESES;
@@ -55,20 +53,6 @@ impl MotionEstimate {
     pub fn inliers(&self) -> usize {
         self.rigid.as_ref().map_or(0, |r| r.inliers.len())
     }
-}
-
-/// The 3D pairs of `matched` (current → reference), with their noise, for the f64 reference
-/// ([`super::rigid::ransac`]).
-pub fn correspondences(k0: &PinholeIntrinsics, current: &Features, reference: &Features, matched: &[Match]) -> Vec<Correspondence> {
-    let f = f64::from(k0.fx_px.max(k0.fy_px));
-    let v = |p: [f32; 4]| DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-    matched
-        .iter()
-        .map(|m| {
-            let (q, t) = (m.query as usize, m.train as usize);
-            Correspondence::new(v(current.points[q]), current.keypoints[q][2] as u32, v(reference.points[t]), reference.keypoints[t][2] as u32, f)
-        })
-        .collect()
 }
 
 /// The focal length the estimate's lateral noise uses, pixels.

@@ -340,15 +340,15 @@ impl PlaneWorld {
                 hi[a] = hi[a].max(xy[a] + 1);
             }
         }
-        let on = |f: &PlaneFrame, uv: [f64; 2]| to_dvec(f.origin_m) + uv[0] * to_dvec(f.u_axis) + uv[1] * to_dvec(f.v_axis);
-        let in_frame = |f: &PlaneFrame, p: DVec3| [(p - to_dvec(f.origin_m)).dot(to_dvec(f.u_axis)), (p - to_dvec(f.origin_m)).dot(to_dvec(f.v_axis))];
-        let r = f64::from(res);
-        let (mut dlo, mut dhi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        // Texel coordinates (texels from the frame's origin) in `to` of texel coordinates `t` in
+        // `from`, through the world.
+        let texels_in = |from: &PlaneFrame, to: &PlaneFrame, t: [f32; 2]| to.to_plane(from.point([t[0] / res, t[1] / res])).map(|c| c * res);
+        let (mut dlo, mut dhi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
         for corner in [[lo[0], lo[1]], [hi[0], lo[1]], [lo[0], hi[1]], [hi[0], hi[1]]] {
-            let uv = in_frame(&k.frame, on(&sf, [f64::from(corner[0]) / r, f64::from(corner[1]) / r]));
+            let uv = texels_in(&sf, &k.frame, corner.map(|c| c as f32));
             for a in 0..2 {
-                dlo[a] = dlo[a].min(uv[a] * r);
-                dhi[a] = dhi[a].max(uv[a] * r);
+                dlo[a] = dlo[a].min(uv[a]);
+                dhi[a] = dhi[a].max(uv[a]);
             }
         }
         let want_lo = [dlo[0].floor() as i32, dlo[1].floor() as i32];
@@ -359,9 +359,8 @@ impl PlaneWorld {
         let stride = k.texels.size[0] as i32;
         for y in glo[1]..ghi[1] {
             for x in glo[0]..ghi[0] {
-                let centre = on(&k.frame, [(f64::from(x) + 0.5) / r, (f64::from(y) + 0.5) / r]);
-                let uv = in_frame(&sf, centre);
-                let (sx, sy) = ((uv[0] * r).floor() as i32 - src.first[0], (uv[1] * r).floor() as i32 - src.first[1]);
+                let uv = texels_in(&k.frame, &sf, [x as f32 + 0.5, y as f32 + 0.5]);
+                let (sx, sy) = (uv[0].floor() as i32 - src.first[0], uv[1].floor() as i32 - src.first[1]);
                 if sx < 0 || sy < 0 || sx >= src.size[0] as i32 || sy >= src.size[1] as i32 {
                     continue;
                 }

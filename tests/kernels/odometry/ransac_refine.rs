@@ -9,14 +9,13 @@
 //! within 0.05 mm and 0.005° of the f64 optimum of the same cost on its inliers, and within 3×
 //! its inlier RMS of the f64 RANSAC (whose own samples pick a slightly different inlier set).
 
-use glam::DVec3;
 use webfusion_core::Se3;
 use webfusion_core::cpu;
 use webfusion_core::cpu::shared::{Mat4, kinect_sigma_m, pcg_hash, random_gauss2};
 use webfusion_core::kernels::gpu_data::{FeaturePair, RansacParams, RigidEstimate};
 use webfusion_core::odometry::matching::MatchConfig;
 use webfusion_core::odometry::reference::matches as cpu_matches;
-use webfusion_core::odometry::rigid::{Correspondence, RansacConfig, ransac, refine_mahalanobis};
+use webfusion_core::odometry::rigid::{RansacConfig, correspondences, ransac, refine_mahalanobis};
 use webfusion_tests::{Slot, cast, finish, gpu, run_kernel_slots};
 
 use super::pipeline::cpu_features;
@@ -140,7 +139,7 @@ fn sensor_noise_lands_near_the_f64_reference_and_outliers_alone_are_rejected() {
     }
     let (g, c) = run(&params(3), &pairs, &estimate_of(pairs.len()));
     assert_close_with_controls("noisy scene", &g, &c);
-    let corr: Vec<Correspondence> = pairs.iter().map(|p| Correspondence::new(DVec3::new(p.src[0].into(), p.src[1].into(), p.src[2].into()), 0, DVec3::new(p.dst[0].into(), p.dst[1].into(), p.dst[2].into()), 0, 525.0)).collect();
+    let corr = correspondences(&pairs, 525.0);
     let reference = ransac(&corr, &RansacConfig::default(), 3).expect("the f64 reference accepts");
     let (t_mm, r_deg) = apart(&g.0.dst_from_src, &reference.dst_from_src.to_cols_f32());
     let (tt, tr) = apart(&g.0.dst_from_src, &truth().to_cols_f32());
@@ -179,8 +178,8 @@ fn noisy_scene(k: f32, seed: u32) -> Vec<FeaturePair> {
             let (g01, g2) = (random_gauss2(&mut state), random_gauss2(&mut state));
             let g = [g01[0], g01[1], g2[0]];
             let e = [l00 * g[0], l10 * g[0] + l11 * g[1], l20 * g[0] + l21 * g[1] + l22 * g[2]];
-            for a in 0..3 {
-                p.dst[a] += k * e[a];
+            for (d, e) in p.dst.iter_mut().zip(e) {
+                *d += k * e;
             }
             p
         })
@@ -202,7 +201,7 @@ fn pairs_noisier_than_the_bound_are_rejected_and_the_scale_is_measured() {
     compare("8x noise", &g, &c).unwrap();
     eprintln!("8x noise: accepted {}, scale {}, {} inliers", g.0.accepted, g.0.noise_scale, g.0.inliers);
     assert!(g.0.accepted == 0 && g.0.noise_scale > 4.0, "{:?}", g.0);
-    let corr: Vec<Correspondence> = pairs.iter().map(|p| Correspondence::new(DVec3::new(p.src[0].into(), p.src[1].into(), p.src[2].into()), 0, DVec3::new(p.dst[0].into(), p.dst[1].into(), p.dst[2].into()), 0, 525.0)).collect();
+    let corr = correspondences(&pairs, 525.0);
     assert!(ransac(&corr, &RansacConfig::default(), 5).is_none(), "the f64 reference rejects it too");
 }
 
@@ -215,13 +214,7 @@ fn real_frames_refine_like_the_twin_and_the_f64_reference() {
         assert_close_with_controls(&what, &g, &c);
         assert_eq!(g.0.accepted, 1, "{what}: {:?}", g.0);
         let n = estimate.pairs as usize;
-        let corr: Vec<Correspondence> = pairs[..n]
-            .iter()
-            .map(|p| {
-                let v = |q: [f32; 4]| DVec3::new(q[0].into(), q[1].into(), q[2].into());
-                Correspondence::new(v(p.src), p.src[3] as u32, v(p.dst), p.dst[3] as u32, 525.0)
-            })
-            .collect();
+        let corr = correspondences(&pairs[..n], 525.0);
         // The f64 optimum of the same cost on the GPU's inliers and scale: f32 loses nothing.
         let inliers: Vec<usize> = (0..n).filter(|&i| g.1[i] == 1).collect();
         let optimum = refine_mahalanobis(&corr, &inliers, &Se3::from_cols_f32(&g.0.dst_from_src), 20, f64::from(g.0.noise_scale)).expect("the f64 refinement");

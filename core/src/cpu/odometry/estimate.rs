@@ -4,7 +4,7 @@
 //! `mat3x3`: an array of columns).
 
 use crate::cpu::planes::plane_fit::eigen_symmetric3_f32;
-use crate::cpu::shared::{Mat4, cross3, dot3, kinect_sigma_m, transform_point};
+use crate::cpu::shared::{Mat4, cross3, dot3, kinect_sigma_m, normalize3, transform_point};
 use crate::kernels::gpu_data::FeaturePair;
 
 /// Twin of `CHI2_3DOF_95`.
@@ -53,10 +53,6 @@ fn scale3(a: [f32; 3], k: f32) -> [f32; 3] {
     a.map(|c| c * k)
 }
 
-fn normalize(v: [f32; 3]) -> [f32; 3] {
-    scale3(v, 1.0 / dot3(v, v).sqrt())
-}
-
 fn xyz(v: [f32; 4]) -> [f32; 3] {
     [v[0], v[1], v[2]]
 }
@@ -65,7 +61,7 @@ fn xyz(v: [f32; 4]) -> [f32; 3] {
 pub fn point_covariance(p: [f32; 3], level: f32, f_px: f32) -> M3 {
     let axial = kinect_sigma_m(p[2]);
     let lateral = p[2] * (1u32 << level as u32) as f32 / f_px;
-    let ray = scale3(p, 1.0 / dot3(p, p).sqrt());
+    let ray = normalize3(p);
     let k = axial * axial - lateral * lateral;
     let l2 = lateral * lateral;
     [
@@ -144,9 +140,9 @@ pub fn kabsch3(a0: [f32; 3], a1: [f32; 3], a2: [f32; 3], b0: [f32; 3], b1: [f32;
     }
     let (v1, v2) = (vectors[2], vectors[1]);
     let hm: M3 = [[h[0][0], h[1][0], h[2][0]], [h[0][1], h[1][1], h[2][1]], [h[0][2], h[1][2], h[2][2]]];
-    let u1 = normalize(m3_mul_vec(&hm, v1));
+    let u1 = normalize3(m3_mul_vec(&hm, v1));
     let w2 = m3_mul_vec(&hm, v2);
-    let u2 = normalize(sub3(w2, scale3(u1, dot3(w2, u1))));
+    let u2 = normalize3(sub3(w2, scale3(u1, dot3(w2, u1))));
     let u3 = cross3(u1, u2);
     let v3 = cross3(v1, v2);
     let col = |c: usize| [0, 1, 2].map(|r| v1[r] * u1[c] + v2[r] * u2[c] + v3[r] * u3[c]);
