@@ -161,7 +161,7 @@ fn main() -> anyhow::Result<()> {
         Command::Compare(args) => compare::run(&args),
         Command::Planes(args) => planes::run(&options, &args),
         Command::Odometry(args) => odometry::run(&options, &args),
-        Command::Serve(args) => serve::run(args),
+        Command::Serve(args) => serve::run(&options, args),
         #[cfg(feature = "openni2")]
         Command::Devices => {
             let devices = openni::list_devices()?;

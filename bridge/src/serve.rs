@@ -10,6 +10,9 @@
 //! A live camera (`--source openni2[:<uri>]`) is read by one capture thread that encodes each
 //! frame once and broadcasts it ([`LiveHub`]); every client subscribes, plays or pauses on its
 //! own, and a client that falls behind the camera loses the oldest frames, counted as drops.
+//!
+//! With `--map`, any client may also send render requests: the depth a virtual Kinect sees at
+//! a pose in the saved map ([`render`]), answered in the same session between frames.
 
 use std::collections::{HashMap, VecDeque};
 use std::net::SocketAddr;
@@ -30,12 +33,17 @@ use futures_util::{SinkExt as _, StreamExt as _};
 use tokio::sync::{Notify, broadcast};
 use tokio::time::Instant;
 use webfusion_core::codec::{ColorCodec, DepthCodec};
-use webfusion_core::protocol::{Control, Delivery, ErrorCode, FrameMessage, Hello, MAX_CLIENT_MESSAGE_BYTES, Message, PlaybackState, Status, WireColor};
+use webfusion_core::protocol::{
+    Control, Delivery, ErrorCode, FrameMessage, Hello, MAX_CLIENT_MESSAGE_BYTES, Message, PlaybackState, RenderFailure, RenderOutcome, RenderRequest, Status, WireColor, render_request_id,
+};
 use webfusion_core::recording::RecordingReader;
 use webfusion_core::source::{FrameSource, LiveSource, TimedPose, is_recording, open_recording};
-use webfusion_core::{RgbdCalibration, Se3};
+use webfusion_core::{GpuOptions, RgbdCalibration, Se3};
 
 use crate::calib::CalibrationArgs;
+
+mod render;
+use render::Renderer;
 
 /// Largest |t_gt − t_depth| for a ground-truth pose to travel with a frame (TUM convention).
 const GROUND_TRUTH_MAX_DIFFERENCE_NS: i64 = 20_000_000;
@@ -84,9 +92,13 @@ pub(crate) struct ServeArgs {
     #[arg(long, default_value_t = 2)]
     live_queue: usize,
     /// Skip damaged frames of a recording (each client's status counts them) instead of ending
-    /// the session at the first one.
+    /// the session at the first one, and serve the intact blocks of a damaged --map.
     #[arg(long)]
     skip_corrupt: bool,
+    /// A saved map (`reconstruct --save-map`) to answer render requests from: any WebSocket
+    /// client may ask what a virtual Kinect sees at a pose (`scripts/render_client.py`).
+    #[arg(long)]
+    map: Option<PathBuf>,
     #[command(flatten)]
     calibration: CalibrationArgs,
 }
@@ -104,6 +116,8 @@ struct Shared {
     skip_corrupt: bool,
     /// The capture of a live camera; `None` for logs.
     live: Option<LiveHub>,
+    /// The virtual sensor in the served map (`--map`).
+    renderer: Option<Renderer>,
 }
 
 /// Frames a client may fall behind a live camera before it loses the oldest.
@@ -163,7 +177,7 @@ impl LiveHub {
     }
 }
 
-pub(crate) fn run(args: ServeArgs) -> anyhow::Result<()> {
+pub(crate) fn run(options: &GpuOptions, args: ServeArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
         args.bind.ip().is_loopback() || args.token.is_some() || args.insecure,
         "refusing to serve on {} without --token: anyone on the network could read the frames (pass --token SECRET, or --insecure if you mean it)",
@@ -185,6 +199,14 @@ pub(crate) fn run(args: ServeArgs) -> anyhow::Result<()> {
             None
         }
     };
+    let renderer = match &args.map {
+        Some(path) => {
+            let (renderer, summary) = Renderer::start(options.clone(), path, args.skip_corrupt)?;
+            eprintln!("{summary}");
+            Some(renderer)
+        }
+        None => None,
+    };
     if !args.web_dir.join("index.html").is_file() {
         eprintln!("note: {} has no index.html; the WebSocket works but the page is not built (scripts/run.sh builds it)", args.web_dir.display());
     }
@@ -199,6 +221,7 @@ pub(crate) fn run(args: ServeArgs) -> anyhow::Result<()> {
         live_queue: args.live_queue,
         skip_corrupt: args.skip_corrupt,
         live,
+        renderer,
     });
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
     runtime.block_on(async move {
@@ -557,7 +580,7 @@ async fn session(socket: WebSocket, shared: Arc<Shared>) {
     });
 
     let outcome = match &shared.live {
-        Some(hub) => drive_live_session(&mut stream, hub, &queue).await,
+        Some(hub) => drive_live_session(&mut stream, hub, shared.renderer.as_ref(), &queue).await,
         None => drive_session(&mut stream, &shared, &queue).await,
     };
     if let Err((code, reason)) = outcome {
@@ -645,8 +668,15 @@ async fn drive_session(stream: &mut futures_util::stream::SplitStream<WebSocket>
         let due = pending.as_ref().map(|(_, due)| *due);
         tokio::select! {
             incoming = stream.next() => {
-                let Some(control) = client_control(incoming)? else { return Ok(()) };
-                let Some(control) = control else { continue };
+                let control = match from_client(incoming)? {
+                    FromClient::Left => return Ok(()),
+                    FromClient::Nothing => continue,
+                    FromClient::Render(request) => {
+                        answer_render(shared.renderer.as_ref(), queue, request).await;
+                        continue;
+                    }
+                    FromClient::Control(control) => control,
+                };
                 apply_control(&mut playback, control, frame_count).map_err(|reason| (ErrorCode::InvalidControl, reason))?;
                 pending = None;
                 queue.reply(status(&playback));
@@ -667,27 +697,53 @@ async fn drive_session(stream: &mut futures_util::stream::SplitStream<WebSocket>
     }
 }
 
-/// The control in a client's WebSocket message: `Ok(None)` when the client left,
-/// `Ok(Some(None))` for a ping or pong, an error (the close reason) for anything malformed.
-#[allow(clippy::option_option, reason = "left / nothing to do / a control are three distinct outcomes")]
-fn client_control(incoming: Option<Result<WsMessage, axum::Error>>) -> Result<Option<Option<Control>>, (ErrorCode, String)> {
+/// What a client's WebSocket message asks for.
+enum FromClient {
+    /// The client left.
+    Left,
+    /// A ping or pong: nothing to do.
+    Nothing,
+    /// A playback control.
+    Control(Control),
+    /// A render request (its id, and the request or why it does not decode).
+    Render((u32, Result<RenderRequest, String>)),
+}
+
+/// Reads a client's WebSocket message; an error (the close reason) for anything malformed,
+/// except a render request whose id can be read: that is answered, not closed over.
+fn from_client(incoming: Option<Result<WsMessage, axum::Error>>) -> Result<FromClient, (ErrorCode, String)> {
     let bytes = match incoming {
-        None | Some(Ok(WsMessage::Close(_))) => return Ok(None),
+        None | Some(Ok(WsMessage::Close(_))) => return Ok(FromClient::Left),
         Some(Err(e)) => return Err((ErrorCode::MalformedMessage, format!("WebSocket error: {e}"))),
         Some(Ok(WsMessage::Binary(bytes))) => bytes,
-        Some(Ok(WsMessage::Ping(_) | WsMessage::Pong(_))) => return Ok(Some(None)),
+        Some(Ok(WsMessage::Ping(_) | WsMessage::Pong(_))) => return Ok(FromClient::Nothing),
         Some(Ok(WsMessage::Text(_))) => return Err((ErrorCode::MalformedMessage, "text messages are not part of the protocol; send binary control messages".to_owned())),
     };
     match Message::decode(&bytes) {
-        Ok(Message::Control(control)) => Ok(Some(Some(control))),
-        Ok(other) => Err((ErrorCode::MalformedMessage, format!("clients may only send control messages, got {}", kind_name(&other)))),
+        Ok(Message::Control(control)) => Ok(FromClient::Control(control)),
+        Ok(Message::RenderRequest(request)) => Ok(FromClient::Render((request.request_id, Ok(request)))),
+        Ok(other) => Err((ErrorCode::MalformedMessage, format!("clients may only send control and render request messages, got {}", kind_name(&other)))),
         Err(e @ webfusion_core::Error::ProtocolVersion { .. }) => Err((ErrorCode::UnsupportedVersion, e.to_string())),
-        Err(e) => Err((ErrorCode::MalformedMessage, e.to_string())),
+        Err(e) => match render_request_id(&bytes) {
+            Some(request_id) => Ok(FromClient::Render((request_id, Err(e.to_string())))),
+            None => Err((ErrorCode::MalformedMessage, e.to_string())),
+        },
     }
 }
 
+/// Answers a render request in the session's queue (after whatever is queued before it): the
+/// view, or why there is none. The session stays open either way.
+async fn answer_render(renderer: Option<&Renderer>, queue: &OutQueue, (request_id, request): (u32, Result<RenderRequest, String>)) {
+    let outcome = match (renderer, request) {
+        (_, Err(reason)) => RenderOutcome::Failed { code: RenderFailure::InvalidRequest, message: reason },
+        (None, Ok(_)) => RenderOutcome::Failed { code: RenderFailure::NoMap, message: "this server has no map to render: start it with `webfusion serve --map MAP.wfm`".to_owned() },
+        (Some(renderer), Ok(request)) => renderer.render(request).await,
+    };
+    queue.reply(WsMessage::Binary(Message::RenderReply { request_id, outcome }.encode().into()));
+}
+
 /// Runs a client of a live camera: frames flow while it plays, from the newest on.
-async fn drive_live_session(stream: &mut futures_util::stream::SplitStream<WebSocket>, hub: &LiveHub, queue: &OutQueue) -> Result<(), (ErrorCode, String)> {
+async fn drive_live_session(stream: &mut futures_util::stream::SplitStream<WebSocket>, hub: &LiveHub, renderer: Option<&Renderer>, queue: &OutQueue) -> Result<(), (ErrorCode, String)> {
     let mut frames = hub.frames.subscribe();
     if let Some(reason) = hub.failure.lock().unwrap_or_else(std::sync::PoisonError::into_inner).clone() {
         return Err((ErrorCode::SourceFailed, reason));
@@ -705,8 +761,15 @@ async fn drive_live_session(stream: &mut futures_util::stream::SplitStream<WebSo
     loop {
         tokio::select! {
             incoming = stream.next() => {
-                let Some(control) = client_control(incoming)? else { return Ok(()) };
-                let Some(control) = control else { continue };
+                let control = match from_client(incoming)? {
+                    FromClient::Left => return Ok(()),
+                    FromClient::Nothing => continue,
+                    FromClient::Render(request) => {
+                        answer_render(renderer, queue, request).await;
+                        continue;
+                    }
+                    FromClient::Control(control) => control,
+                };
                 apply_live_control(&mut playback, control).map_err(|reason| (ErrorCode::InvalidControl, reason))?;
                 queue.reply(status(&mut playback));
             }
@@ -770,7 +833,9 @@ fn kind_name(message: &Message) -> &'static str {
         Message::Frame(_) => "frame",
         Message::Status(_) => "status",
         Message::Error { .. } => "error",
+        Message::RenderReply { .. } => "render reply",
         Message::Control(_) => "control",
+        Message::RenderRequest(_) => "render request",
     }
 }
 

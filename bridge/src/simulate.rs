@@ -101,12 +101,19 @@ fn poses(args: &SimulateArgs) -> anyhow::Result<Vec<TimedPose>> {
 }
 
 fn sensor_options(args: &SimulateArgs) -> anyhow::Result<SensorOptions> {
+    kinect_sensor(args.depth_scale, args.radial, (args.noise == NoiseKind::Kinect).then_some(args.seed), (args.min_depth, args.max_depth), args.color)
+}
+
+/// A virtual Kinect's options: depth at `units_per_metre` (radial or along z), within
+/// `range_m` (each end the Kinect model's where `None`), with the model's seeded noise when
+/// `noise_seed` is given, and the map's colour when `color`. `simulate` and `serve --map` share it.
+pub(crate) fn kinect_sensor(units_per_metre: f32, radial: bool, noise_seed: Option<u32>, range_m: (Option<f32>, Option<f32>), color: bool) -> anyhow::Result<SensorOptions> {
     let model = KinectModel::default();
-    let near = args.min_depth.unwrap_or(model.min_depth_m);
-    let far = args.max_depth.unwrap_or(model.max_depth_m);
+    let near = range_m.0.unwrap_or(model.min_depth_m);
+    let far = range_m.1.unwrap_or(model.max_depth_m);
     anyhow::ensure!(near.is_finite() && far.is_finite() && near >= 0.0 && far > near, "--min-depth {near} / --max-depth {far}: an empty range");
     let model = KinectModel { min_depth_m: near.max(0.01), ..model };
-    Ok(SensorOptions { units_per_metre: args.depth_scale, radial: args.radial, noise: (args.noise == NoiseKind::Kinect).then_some((model, args.seed)), depth_range_m: (near, far), color: args.color })
+    Ok(SensorOptions { units_per_metre, radial, noise: noise_seed.map(|seed| (model, seed)), depth_range_m: (near, far), color })
 }
 
 /// A TUM-layout directory being written: depth (and colour) image folders with their lists, the

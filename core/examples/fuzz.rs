@@ -18,7 +18,7 @@ use std::time::Instant;
 use glam::{DQuat, DVec3};
 use webfusion_core::codec::{ColorCodec, DepthCodec, png, rvl};
 use webfusion_core::io::trajectory::TimedPose;
-use webfusion_core::protocol::{Control, Delivery, FrameMessage, Hello, Message, PlaybackState, Status, WireColor};
+use webfusion_core::protocol::{Control, Delivery, FrameMessage, Hello, Message, PlaybackState, RenderNoise, RenderOutcome, RenderRequest, RenderedView, Status, WireColor, WireDepth};
 use webfusion_core::recording::{RecordingOptions, RecordingReader, RecordingWriter, TakeStats};
 use webfusion_core::source::FrameSource as _;
 use webfusion_core::{ColorImage, DepthImage, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
@@ -134,6 +134,31 @@ fn messages() -> Vec<Vec<u8>> {
         Message::Frame(frame_message(WireColor::Raw, f.color.rgb8.clone())).encode(),
         Message::Frame(frame_message(WireColor::Coded(ColorCodec::Jpeg), ColorCodec::Jpeg.encode(&f.color, 80).expect("jpeg"))).encode(),
         Message::Frame(frame_message(WireColor::Coded(ColorCodec::Png), ColorCodec::Png.encode(&f.color, 0).expect("png"))).encode(),
+        Message::RenderRequest(RenderRequest {
+            request_id: 4,
+            world_from_camera: Se3::IDENTITY,
+            intrinsics: calibration().intrinsics,
+            depth_units_per_metre: 5000.0,
+            radial: false,
+            depth_range_m: Some((0.4, 4.0)),
+            noise: Some(RenderNoise { seed: 1, frame_index: 2 }),
+            color: true,
+            depth_encoding: WireDepth::Raw,
+        })
+        .encode(),
+        Message::RenderReply {
+            request_id: 4,
+            outcome: RenderOutcome::View(RenderedView {
+                width_px: f.depth.width_px,
+                height_px: f.depth.height_px,
+                depth_units_per_metre: 5000.0,
+                radial: false,
+                depth_encoding: WireDepth::Raw,
+                depth_payload: WireDepth::Raw.encode(&f.depth),
+                color_rgb8: Some(f.color.rgb8.clone()),
+            }),
+        }
+        .encode(),
     ]
 }
 

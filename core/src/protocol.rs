@@ -11,7 +11,14 @@
 //! | 2 `Frame` | server → client | sequence, index, timestamps, optional ground-truth pose, depth (RVL), colour |
 //! | 3 `Status` | server → client | playback state, next index, rate, loop, delivery, sent/dropped/skipped counts |
 //! | 4 `Error` | server → client | code and message; the server closes after it |
+//! | 5 `RenderReply` | server → client | the request's id, then a rendered view (depth, optional colour) or why not |
 //! | 16 `Control` | client → server | play, pause, step, seek, rate, loop, delivery |
+//! | 17 `RenderRequest` | client → server | id, `world_from_camera`, intrinsics, depth scale and encoding, range, noise, colour |
+//!
+//! Render requests (`serve --map`) let any WebSocket client, a planner in any language, query
+//! the virtual depth sensor at a pose; `scripts/render_client.py` is a stdlib-only example. A
+//! request that does not decode is answered with a failed [`RenderReply`] naming the problem
+//! when its id can be read ([`render_request_id`]), and the session stays open.
 //!
 //! A message of another version is rejected with [`Error::Protocol`] naming both versions, so
 //! old and new peers fail loudly instead of misreading each other. Decoding never allocates
@@ -53,7 +60,12 @@ const KIND_HELLO: u8 = 1;
 const KIND_FRAME: u8 = 2;
 const KIND_STATUS: u8 = 3;
 const KIND_ERROR: u8 = 4;
+const KIND_RENDER_REPLY: u8 = 5;
 const KIND_CONTROL: u8 = 16;
+const KIND_RENDER_REQUEST: u8 = 17;
+
+/// Largest image side a render request may ask for, pixels.
+pub const MAX_RENDER_SIDE_PX: u32 = 4096;
 
 /// How a server delivers frames to one client.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -82,6 +94,152 @@ pub enum WireColor {
     Raw,
     /// A compressed image file.
     Coded(ColorCodec),
+}
+
+/// Depth payload encoding on the wire of a render reply.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WireDepth {
+    /// Row-major u16 little-endian, `2 * width * height` bytes (simplest to read anywhere).
+    Raw,
+    /// A lossless depth codec.
+    Coded(DepthCodec),
+}
+
+impl WireDepth {
+    fn id(self) -> u8 {
+        match self {
+            Self::Raw => 0,
+            Self::Coded(codec) => codec.id(),
+        }
+    }
+
+    fn from_id(id: u8) -> Option<Self> {
+        if id == 0 { Some(Self::Raw) } else { DepthCodec::from_id(id).map(Self::Coded) }
+    }
+
+    /// `image` in this encoding.
+    pub fn encode(self, image: &DepthImage) -> Vec<u8> {
+        match self {
+            Self::Raw => image.units.iter().flat_map(|u| u.to_le_bytes()).collect(),
+            Self::Coded(codec) => codec.encode(image),
+        }
+    }
+
+    /// A `width_px` x `height_px` image from `payload`; a payload of the wrong size is an error.
+    pub fn decode(self, payload: &[u8], width_px: u32, height_px: u32) -> Result<DepthImage> {
+        match self {
+            Self::Raw => {
+                let pixels = width_px as usize * height_px as usize;
+                if payload.len() != 2 * pixels {
+                    return Err(protocol_error(format!("raw depth payload has {} bytes, {width_px}x{height_px} u16 needs {}", payload.len(), 2 * pixels)));
+                }
+                DepthImage::new(width_px, height_px, payload.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect())
+            }
+            Self::Coded(codec) => codec.decode(payload, width_px, height_px),
+        }
+    }
+}
+
+/// Seeded depth noise for a render request: the Kinect v1 model of `webfusion simulate
+/// --noise kinect`. A view's noise depends only on the seed, the frame index and the pixel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderNoise {
+    /// The noise's seed.
+    pub seed: u32,
+    /// The frame index the noise is drawn for (two requests with the same seed and index at
+    /// the same pose give the same view).
+    pub frame_index: u32,
+}
+
+/// A client's request to render the served map (`serve --map`) at a pose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderRequest {
+    /// Chosen by the client; the reply carries it back.
+    pub request_id: u32,
+    /// The virtual camera's pose in the map's frame (`world_from_camera`, camera axes x right,
+    /// y down, z forward).
+    pub world_from_camera: Se3,
+    /// The virtual camera's pinhole model and image size.
+    pub intrinsics: PinholeIntrinsics,
+    /// Raw depth units per metre of the reply (TUM: 5000).
+    pub depth_units_per_metre: f32,
+    /// Distance along each pixel's ray instead of depth along z.
+    pub radial: bool,
+    /// Nearest and farthest depth with a return, metres; `None`: the Kinect model's range.
+    pub depth_range_m: Option<(f32, f32)>,
+    /// Seeded Kinect noise; `None`: exact depth.
+    pub noise: Option<RenderNoise>,
+    /// Also return the map's colour at each pixel.
+    pub color: bool,
+    /// How the reply's depth is encoded.
+    pub depth_encoding: WireDepth,
+}
+
+/// A rendered view: what a depth sensor at the request's pose would see.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderedView {
+    /// Image width, pixels.
+    pub width_px: u32,
+    /// Image height, pixels.
+    pub height_px: u32,
+    /// Raw depth units per metre.
+    pub depth_units_per_metre: f32,
+    /// Whether depth is the distance along each ray (else depth along z).
+    pub radial: bool,
+    /// Depth encoding.
+    pub depth_encoding: WireDepth,
+    /// Depth payload: one u16 per pixel once decoded, 0 where nothing was hit or out of range.
+    pub depth_payload: Vec<u8>,
+    /// The map's colour, packed RGB8 (`3 * width * height` bytes), when asked for.
+    pub color_rgb8: Option<Vec<u8>>,
+}
+
+impl RenderedView {
+    /// The depth image.
+    pub fn depth_image(&self) -> Result<DepthImage> {
+        self.depth_encoding.decode(&self.depth_payload, self.width_px, self.height_px)
+    }
+}
+
+/// Why a render request was not answered with a view.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum RenderFailure {
+    /// The server has no map to render (start it with `serve --map`).
+    NoMap = 1,
+    /// The request is malformed or its values are out of range.
+    InvalidRequest = 2,
+    /// Rendering failed on the server (the GPU reported an error).
+    RenderFailed = 3,
+}
+
+/// The answer to a render request.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RenderOutcome {
+    /// The rendered view.
+    View(RenderedView),
+    /// No view, and why.
+    Failed {
+        /// Machine-readable reason.
+        code: RenderFailure,
+        /// Human-readable reason.
+        message: String,
+    },
+}
+
+/// The largest reply a render request can produce: raw depth, colour and the fixed fields.
+fn render_reply_bytes(width_px: u32, height_px: u32, color: bool) -> usize {
+    let pixels = width_px as usize * height_px as usize;
+    64 + 2 * pixels + if color { 3 * pixels } else { 0 }
+}
+
+/// The id of a render request in `bytes` when at least its header and id can be read, whether
+/// or not the rest decodes: the server answers a bad request instead of closing the session.
+pub fn render_request_id(bytes: &[u8]) -> Option<u32> {
+    match bytes {
+        [m0, m1, version, KIND_RENDER_REQUEST, a, b, c, d, ..] if [*m0, *m1] == PROTOCOL_MAGIC && *version == PROTOCOL_VERSION => Some(u32::from_le_bytes([*a, *b, *c, *d])),
+        _ => None,
+    }
 }
 
 /// A command from a client.
@@ -192,8 +350,17 @@ pub enum Message {
         /// Human-readable reason.
         message: String,
     },
+    /// Server → client: the answer to the client's [`Message::RenderRequest`] of the same id.
+    RenderReply {
+        /// The request's id.
+        request_id: u32,
+        /// The view, or why there is none.
+        outcome: RenderOutcome,
+    },
     /// Client → server.
     Control(Control),
+    /// Client → server: render the served map at a pose.
+    RenderRequest(RenderRequest),
 }
 
 impl FrameMessage {
@@ -244,10 +411,7 @@ impl Message {
                     None => w.u8(0),
                     Some(pose) => {
                         w.u8(1);
-                        let (t, q) = (pose.translation_m, pose.rotation);
-                        for v in [t.x, t.y, t.z, q.x, q.y, q.z, q.w] {
-                            w.f64(v);
-                        }
+                        w.pose(pose);
                     }
                 }
                 w.u8(frame.depth_codec.id());
@@ -302,6 +466,62 @@ impl Message {
                     }
                 }
             }
+            Message::RenderRequest(request) => {
+                w.u8(KIND_RENDER_REQUEST);
+                w.u32(request.request_id);
+                w.pose(&request.world_from_camera);
+                let k = &request.intrinsics;
+                w.u32(k.width_px);
+                w.u32(k.height_px);
+                for v in [k.fx_px, k.fy_px, k.cx_px, k.cy_px, request.depth_units_per_metre] {
+                    w.f32(v);
+                }
+                w.u8(u8::from(request.radial));
+                w.u8(u8::from(request.color));
+                w.u8(request.depth_encoding.id());
+                match request.depth_range_m {
+                    None => w.u8(0),
+                    Some((near_m, far_m)) => {
+                        w.u8(1);
+                        w.f32(near_m);
+                        w.f32(far_m);
+                    }
+                }
+                match request.noise {
+                    None => w.u8(0),
+                    Some(noise) => {
+                        w.u8(1);
+                        w.u32(noise.seed);
+                        w.u32(noise.frame_index);
+                    }
+                }
+            }
+            Message::RenderReply { request_id, outcome } => {
+                w.u8(KIND_RENDER_REPLY);
+                w.u32(*request_id);
+                match outcome {
+                    RenderOutcome::View(view) => {
+                        w.u8(0);
+                        w.u32(view.width_px);
+                        w.u32(view.height_px);
+                        w.f32(view.depth_units_per_metre);
+                        w.u8(u8::from(view.radial));
+                        w.u8(view.depth_encoding.id());
+                        w.blob(&view.depth_payload);
+                        match &view.color_rgb8 {
+                            None => w.u8(0),
+                            Some(rgb) => {
+                                w.u8(1);
+                                w.blob(rgb);
+                            }
+                        }
+                    }
+                    RenderOutcome::Failed { code, message } => {
+                        w.u8(*code as u8);
+                        w.text(message);
+                    }
+                }
+            }
         }
         w.0
     }
@@ -309,6 +529,7 @@ impl Message {
     fn encoded_len_hint(&self) -> usize {
         match self {
             Message::Frame(f) => 128 + f.depth_payload.len() + f.color_payload.len(),
+            Message::RenderReply { outcome: RenderOutcome::View(v), .. } => 64 + v.depth_payload.len() + v.color_rgb8.as_ref().map_or(0, Vec::len),
             _ => 64,
         }
     }
@@ -352,19 +573,7 @@ impl Message {
                 let index = r.u64("index")?;
                 let depth_timestamp_ns = r.i64("depth timestamp")?;
                 let color_timestamp_ns = r.i64("colour timestamp")?;
-                let ground_truth = if r.bool("ground truth flag")? {
-                    let mut v = [0.0_f64; 7];
-                    for slot in &mut v {
-                        *slot = r.f64("ground-truth pose")?;
-                    }
-                    let rotation = DQuat::from_xyzw(v[3], v[4], v[5], v[6]);
-                    if !v.iter().all(|x| x.is_finite()) || (rotation.length() - 1.0).abs() > 1e-3 {
-                        return Err(protocol_error("frame: ground-truth pose is not finite or its quaternion is not unit".to_owned()));
-                    }
-                    Some(Se3::new(rotation.normalize(), DVec3::new(v[0], v[1], v[2])))
-                } else {
-                    None
-                };
+                let ground_truth = if r.bool("ground truth flag")? { Some(r.pose("frame: ground-truth pose")?) } else { None };
                 let depth_id = r.u8("depth codec")?;
                 let depth_codec = DepthCodec::from_id(depth_id).ok_or_else(|| protocol_error(format!("frame: unknown depth codec id {depth_id}")))?;
                 let depth_payload = r.blob("depth payload")?.to_vec();
@@ -417,6 +626,45 @@ impl Message {
                     other => return Err(protocol_error(format!("control: unknown op {other}"))),
                 })
             }
+            KIND_RENDER_REQUEST => Message::RenderRequest(r.render_request()?),
+            KIND_RENDER_REPLY => {
+                let request_id = r.u32("request id")?;
+                let outcome = match r.u8("render status")? {
+                    0 => {
+                        let width_px = r.u32("width")?;
+                        let height_px = r.u32("height")?;
+                        check_render_size(width_px, height_px, false).map_err(|e| protocol_error(format!("render reply: {e}")))?;
+                        let depth_units_per_metre = r.f32("depth units per metre")?;
+                        if !(depth_units_per_metre.is_finite() && depth_units_per_metre > 0.0) {
+                            return Err(protocol_error(format!("render reply: depth units per metre must be finite and positive, not {depth_units_per_metre}")));
+                        }
+                        let radial = r.bool("radial flag")?;
+                        let depth_encoding = r.wire_depth()?;
+                        let depth_payload = r.blob("depth payload")?.to_vec();
+                        let color_rgb8 = if r.bool("colour flag")? {
+                            let rgb = r.blob("colour payload")?;
+                            let expected = 3 * width_px as usize * height_px as usize;
+                            if rgb.len() != expected {
+                                return Err(protocol_error(format!("render reply: colour payload has {} bytes, {width_px}x{height_px} RGB needs {expected}", rgb.len())));
+                            }
+                            Some(rgb.to_vec())
+                        } else {
+                            None
+                        };
+                        RenderOutcome::View(RenderedView { width_px, height_px, depth_units_per_metre, radial, depth_encoding, depth_payload, color_rgb8 })
+                    }
+                    status => {
+                        let code = match status {
+                            1 => RenderFailure::NoMap,
+                            2 => RenderFailure::InvalidRequest,
+                            3 => RenderFailure::RenderFailed,
+                            other => return Err(protocol_error(format!("render reply: unknown status {other}"))),
+                        };
+                        RenderOutcome::Failed { code, message: r.text("render failure message")? }
+                    }
+                };
+                Message::RenderReply { request_id, outcome }
+            }
             other => return Err(protocol_error(format!("unknown message kind {other}"))),
         };
         if r.at != bytes.len() {
@@ -424,6 +672,23 @@ impl Message {
         }
         Ok(message)
     }
+}
+
+/// Whether a `width_px` x `height_px` view (with colour: `color`) is one the protocol carries.
+fn check_render_size(width_px: u32, height_px: u32, color: bool) -> std::result::Result<(), String> {
+    if width_px == 0 || height_px == 0 || width_px > MAX_RENDER_SIDE_PX || height_px > MAX_RENDER_SIDE_PX {
+        return Err(format!("image size {width_px}x{height_px} is outside 1..={MAX_RENDER_SIDE_PX} per side"));
+    }
+    let bytes = render_reply_bytes(width_px, height_px, color);
+    if bytes > MAX_SERVER_MESSAGE_BYTES {
+        return Err(format!(
+            "a {width_px}x{height_px} view{} needs a {:.1} MiB reply, more than the {} MiB a server may send",
+            if color { " with colour" } else { "" },
+            bytes as f64 / 1048576.0,
+            MAX_SERVER_MESSAGE_BYTES >> 20
+        ));
+    }
+    Ok(())
 }
 
 fn delivery_id(delivery: Delivery) -> u8 {
@@ -459,6 +724,13 @@ impl Writer {
     }
     fn f64(&mut self, v: f64) {
         self.bytes(&v.to_le_bytes());
+    }
+    /// Translation x, y, z then quaternion x, y, z, w, as f64.
+    fn pose(&mut self, pose: &Se3) {
+        let (t, q) = (pose.translation_m, pose.rotation);
+        for v in [t.x, t.y, t.z, q.x, q.y, q.z, q.w] {
+            self.f64(v);
+        }
     }
     /// u16 length + UTF-8, cut at [`MAX_TEXT_BYTES`] on a character boundary.
     fn text(&mut self, s: &str) {
@@ -536,6 +808,58 @@ impl<'a> Reader<'a> {
         let len = self.u32(what)? as usize;
         self.take(len, what)
     }
+    /// A pose as [`Writer::pose`] writes it: finite, with a unit quaternion (to 1e-3, then
+    /// normalised).
+    fn pose(&mut self, what: &str) -> Result<Se3> {
+        let mut v = [0.0_f64; 7];
+        for slot in &mut v {
+            *slot = self.f64(what)?;
+        }
+        let rotation = DQuat::from_xyzw(v[3], v[4], v[5], v[6]);
+        if !v.iter().all(|x| x.is_finite()) || (rotation.length() - 1.0).abs() > 1e-3 {
+            return Err(protocol_error(format!("{what} is not finite or its quaternion is not unit")));
+        }
+        Ok(Se3::new(rotation.normalize(), DVec3::new(v[0], v[1], v[2])))
+    }
+    fn wire_depth(&mut self) -> Result<WireDepth> {
+        let id = self.u8("depth encoding")?;
+        WireDepth::from_id(id).ok_or_else(|| protocol_error(format!("unknown depth encoding {id} (0 raw u16, 1 RVL, 2 RVL+DEFLATE)")))
+    }
+    /// A render request's body, every value checked.
+    fn render_request(&mut self) -> Result<RenderRequest> {
+        let invalid = |what: String| protocol_error(format!("render request: {what}"));
+        let request_id = self.u32("request id")?;
+        let world_from_camera = self.pose("render request: world_from_camera")?;
+        let width_px = self.u32("width")?;
+        let height_px = self.u32("height")?;
+        let [fx_px, fy_px, cx_px, cy_px, depth_units_per_metre] = [self.f32("fx")?, self.f32("fy")?, self.f32("cx")?, self.f32("cy")?, self.f32("depth units per metre")?];
+        if !([fx_px, fy_px, cx_px, cy_px].iter().all(|v| v.is_finite()) && fx_px > 0.0 && fy_px > 0.0) {
+            return Err(invalid(format!("intrinsics fx {fx_px}, fy {fy_px}, cx {cx_px}, cy {cy_px} must be finite with positive focal lengths")));
+        }
+        if !(depth_units_per_metre.is_finite() && depth_units_per_metre > 0.0) {
+            return Err(invalid(format!("depth units per metre must be finite and positive, not {depth_units_per_metre}")));
+        }
+        let radial = self.bool("radial flag")?;
+        let color = self.bool("colour flag")?;
+        check_render_size(width_px, height_px, color).map_err(invalid)?;
+        let depth_encoding = self.wire_depth()?;
+        let depth_range_m = if self.bool("depth range flag")? {
+            let (near_m, far_m) = (self.f32("nearest depth")?, self.f32("farthest depth")?);
+            if !(near_m.is_finite() && far_m.is_finite() && near_m >= 0.0 && far_m > near_m) {
+                return Err(invalid(format!("depth range [{near_m}, {far_m}] m is empty or not finite")));
+            }
+            Some((near_m, far_m))
+        } else {
+            None
+        };
+        let noise = match self.u8("noise model")? {
+            0 => None,
+            1 => Some(RenderNoise { seed: self.u32("noise seed")?, frame_index: self.u32("noise frame index")? }),
+            other => return Err(invalid(format!("unknown noise model {other} (0 none, 1 kinect)"))),
+        };
+        let intrinsics = PinholeIntrinsics { fx_px, fy_px, cx_px, cy_px, width_px, height_px };
+        Ok(RenderRequest { request_id, world_from_camera, intrinsics, depth_units_per_metre, radial, depth_range_m, noise, color, depth_encoding })
+    }
     fn delivery(&mut self) -> Result<Delivery> {
         match self.u8("delivery mode")? {
             0 => Ok(Delivery::Lossless),
@@ -589,7 +913,118 @@ mod tests {
             Message::Control(Control::Rate(0.0)),
             Message::Control(Control::Loop(true)),
             Message::Control(Control::Delivery(Delivery::Live)),
+            Message::RenderRequest(render_request()),
+            Message::RenderRequest(RenderRequest {
+                request_id: 0,
+                world_from_camera: Se3::IDENTITY,
+                depth_range_m: None,
+                noise: None,
+                radial: false,
+                color: false,
+                depth_encoding: WireDepth::Coded(DepthCodec::RvlDeflate),
+                ..render_request()
+            }),
+            Message::RenderReply {
+                request_id: 9,
+                outcome: RenderOutcome::View(RenderedView {
+                    width_px: 2,
+                    height_px: 1,
+                    depth_units_per_metre: 5000.0,
+                    radial: true,
+                    depth_encoding: WireDepth::Raw,
+                    depth_payload: vec![1, 0, 2, 0],
+                    color_rgb8: Some(vec![7; 6]),
+                }),
+            },
+            Message::RenderReply {
+                request_id: u32::MAX,
+                outcome: RenderOutcome::View(RenderedView {
+                    width_px: 640,
+                    height_px: 480,
+                    depth_units_per_metre: 1000.0,
+                    radial: false,
+                    depth_encoding: WireDepth::Coded(DepthCodec::Rvl),
+                    depth_payload: vec![3; 5],
+                    color_rgb8: None,
+                }),
+            },
+            Message::RenderReply { request_id: 1, outcome: RenderOutcome::Failed { code: RenderFailure::NoMap, message: "start the server with --map".into() } },
+            Message::RenderReply { request_id: 2, outcome: RenderOutcome::Failed { code: RenderFailure::InvalidRequest, message: String::new() } },
+            Message::RenderReply { request_id: 3, outcome: RenderOutcome::Failed { code: RenderFailure::RenderFailed, message: "lost".into() } },
         ]
+    }
+
+    fn render_request() -> RenderRequest {
+        RenderRequest {
+            request_id: 77,
+            world_from_camera: Se3::new(DQuat::from_rotation_x(-0.4), DVec3::new(0.5, 1.2, -3.0)),
+            intrinsics: TUM_FREIBURG1,
+            depth_units_per_metre: 5000.0,
+            radial: true,
+            depth_range_m: Some((0.3, 6.0)),
+            noise: Some(RenderNoise { seed: 5, frame_index: 12 }),
+            color: true,
+            depth_encoding: WireDepth::Raw,
+        }
+    }
+
+    #[test]
+    fn render_requests_with_bad_values_are_refused_by_name_and_their_id_is_still_read() {
+        let bad = |f: &dyn Fn(&mut RenderRequest)| {
+            let mut request = render_request();
+            f(&mut request);
+            let bytes = Message::RenderRequest(request).encode();
+            assert_eq!(render_request_id(&bytes), Some(77), "the id is readable whatever follows");
+            Message::decode(&bytes).expect_err("a bad request decoded").to_string()
+        };
+        type Spoil = dyn Fn(&mut RenderRequest);
+        let cases: [(&str, &Spoil); 9] = [
+            ("not finite", &|r| r.world_from_camera.translation_m.x = f64::NAN),
+            ("not unit", &|r| r.world_from_camera.rotation = DQuat::from_xyzw(0.0, 0.0, 0.0, 2.0)),
+            ("image size 0x480", &|r| r.intrinsics.width_px = 0),
+            ("outside 1..=4096", &|r| r.intrinsics.height_px = 5000),
+            ("more than the 16 MiB", &|r| (r.intrinsics.width_px, r.intrinsics.height_px) = (2048, 2048)),
+            ("positive focal lengths", &|r| r.intrinsics.fx_px = -1.0),
+            ("finite with", &|r| r.intrinsics.cy_px = f32::INFINITY),
+            ("depth units per metre", &|r| r.depth_units_per_metre = 0.0),
+            ("depth range [2, 1]", &|r| r.depth_range_m = Some((2.0, 1.0))),
+        ];
+        for (needle, f) in cases {
+            let message = bad(f);
+            assert!(message.contains(needle), "{needle:?} not in {message:?}");
+        }
+        // 2048x2048 fits without colour; the reply is the limit, not the side.
+        let mut big = render_request();
+        (big.intrinsics.width_px, big.intrinsics.height_px, big.color) = (2048, 2048, false);
+        assert!(Message::decode(&Message::RenderRequest(big).encode()).is_ok(), "2048x2048 depth only");
+        let mut noise = Message::RenderRequest(render_request()).encode();
+        let noise_at = noise.len() - 9;
+        noise[noise_at] = 2;
+        assert!(Message::decode(&noise).expect_err("noise model 2").to_string().contains("noise model 2"));
+        assert_eq!(render_request_id(&Message::Control(Control::Play).encode()), None, "not a render request");
+        assert_eq!(render_request_id(&Message::RenderRequest(render_request()).encode()[..7]), None, "no whole id");
+        let mut other_version = Message::RenderRequest(render_request()).encode();
+        other_version[2] = PROTOCOL_VERSION + 1;
+        assert_eq!(render_request_id(&other_version), None, "another version is not read");
+    }
+
+    #[test]
+    fn rendered_depth_decodes_in_every_encoding_and_wrong_sizes_are_errors() {
+        let depth = DepthImage::new(4, 3, (0..12).map(|i| i * 1000).collect()).expect("depth");
+        for encoding in [WireDepth::Raw, WireDepth::Coded(DepthCodec::Rvl), WireDepth::Coded(DepthCodec::RvlDeflate)] {
+            let view = RenderedView { width_px: 4, height_px: 3, depth_units_per_metre: 5000.0, radial: false, depth_encoding: encoding, depth_payload: encoding.encode(&depth), color_rgb8: None };
+            assert_eq!(view.depth_image().expect("decoding"), depth, "{encoding:?}");
+            assert!(encoding.decode(&view.depth_payload, 4, 4).is_err(), "{encoding:?} at the wrong size");
+        }
+        assert_eq!(WireDepth::Raw.encode(&depth)[2..4], 1000_u16.to_le_bytes(), "raw is u16 little-endian, row-major");
+        let mut short_color = Message::RenderReply {
+            request_id: 1,
+            outcome: RenderOutcome::View(RenderedView { width_px: 2, height_px: 1, depth_units_per_metre: 5000.0, radial: false, depth_encoding: WireDepth::Raw, depth_payload: vec![0; 4], color_rgb8: Some(vec![0; 5]) }),
+        }
+        .encode();
+        assert!(Message::decode(&short_color).expect_err("5 bytes of colour for 2 pixels").to_string().contains("needs 6"));
+        short_color[9..13].copy_from_slice(&0_u32.to_le_bytes());
+        assert!(Message::decode(&short_color).is_err(), "a 0-pixel view");
     }
 
     #[test]

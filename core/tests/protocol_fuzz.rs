@@ -16,7 +16,7 @@ fn config() -> ProptestConfig {
 
 /// Bytes that start with a valid header and a plausible kind, so the fuzzer reaches the bodies.
 fn with_header() -> impl Strategy<Value = Vec<u8>> {
-    (prop::sample::select(vec![1_u8, 2, 3, 4, 16, 0, 255]), prop::collection::vec(any::<u8>(), 0..256)).prop_map(|(kind, body)| {
+    (prop::sample::select(vec![1_u8, 2, 3, 4, 5, 16, 17, 0, 255]), prop::collection::vec(any::<u8>(), 0..256)).prop_map(|(kind, body)| {
         let mut bytes = PROTOCOL_MAGIC.to_vec();
         bytes.push(PROTOCOL_VERSION);
         bytes.push(kind);

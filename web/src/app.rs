@@ -363,7 +363,9 @@ impl App {
                     }
                 }
                 Ok(Message::Error { code, message }) => self.last_error = Some(format!("bridge: {message} ({code:?})")),
-                Ok(Message::Control(_)) => self.last_error = Some("the bridge sent a control message".to_owned()),
+                Ok(Message::Control(_) | Message::RenderRequest(_)) => self.last_error = Some("the bridge sent a client's message".to_owned()),
+                // The page sends no render requests yet; a reply is the bridge's mistake.
+                Ok(Message::RenderReply { request_id, .. }) => self.last_error = Some(format!("the bridge answered render request {request_id}, which this page never sent")),
                 Err(e) => self.last_error = Some(format!("undecodable message from the bridge: {e}")),
             },
             Event::Closed { generation, code, reason } if generation == self.generation => {

@@ -1,0 +1,156 @@
+// SPDX-License-Identifier: MIT
+//! `serve --map`: the virtual depth sensor behind the protocol's render requests.
+//!
+//! One worker thread owns the GPU, the saved map and a few [`VirtualSensor`]s (one per
+//! combination of intrinsics and sensor options recently asked for, so a planner that queries
+//! many poses with one camera allocates once). Sessions hand it requests over a bounded
+//! channel and await the reply; requests from all clients are rendered one at a time, in the
+//! order they arrive.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use tokio::sync::{mpsc, oneshot};
+use webfusion_core::map::Map;
+use webfusion_core::map::file::{read_map_file, read_map_file_recovering};
+use webfusion_core::protocol::{RenderFailure, RenderOutcome, RenderRequest, RenderedView};
+use webfusion_core::sim::sensor::{SensorOptions, VirtualSensor};
+use webfusion_core::tsdf::TsdfStore as _;
+use webfusion_core::{DepthImage, Gpu, GpuOptions, PinholeIntrinsics};
+
+/// Requests that may wait for the worker before a session waits to hand in its own.
+const QUEUED_REQUESTS: usize = 16;
+/// Sensors kept between requests (each holds its images' buffers on the GPU).
+const CACHED_SENSORS: usize = 4;
+
+struct Job {
+    request: RenderRequest,
+    reply: oneshot::Sender<RenderOutcome>,
+}
+
+/// The render worker of `serve --map`.
+pub(crate) struct Renderer {
+    jobs: mpsc::Sender<Job>,
+}
+
+impl Renderer {
+    /// Loads the map at `path` onto the GPU in a new worker thread; a map that cannot be read
+    /// or loaded fails here, before the server listens. Returns the worker and a line
+    /// describing the map.
+    pub(crate) fn start(options: GpuOptions, path: &Path, skip_corrupt: bool) -> anyhow::Result<(Self, String)> {
+        let (jobs, mut queue) = mpsc::channel::<Job>(QUEUED_REQUESTS);
+        let (ready_tx, ready) = std::sync::mpsc::sync_channel::<anyhow::Result<String>>(1);
+        let path: PathBuf = path.to_owned();
+        std::thread::Builder::new()
+            .name("webfusion-render".to_owned())
+            .spawn(move || {
+                let (gpu, map) = match load(&options, &path, skip_corrupt) {
+                    Ok((gpu, map, summary)) => {
+                        let _ = ready_tx.send(Ok(summary));
+                        (gpu, map)
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        return;
+                    }
+                };
+                let mut sensors = SensorCache::default();
+                while let Some(job) = queue.blocking_recv() {
+                    let outcome = render(&gpu, &map, &mut sensors, &job.request);
+                    // A client that left before its answer needs none.
+                    let _ = job.reply.send(outcome);
+                }
+            })
+            .context("starting the render worker")?;
+        let summary = ready.recv().context("the render worker stopped while loading the map")??;
+        Ok((Self { jobs }, summary))
+    }
+
+    /// Renders `request`, waiting behind the requests queued before it.
+    pub(crate) async fn render(&self, request: RenderRequest) -> RenderOutcome {
+        let stopped = || RenderOutcome::Failed { code: RenderFailure::RenderFailed, message: "the server's render worker has stopped".to_owned() };
+        let (reply, answer) = oneshot::channel();
+        if self.jobs.send(Job { request, reply }).await.is_err() {
+            return stopped();
+        }
+        answer.await.unwrap_or_else(|_| stopped())
+    }
+}
+
+/// The GPU and the map at `path` on it, with a line describing the map.
+fn load(options: &GpuOptions, path: &Path, skip_corrupt: bool) -> anyhow::Result<(Gpu, Map, String)> {
+    let file = if skip_corrupt { read_map_file_recovering(path) } else { read_map_file(path) }.with_context(|| format!("reading the map {}", path.display()))?;
+    if let Some(damage) = &file.damage {
+        eprintln!("warning: {}: {damage}; serving the intact blocks", path.display());
+    }
+    let gpu = pollster::block_on(Gpu::new(options))?;
+    let map = webfusion_core::map::resident_map(&gpu, &file.header, &file.blocks).with_context(|| format!("loading {}", path.display()))?;
+    let summary = format!(
+        "map {}: {} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU); render requests are answered",
+        path.display(),
+        file.blocks.len(),
+        file.header.voxel_size_m * 1e3,
+        file.header.kind.name(),
+        map.memory_bytes() as f64 / 1048576.0
+    );
+    Ok((gpu, map, summary))
+}
+
+/// The most recently used sensors, newest first.
+#[derive(Default)]
+struct SensorCache(VecDeque<(PinholeIntrinsics, SensorOptions, VirtualSensor)>);
+
+impl SensorCache {
+    /// The sensor for `k` and `options`, made (evicting the least recently used) when missing.
+    fn get(&mut self, gpu: &Gpu, map: &Map, k: PinholeIntrinsics, options: SensorOptions) -> webfusion_core::Result<&mut VirtualSensor> {
+        if let Some(at) = self.0.iter().position(|(ck, co, _)| *ck == k && *co == options) {
+            let entry = self.0.remove(at).expect("found");
+            self.0.push_front(entry);
+        } else {
+            let sensor = VirtualSensor::new(gpu, map, k, options)?;
+            self.0.truncate(CACHED_SENSORS - 1);
+            self.0.push_front((k, options, sensor));
+        }
+        Ok(&mut self.0.front_mut().expect("just placed").2)
+    }
+}
+
+/// Renders one request: its view, or why there is none.
+fn render(gpu: &Gpu, map: &Map, sensors: &mut SensorCache, request: &RenderRequest) -> RenderOutcome {
+    let failed = |code, message: String| RenderOutcome::Failed { code, message };
+    let k = request.intrinsics;
+    let options = match crate::simulate::kinect_sensor(request.depth_units_per_metre, request.radial, request.noise.map(|n| n.seed), (request.depth_range_m.map(|r| r.0), request.depth_range_m.map(|r| r.1)), request.color) {
+        Ok(options) => options,
+        Err(e) => return failed(RenderFailure::InvalidRequest, format!("{e:#}")),
+    };
+    let sensor = match sensors.get(gpu, map, k, options) {
+        Ok(sensor) => sensor,
+        // The sensor refuses what the protocol cannot check alone (a range past the u16 scale).
+        Err(webfusion_core::Error::InvalidConfig(reason)) => return failed(RenderFailure::InvalidRequest, reason),
+        Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
+    };
+    let frame_index = request.noise.map_or(0, |n| n.frame_index);
+    let frame = pollster::block_on(sensor.render(gpu, map, &request.world_from_camera, frame_index));
+    let errors = gpu.take_errors();
+    if !errors.is_empty() {
+        return failed(RenderFailure::RenderFailed, format!("the GPU reported errors: {}", errors.join("; ")));
+    }
+    let frame = match frame {
+        Ok(frame) => frame,
+        Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
+    };
+    let depth = match DepthImage::new(k.width_px, k.height_px, frame.depth_units) {
+        Ok(depth) => depth,
+        Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
+    };
+    RenderOutcome::View(RenderedView {
+        width_px: k.width_px,
+        height_px: k.height_px,
+        depth_units_per_metre: request.depth_units_per_metre,
+        radial: request.radial,
+        depth_encoding: request.depth_encoding,
+        depth_payload: request.depth_encoding.encode(&depth),
+        color_rgb8: frame.color_rgb8.map(|rgb| rgb.as_flattened().to_vec()),
+    })
+}
