@@ -8,6 +8,7 @@ mod compare;
 mod eval;
 #[cfg(feature = "openni2")]
 mod openni;
+mod occupancy;
 mod odometry;
 mod planes;
 mod plot;
@@ -85,6 +86,10 @@ enum Command {
     /// over 10 % relative error, new valid pixels, coverage, absolute errors; difference images
     /// and an error-vs-distance chart.
     Compare(compare::CompareArgs),
+    /// Seed 000's occupancy grid of a saved map (1 byte per cell: 255 occupied, 0 free, 128
+    /// never observed; x fastest), free space carved from the poses the map was fused from, with
+    /// a JSON description beside it.
+    ExportOccupancy(occupancy::ExportOccupancyArgs),
     /// Seed 003's plane segmentation of every frame: each frame's planes (normal, offset,
     /// area, extent) in its camera frame as `frames.json`, and optionally label images.
     Planes(planes::PlanesArgs),
@@ -159,6 +164,7 @@ fn main() -> anyhow::Result<()> {
         Command::SynthRoom(args) => synth::run(&args),
         Command::Simulate(args) => simulate::run(&options, &args),
         Command::Compare(args) => compare::run(&args),
+        Command::ExportOccupancy(args) => occupancy::run(&options, &args),
         Command::Planes(args) => planes::run(&options, &args),
         Command::Odometry(args) => odometry::run(&options, &args),
         Command::Serve(args) => serve::run(&options, args),

@@ -77,27 +77,40 @@ pub(crate) enum NoiseKind {
 
 /// The intrinsics of `--intrinsics` / `--image-size`.
 fn intrinsics(args: &SimulateArgs) -> anyhow::Result<PinholeIntrinsics> {
-    let size = args.image_size.as_deref().map(crate::calib::parse_image_size).transpose()?;
-    let Some(spec) = &args.intrinsics else {
-        let (w, h) = size.unwrap_or((640, 480));
+    camera(args.intrinsics.as_deref(), args.image_size.as_deref(), (640, 480))
+}
+
+/// A virtual camera from `--intrinsics fx,fy,cx,cy[,W,H]` and `--image-size WxH`: without
+/// intrinsics, the Kinect's nominal 525 px at 640x480 scaled to the size (`default_size` when
+/// none is given).
+pub(crate) fn camera(intrinsics: Option<&str>, image_size: Option<&str>, default_size: (u32, u32)) -> anyhow::Result<PinholeIntrinsics> {
+    let size = image_size.map(crate::calib::parse_image_size).transpose()?;
+    let Some(spec) = intrinsics else {
+        let (w, h) = size.unwrap_or(default_size);
         return Ok(crate::synth::intrinsics(w, h));
     };
-    let calibration = crate::calib::CalibrationArgs { intrinsics: Some(spec.clone()), depth_scale: None, image_size: args.image_size.clone() }.resolve()?.expect("--intrinsics given");
+    let calibration = crate::calib::CalibrationArgs { intrinsics: Some(spec.to_owned()), depth_scale: None, image_size: image_size.map(str::to_owned) }.resolve()?.expect("--intrinsics given");
     Ok(calibration.intrinsics)
 }
 
 /// The poses to render at, with their timestamps.
 fn poses(args: &SimulateArgs) -> anyhow::Result<Vec<TimedPose>> {
-    let poses = match (args.given.tum()?, args.given.robot()?) {
+    given_poses(&args.given)?.context("give the poses to render at: --poses FILE (TUM trajectory) or --robot-poses FILE")
+}
+
+/// The poses of `--poses` or `--robot-poses` with their timestamps (robot poses without any:
+/// 30 Hz from 0), checked non-empty and increasing in time; `None` when neither is given.
+pub(crate) fn given_poses(given: &crate::pose_args::PoseFileArgs) -> anyhow::Result<Option<Vec<TimedPose>>> {
+    let poses = match (given.tum()?, given.robot()?) {
         (Some(poses), _) => poses,
         (None, Some(robot)) => robot.into_iter().enumerate().map(|(i, p)| TimedPose { timestamp_ns: p.timestamp_ns.unwrap_or(i as i64 * FRAME_PERIOD_NS), world_from_camera: p.world_from_camera }).collect(),
-        (None, None) => anyhow::bail!("give the poses to render at: --poses FILE (TUM trajectory) or --robot-poses FILE"),
+        (None, None) => return Ok(None),
     };
-    anyhow::ensure!(!poses.is_empty(), "no poses to render at");
+    anyhow::ensure!(!poses.is_empty(), "no poses in {}", given.file().map_or_else(String::new, |f| f.display().to_string()));
     for pair in poses.windows(2) {
         anyhow::ensure!(pair[1].timestamp_ns > pair[0].timestamp_ns, "the poses' timestamps must increase (two frames at {} s)", format_timestamp_s(pair[1].timestamp_ns));
     }
-    Ok(poses)
+    Ok(Some(poses))
 }
 
 fn sensor_options(args: &SimulateArgs) -> anyhow::Result<SensorOptions> {

@@ -26,6 +26,7 @@ use crate::cpu::shared::{
 };
 
 pub mod file;
+pub mod occupancy;
 pub mod swap;
 use crate::tsdf::{TsdfConfig, TsdfStore, VolumeDesc};
 use crate::{Error, Gpu, Result};
