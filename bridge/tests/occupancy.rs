@@ -5,41 +5,18 @@
 //! the furniture) is unknown, never free. Bad grids and maps are clean errors.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use glam::DVec3;
-use webfusion_core::io::trajectory::format_tum_trajectory;
-use webfusion_core::recording::RecordingReader;
 use webfusion_core::sim::room::SyntheticRoom;
-use webfusion_core::source::FrameSource as _;
+
+mod common;
+use common::{fails, fused_room, ok, s, scratch, webfusion};
 
 const FREE: u8 = 0;
 const OCCUPIED: u8 = 255;
 const UNKNOWN: u8 = 128;
 const CELL_M: f64 = 0.05;
 const VOXEL: &str = "0.04";
-
-fn webfusion(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_webfusion")).args(args).env("XDG_RUNTIME_DIR", std::env::temp_dir()).output().expect("run webfusion")
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = webfusion(args);
-    assert!(o.status.success(), "webfusion {args:?} failed: {}", String::from_utf8_lossy(&o.stderr));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn fails(args: &[&str], needle: &str) {
-    let o = webfusion(args);
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success(), "webfusion {args:?} should fail");
-    assert!(stderr.contains(needle), "webfusion {args:?}: the error should say {needle:?}: {stderr}");
-    assert!(!stderr.contains("panicked"), "no panic: {stderr}");
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
 
 /// Signed distance from `p` to the room's solid geometry (walls, floor, ceiling, furniture):
 /// positive in its open space, negative behind a wall or inside furniture.
@@ -81,16 +58,8 @@ impl Grid {
 
 #[test]
 fn the_occupancy_grid_of_a_room_knows_free_from_occupied_from_unseen() {
-    let dir = std::env::temp_dir().join(format!("webfusion-occupancy-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("scratch dir");
-    let room_file = dir.join("room.wfr");
-    ok(&["synth-room", "--out", s(&room_file), "--size", "4,2.5,4", "--frames", "24", "--width", "160", "--height", "120"]);
-    let gt = RecordingReader::open(&room_file).expect("the room").ground_truth().expect("exact poses").to_vec();
-    let poses = dir.join("gt.txt");
-    std::fs::write(&poses, format_tum_trajectory(&gt)).expect("poses");
-    let map = dir.join("room.wfm");
-    ok(&["reconstruct", s(&room_file), "--poses", s(&poses), "--voxel-size", VOXEL, "--save-map", s(&map), "--no-mesh", "--out", s(&dir.join("fused"))]);
+    let dir = scratch("occupancy");
+    let common::FusedRoom { gt, poses, map, .. } = fused_room(&dir, 24, VOXEL);
     let room = SyntheticRoom::new(4.0, 2.5, 4.0);
 
     // The room (x ±2, y -1..1.5, z ±2, the map in the poses' frame) and 0.5 m around it.

@@ -8,7 +8,7 @@
 
 use std::io::BufRead as _;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use futures_util::{SinkExt as _, StreamExt as _};
@@ -17,9 +17,10 @@ use webfusion_core::codec::DepthCodec;
 use webfusion_core::codec::png::{decode_depth16, decode_rgb8};
 use webfusion_core::io::trajectory::{TimedPose, format_tum_trajectory};
 use webfusion_core::protocol::{Message, PROTOCOL_VERSION, RenderFailure, RenderNoise, RenderOutcome, RenderRequest, RenderedView, WireDepth};
-use webfusion_core::recording::RecordingReader;
-use webfusion_core::source::FrameSource as _;
 use webfusion_core::{PinholeIntrinsics, Se3};
+
+mod common;
+use common::{fused_room, ok, s, scratch, webfusion};
 
 const RECV_TIMEOUT: Duration = Duration::from_secs(120);
 const W: u32 = 160;
@@ -30,20 +31,6 @@ const K_ARG: &str = "120,122,81,58.5";
 const SEED: u32 = 3;
 
 type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
-
-fn webfusion(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_webfusion")).args(args).env("XDG_RUNTIME_DIR", std::env::temp_dir()).output().expect("run webfusion")
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = webfusion(args);
-    assert!(o.status.success(), "webfusion {args:?} failed: {}", String::from_utf8_lossy(&o.stderr));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
 
 /// A room fused at its exact poses and saved, with the poses and `simulate`'s frames at the
 /// first three of them (exact, and with Kinect noise of seed [`SEED`]), built once.
@@ -57,16 +44,8 @@ struct Fixture {
 fn fixture() -> &'static Fixture {
     static FIXTURE: std::sync::OnceLock<Fixture> = std::sync::OnceLock::new();
     FIXTURE.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("webfusion-render-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("scratch dir");
-        let room = dir.join("room.wfr");
-        ok(&["synth-room", "--out", s(&room), "--size", "4,2.5,4", "--frames", "24", "--width", "160", "--height", "120"]);
-        let gt = RecordingReader::open(&room).expect("the room").ground_truth().expect("exact poses").to_vec();
-        let all = dir.join("gt.txt");
-        std::fs::write(&all, format_tum_trajectory(&gt)).expect("poses");
-        let map = dir.join("room.wfm");
-        ok(&["reconstruct", s(&room), "--poses", s(&all), "--voxel-size", "0.04", "--save-map", s(&map), "--no-mesh", "--out", s(&dir.join("fused"))]);
+        let dir = scratch("render");
+        let common::FusedRoom { room, gt, map, .. } = fused_room(&dir, 24, "0.04");
         let poses: Vec<TimedPose> = [0, 11, 23].iter().map(|&i| gt[i]).collect();
         let views = dir.join("views.txt");
         std::fs::write(&views, format_tum_trajectory(&poses)).expect("view poses");

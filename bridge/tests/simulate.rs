@@ -5,41 +5,12 @@
 //! tracks back to the known trajectory; `compare` scores the simulation against the room's
 //! exact frames. Bad input (a damaged map, no poses, frames of another size) is a clean error.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-use webfusion_core::io::trajectory::format_tum_trajectory;
-use webfusion_core::recording::RecordingReader;
 use webfusion_core::source::FrameSource as _;
 
-fn webfusion(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_webfusion")).args(args).env("XDG_RUNTIME_DIR", std::env::temp_dir()).output().expect("run webfusion")
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = webfusion(args);
-    assert!(o.status.success(), "webfusion {args:?} failed: {}", String::from_utf8_lossy(&o.stderr));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn fails(args: &[&str], needle: &str) {
-    let o = webfusion(args);
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success(), "webfusion {args:?} should fail");
-    assert!(stderr.contains(needle), "webfusion {args:?}: the error should say {needle:?}: {stderr}");
-    assert!(!stderr.contains("panicked"), "no panic: {stderr}");
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("webfusion-simulate-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("scratch dir");
-    dir
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
+mod common;
+use common::{fails, fused_room, ok, s, scratch};
 
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).expect("json")
@@ -50,18 +21,12 @@ const VOXEL: &str = "0.02";
 
 #[test]
 fn a_map_simulated_along_a_known_trajectory_replays_tracks_back_and_compares() {
-    let dir = scratch("loop");
-    let room = dir.join("room.wfr");
-    ok(&["synth-room", "--out", s(&room), "--size", "4,2.5,4", "--frames", FRAMES, "--width", "160", "--height", "120"]);
-    let gt = RecordingReader::open(&room).expect("the room").ground_truth().expect("exact poses").to_vec();
-    let poses = dir.join("gt.txt");
-    std::fs::write(&poses, format_tum_trajectory(&gt)).expect("poses");
-    let map = dir.join("room.wfm");
-    ok(&["reconstruct", s(&room), "--poses", s(&poses), "--voxel-size", VOXEL, "--save-map", s(&map), "--no-mesh", "--out", s(&dir.join("fused"))]);
+    let dir = scratch("simulate-loop");
+    let common::FusedRoom { room, gt, map, fused, .. } = fused_room(&dir, FRAMES.parse().expect("n"), VOXEL);
 
     // Exact simulation at the fused frames' poses (trajectory.txt), the room camera's size.
     let sim = dir.join("sim");
-    let used = dir.join("fused/trajectory.txt");
+    let used = fused.join("trajectory.txt");
     ok(&["simulate", "--map", s(&map), "--poses", s(&used), "--out", s(&sim), "--image-size", "160x120", "--color"]);
     for f in ["depth.txt", "rgb.txt", "rgbd_assoc.txt", "groundtruth.txt", "calibration.txt"] {
         assert!(sim.join(f).is_file(), "the simulation writes {f}");
