@@ -73,6 +73,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
     let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let started = std::time::Instant::now();
     let mut builder = OccupancyBuilder::new(&spec, threads)?;
+    let (mut render_s, mut carve_s) = (0.0, 0.0);
     let k = crate::simulate::camera(args.intrinsics.as_deref(), args.image_size.as_deref(), (320, 240))?;
     if let Some(poses) = &poses {
         // The map rendered at each pose it was fused from: exact depth from the camera on (no
@@ -82,6 +83,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
         let sensor_options = crate::simulate::kinect_sensor(CARVE_UNITS_PER_METRE, false, None, (Some(0.0), Some(args.max_depth)), false)?;
         let mut sensor = VirtualSensor::new(&gpu, &map, k, sensor_options)?;
         for batch in poses.chunks(CARVE_BATCH) {
+            let rendering = std::time::Instant::now();
             let mut depths = Vec::with_capacity(batch.len());
             for p in batch {
                 let frame = pollster::block_on(sensor.render(&gpu, &map, &p.world_from_camera, 0))?;
@@ -89,13 +91,18 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
             }
             let errors = gpu.take_errors();
             anyhow::ensure!(errors.is_empty(), "the GPU reported errors: {}", errors.join("; "));
+            render_s += rendering.elapsed().as_secs_f64();
+            let carving = std::time::Instant::now();
             let views: Vec<CarveView> = batch.iter().zip(&depths).map(|(p, depth_m)| CarveView { world_from_camera: p.world_from_camera, intrinsics: k, depth_m }).collect();
             builder.carve(&views, f64::from(header.truncation_m))?;
+            carve_s += carving.elapsed().as_secs_f64();
         }
     } else {
         eprintln!("note: no --poses: free space is known only within {:.1} cm of the map's surfaces (pass the poses the map was fused from to carve the rest)", header.truncation_m * 100.0);
     }
+    let marking = std::time::Instant::now();
     let grid = builder.finish(header, &file.blocks);
+    let tsdf_s = marking.elapsed().as_secs_f64();
     let counts = grid.counts();
     std::fs::write(&args.out, &grid.cells).with_context(|| format!("writing {}", args.out.display()))?;
     let (frame, axes) = match header.frame {
@@ -128,11 +135,12 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
             "max_depth_m": args.max_depth,
         },
         "counts": { "occupied": counts.occupied, "free": counts.free, "unknown": counts.unknown },
+        "stages_s": { "render": render_s, "carve": carve_s, "tsdf": tsdf_s, "total": started.elapsed().as_secs_f64() },
     });
     let sidecar = args.out.with_extension("json");
     std::fs::write(&sidecar, serde_json::to_string_pretty(&description)? + "\n").with_context(|| format!("writing {}", sidecar.display()))?;
     println!(
-        "{}: {}x{}x{} cells of {:.1} cm in the {frame} frame: {:.2} % occupied, {:.2} % free, {:.2} % unknown ({} carving views, {:.1} s); described in {}",
+        "{}: {}x{}x{} cells of {:.1} cm in the {frame} frame: {:.2} % occupied, {:.2} % free, {:.2} % unknown ({} carving views; render {render_s:.1} s, carve {carve_s:.1} s, TSDF {tsdf_s:.1} s, total {:.1} s); described in {}",
         args.out.display(),
         spec.dims[0],
         spec.dims[1],
