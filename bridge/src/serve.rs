@@ -118,6 +118,8 @@ struct Shared {
     live: Option<LiveHub>,
     /// The virtual sensor in the served map (`--map`).
     renderer: Option<Renderer>,
+    /// The served map's file (`--map`), offered to pages at `/map.wfm`.
+    map_path: Option<PathBuf>,
 }
 
 /// Frames a client may fall behind a live camera before it loses the oldest.
@@ -222,6 +224,7 @@ pub(crate) fn run(options: &GpuOptions, args: ServeArgs) -> anyhow::Result<()> {
         skip_corrupt: args.skip_corrupt,
         live,
         renderer,
+        map_path: args.map,
     });
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
     runtime.block_on(async move {
@@ -232,7 +235,7 @@ pub(crate) fn run(options: &GpuOptions, args: ServeArgs) -> anyhow::Result<()> {
         println!("webfusion serve: http://{addr}/ (frames: ws://{addr}/ws{token_query})");
         use std::io::Write as _;
         std::io::stdout().flush().ok();
-        let app = Router::new().route("/ws", get(ws_handler)).fallback(get(static_handler)).with_state(shared);
+        let app = Router::new().route("/ws", get(ws_handler)).route(MAP_ROUTE, get(map_handler)).fallback(get(static_handler)).with_state(shared);
         axum::serve(listener, app.into_make_service_with_connect_info::<SocketAddr>())
             .with_graceful_shutdown(async {
                 tokio::signal::ctrl_c().await.ok();
@@ -267,6 +270,37 @@ async fn ws_handler(ws: WebSocketUpgrade, headers: HeaderMap, Query(query): Quer
         return (StatusCode::FORBIDDEN, "Origin not allowed (use --allow-origin)").into_response();
     }
     ws.max_message_size(MAX_CLIENT_MESSAGE_BYTES).max_frame_size(MAX_CLIENT_MESSAGE_BYTES).on_upgrade(move |socket| session(socket, shared))
+}
+
+/// Where a page fetches the served map (`--map`) to explore it and run its own virtual
+/// sensor.
+const MAP_ROUTE: &str = "/map.wfm";
+
+/// The `--map` file as it is on disk now (the page parses it and keeps its intact blocks),
+/// behind the same token as the frames; pages of an allowed origin may fetch it cross-origin.
+async fn map_handler(headers: HeaderMap, Query(query): Query<HashMap<String, String>>, State(shared): State<Arc<Shared>>) -> Response {
+    if let Some(token) = &shared.token
+        && !query.get("token").is_some_and(|given| same_secret(given, token))
+    {
+        return (StatusCode::UNAUTHORIZED, "missing or wrong ?token=").into_response();
+    }
+    if !origin_allowed(&headers, &shared.allowed_origins) {
+        return (StatusCode::FORBIDDEN, "Origin not allowed (use --allow-origin)").into_response();
+    }
+    let Some(path) = &shared.map_path else {
+        return (StatusCode::NOT_FOUND, "this bridge serves no map (start it with serve --map FILE.wfm)").into_response();
+    };
+    let origin = headers.get(header::ORIGIN).cloned();
+    match tokio::fs::read(path).await {
+        Ok(bytes) => {
+            let mut response = ([(header::CONTENT_TYPE, "application/octet-stream"), (header::CACHE_CONTROL, "no-cache")], bytes).into_response();
+            if let Some(origin) = origin {
+                response.headers_mut().insert(header::ACCESS_CONTROL_ALLOW_ORIGIN, origin);
+            }
+            response
+        }
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("reading the map {}: {e}", path.display())).into_response(),
+    }
 }
 
 async fn static_handler(uri: Uri, State(shared): State<Arc<Shared>>) -> Response {

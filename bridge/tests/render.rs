@@ -303,3 +303,55 @@ async fn the_python_client_gets_the_same_views() {
     let sha = line["depth_sha256"].as_str().expect("sha");
     assert_eq!(sha.len(), 64, "a SHA-256 of the raw depth");
 }
+
+/// A raw HTTP/1.1 GET of `path` (with an `Origin` header, if given): the status code, the
+/// headers (lower-cased names) and the body.
+fn http_get(addr: &str, path: &str, origin: Option<&str>) -> (u16, String, Vec<u8>) {
+    use std::io::{Read as _, Write as _};
+    let mut stream = std::net::TcpStream::connect(addr).expect("connecting");
+    let origin = origin.map(|o| format!("Origin: {o}\r\n")).unwrap_or_default();
+    write!(stream, "GET {path} HTTP/1.1\r\nHost: {addr}\r\n{origin}Connection: close\r\n\r\n").expect("request");
+    let mut response = Vec::new();
+    stream.read_to_end(&mut response).expect("response");
+    let split = response.windows(4).position(|w| w == b"\r\n\r\n").expect("a header block");
+    let head = String::from_utf8_lossy(&response[..split]).to_lowercase();
+    let status = head.split_whitespace().nth(1).and_then(|c| c.parse().ok()).expect("a status code");
+    let mut body = response[split + 4..].to_vec();
+    if head.contains("transfer-encoding: chunked") {
+        // De-chunk: size line, data, CRLF, until the zero-sized chunk.
+        let (mut out, mut rest) = (Vec::new(), body.as_slice());
+        loop {
+            let line_end = rest.windows(2).position(|w| w == b"\r\n").expect("a chunk size");
+            let size = usize::from_str_radix(std::str::from_utf8(&rest[..line_end]).expect("hex").trim(), 16).expect("a chunk size");
+            if size == 0 {
+                break;
+            }
+            out.extend_from_slice(&rest[line_end + 2..line_end + 2 + size]);
+            rest = &rest[line_end + 4 + size..];
+        }
+        body = out;
+    }
+    (status, head, body)
+}
+
+#[test]
+fn the_served_map_is_offered_to_pages_behind_the_token() {
+    let fx = fixture();
+    let bytes = std::fs::read(&fx.map).expect("map");
+    let server = Server::start(&["--source", s(&fx.room), "--map", s(&fx.map), "--token", "sesame"]);
+    let (status, head, body) = http_get(&server.addr, "/map.wfm?token=sesame", None);
+    assert_eq!(status, 200, "{head}");
+    assert!(body == bytes, "the file's {} bytes, byte for byte (got {})", bytes.len(), body.len());
+    assert!(webfusion_core::map::file::parse_map_bytes(&body, "served").is_ok_and(|m| m.damage.is_none() && !m.blocks.is_empty()), "a map the page can parse");
+    // A page of the bridge's own origin may read it (CORS), a foreign one may not fetch it.
+    let own = format!("http://{}", server.addr);
+    let (status, head, _) = http_get(&server.addr, "/map.wfm?token=sesame", Some(&own));
+    assert!(status == 200 && head.contains(&format!("access-control-allow-origin: {own}")), "{head}");
+    assert_eq!(http_get(&server.addr, "/map.wfm?token=sesame", Some("http://evil.example")).0, 403);
+    assert_eq!(http_get(&server.addr, "/map.wfm?token=wrong", None).0, 401);
+    assert_eq!(http_get(&server.addr, "/map.wfm", None).0, 401);
+    drop(server);
+    let bare = Server::start(&["--source", s(&fx.room)]);
+    let (status, _, body) = http_get(&bare.addr, "/map.wfm", None);
+    assert!(status == 404 && String::from_utf8_lossy(&body).contains("--map"), "{status} {}", String::from_utf8_lossy(&body));
+}

@@ -195,6 +195,12 @@ pub fn read_map_file_recovering(path: &Path) -> Result<MapFile> {
     parse_map_file(&bytes, path)
 }
 
+/// As [`read_map_file_recovering`], for a map file's bytes already in memory (the browser's
+/// file picker, a download); `name` names it in errors.
+pub fn parse_map_bytes(bytes: &[u8], name: &str) -> Result<MapFile> {
+    parse_map_file(bytes, Path::new(name))
+}
+
 fn parse_map_file(bytes: &[u8], path: &Path) -> Result<MapFile> {
     let bad = |message: String| Error::MapFile { path: path.to_owned(), message };
     if bytes.len() < HEADER_BYTES || &bytes[..8] != MAGIC {
