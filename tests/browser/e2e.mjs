@@ -10,7 +10,12 @@
 //   5. the mesh and trajectory exports arrive as downloads with the right contents;
 //   6. a second page opened with unparsable settings in its URL (?voxel_mm=abc&rate=NaN) falls
 //      back to the defaults with a visible message and fuses; its GPU device is then destroyed
-//      (as a driver reset would) and the page must rebuild the pipeline and carry on fusing.
+//      (as a driver reset would) and the page must rebuild the pipeline and carry on fusing;
+//   7. the virtual sensor (seed 000): in the fused map at the last frame's pose, beside the real
+//      frame with seed 000's metrics, exact and with Kinect noise, downloaded as a 16-bit PNG;
+//      then the native run's saved map, offered by `serve --map`, opened in a fresh page without
+//      fusing, shown in the free view, and rendered at a pose of the native trajectory as
+//      `webfusion simulate` renders it there.
 // Prints one line per check and a closing "e2e: N passed, M failed"; exits non-zero on failure.
 //
 // usage: node tests/browser/e2e.mjs [--webfusion target/release/webfusion] [--dist dist]
@@ -19,7 +24,7 @@
 // The main page fuses into --map (default sparse: the voxel-block map, the app's default); the
 // second page fuses into the dense box, so both kinds run in the browser.
 import { spawnSync } from 'node:child_process';
-import { readFileSync, writeFileSync } from 'node:fs';
+import { readdirSync, readFileSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { decodePng, evaluateWithin, launchChromium, options, parseTum, startBridge, waitFor, within } from './lib.mjs';
 
@@ -56,7 +61,7 @@ try {
   // 1. The native reference on the same frames and settings.
   const native = join(out, 'native');
   const t0 = Date.now();
-  const run = spawnSync(webfusion, ['reconstruct', sample, '--out', native, '--map-kind', map, '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh'], { encoding: 'utf8' });
+  const run = spawnSync(webfusion, ['reconstruct', sample, '--out', native, '--map-kind', map, '--volume', String(volume), '--voxel-size', String(voxelMm / 1000), '--centred', '--no-mesh', '--save-map', join(out, 'native', 'map.wfm')], { encoding: 'utf8' });
   if (run.status !== 0) throw new Error(`webfusion reconstruct failed: ${run.stderr}`);
   const nativeTrajectory = parseTum(readFileSync(join(native, 'trajectory.txt'), 'utf8'));
   console.log(`native reference (${map} map): ${nativeTrajectory.length} frames in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
@@ -179,6 +184,30 @@ try {
   check('plane view', pv && pv.count >= 2 && pv.frame === final.last_index && pv.planes.every((p) => Math.abs(Math.hypot(...p.normal) - 1) < 1e-3 && p.offset_m > 0 && p.pixels > 0) && planeFraction > 0.1,
     `planes ${JSON.stringify(pv && { frame: pv.frame, count: pv.count, pixels: pv.planes.map((p) => p.pixels), median_ms: pv.median_ms })}; view ${(100 * planeFraction).toFixed(0)} % plane-coloured (saved ${join(out, 'planes_view.png')})`);
 
+  // 6d. The virtual sensor in the fused map at the last frame's tracked pose, beside that
+  // frame's real depth: the model explains the frame it was fused from (bounds from the
+  // voxel size: 4 cm voxels blur depth edges; measured coverage 90.2 %, 1.8 % of pixels over
+  // 10 %, median 5.8 mm), then with the Kinect noise model, whose
+  // dropouts leave fewer valid pixels; the last render downloads as 16-bit PNG.
+  stage = 'the virtual sensor';
+  await page.click('#sim-at-frame');
+  const exact = (await waitFor(page, 'the virtual sensor at the last frame', (s) => s.sensor?.last?.compare && s.sensor.last.frame === final.last_index, 120_000)).sensor.last;
+  const ec = exact.compare;
+  const simShot = decodePng(await page.locator('#view-sim').screenshot({ path: join(out, 'sim_view.png') }));
+  let simLit = 0;
+  for (let i = 0; i < simShot.width * simShot.height; i++) {
+    if (simShot.pixels[i * simShot.channels] + simShot.pixels[i * simShot.channels + 1] + simShot.pixels[i * simShot.channels + 2] > 60) simLit++;
+  }
+  check('virtual sensor at the last frame', ec.coverage_percent > 85 && ec.pixels_rel_error_over_10pct_percent < 5 && ec.median_abs_error_mm < 15 && exact.noise_seed === null && simLit / (simShot.width * simShot.height) > 0.3,
+    `frame ${exact.frame}: ${JSON.stringify(ec)}; ${exact.valid_pixels} valid pixels; view ${(100 * simLit / (simShot.width * simShot.height)).toFixed(0)} % lit (saved ${join(out, 'sim_view.png')})`);
+  await page.check('#sim-noise');
+  const noisy = (await waitFor(page, 'the noisy render', (s) => s.sensor?.last?.noise_seed === 1 && s.sensor.last.compare, 120_000)).sensor.last;
+  const [simDownload] = await Promise.all([page.waitForEvent('download', { timeout: 60_000 }), page.click('#sim-download')]);
+  const simPng = decodePng(readFileSync(await simDownload.path()));
+  const simValid = simPng.depth16.reduce((n, u) => n + (u > 0 ? 1 : 0), 0);
+  check('virtual sensor with Kinect noise, downloaded', noisy.frame === exact.frame && noisy.valid_pixels < exact.valid_pixels && noisy.compare.coverage_percent > 75 && simPng.width === noisy.width_px && simPng.height === noisy.height_px && simValid === noisy.valid_pixels && simDownload.suggestedFilename() === `sim_depth_frame${noisy.frame}_noise1.png`,
+    `${noisy.valid_pixels} valid pixels with noise vs ${exact.valid_pixels} exact; ${JSON.stringify(noisy.compare)}; ${simDownload.suggestedFilename()} ${simPng.width}x${simPng.height}, ${simValid} non-zero`);
+
   // 7. Bad settings in the URL, then a lost device, in a browser of their own (a fresh GPU
   // process, as a new visitor would have).
   stage = 'the second browser';
@@ -203,6 +232,61 @@ try {
   check('a lost device is rebuilt and fusing resumes', rebuilt.state !== 'error' && secondErrors.length === 0 && rebuilt.last_index > fallback.last_index,
     `${rebuilt.device_rebuilds} rebuild(s); frames ${fallback.frames_done} -> ${rebuilt.frames_done}, last index ${fallback.last_index} -> ${rebuilt.last_index}; state ${rebuilt.state}${secondErrors.length ? '; page errors: ' + secondErrors.join(' | ') : ''}`);
   await within(second.close(), 30_000);
+
+  // 8. The native run's saved map, offered by `serve --map`, opened in a fresh page: explored
+  // without fusing, and the virtual sensor placed at a pose of the native trajectory renders
+  // what `webfusion simulate` renders there (the same kernels on SwiftShader and lavapipe:
+  // rays that graze an edge may hit on one and miss on the other, nothing more).
+  stage = 'the saved map';
+  const mapPath = join(out, 'native', 'map.wfm');
+  const mapBytes = readFileSync(mapPath);
+  const mapBlocks = Number(mapBytes.readBigUInt64LE(mapBytes.length - 16));
+  bridge.child.kill('SIGKILL');
+  bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0', ['--map', mapPath]);
+  const third = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+  const thirdErrors = [];
+  third.on('pageerror', (e) => thirdErrors.push(String(e)));
+  await third.goto(`http://${bridge.addr}/`);
+  await waitFor(third, 'the link', (s) => s.link === 'connected', 60_000);
+  await third.click('#map-from-bridge');
+  const opened = await waitFor(third, 'the opened map', (s) => s.sensor?.map || s.message, 120_000);
+  const om = opened.sensor.map;
+  await new Promise((r) => setTimeout(r, 2000));
+  const mapShot = decodePng(await third.locator('#view-free').screenshot({ path: join(out, 'opened_map_view.png') }));
+  let mapLit = 0;
+  for (let i = 0; i < mapShot.width * mapShot.height; i++) {
+    if (mapShot.pixels[i * mapShot.channels] + mapShot.pixels[i * mapShot.channels + 1] + mapShot.pixels[i * mapShot.channels + 2] > 60) mapLit++;
+  }
+  // The virtual Kinect placed at the free view's camera sees the map too.
+  await third.click('#sim-from-view');
+  const fromView = (await waitFor(third, 'the render at the free view', (s) => s.sensor?.rendered >= 1 && s.sensor.in_flight === 0, 120_000)).sensor.last;
+  check('a saved map opens from the bridge', om && om.blocks === mapBlocks && om.kind === map && om.frame === 'first camera' && !om.damage && opened.frames_done === 0 && mapLit / (mapShot.width * mapShot.height) > 0.1 && fromView.valid_pixels > 0.1 * fromView.width_px * fromView.height_px && fromView.compare === null,
+    `${JSON.stringify(om ?? opened.message)} (the file has ${mapBlocks} blocks); free view ${(100 * mapLit / (mapShot.width * mapShot.height)).toFixed(0)} % lit (saved ${join(out, 'opened_map_view.png')}); the sensor at the free view: ${fromView.valid_pixels} valid pixels, no real frame`);
+  const poseLine = readFileSync(join(native, 'trajectory.txt'), 'utf8').split('\n').filter((l) => l && !l.startsWith('#'))[Math.floor(nativeTrajectory.length / 2)];
+  writeFileSync(join(out, 'sim_pose.txt'), poseLine + '\n');
+  const simDir = join(out, 'native_sim');
+  const simRun = spawnSync(webfusion, ['simulate', '--map', mapPath, '--poses', join(out, 'sim_pose.txt'), '--out', simDir], { encoding: 'utf8' });
+  if (simRun.status !== 0) throw new Error(`webfusion simulate failed: ${simRun.stderr}`);
+  const nativeSim = decodePng(readFileSync(join(simDir, 'depth', readdirSync(join(simDir, 'depth'))[0]))).depth16;
+  await third.fill('#sim-pose', poseLine.split(/\s+/).slice(1, 8).join(' '));
+  await third.click('#sim-render');
+  await waitFor(third, 'the render at the native pose', (s) => s.sensor?.rendered >= 2 && s.sensor.in_flight === 0, 120_000);
+  const [placedDownload] = await Promise.all([third.waitForEvent('download', { timeout: 60_000 }), third.click('#sim-download')]);
+  const placed = decodePng(readFileSync(await placedDownload.path())).depth16;
+  let onlyOne = 0, both = 0, close = 0, valid = 0;
+  for (let i = 0; i < placed.length; i++) {
+    const [a, b] = [placed[i], nativeSim[i]];
+    if (a > 0 || b > 0) valid++;
+    if ((a > 0) !== (b > 0)) onlyOne++;
+    else if (a > 0) { both++; if (Math.abs(a - b) <= 2) close++; }
+  }
+  check('the placed virtual sensor renders what simulate does', placed.length === nativeSim.length && both > 0.3 * placed.length && onlyOne <= 0.02 * valid && close >= 0.99 * both,
+    `${both} pixels valid in both, ${(100 * close / Math.max(both, 1)).toFixed(2)} % within 2 units (0.4 mm); ${onlyOne} valid in only one (${(100 * onlyOne / Math.max(valid, 1)).toFixed(2)} %)`);
+  await third.fill('#sim-pose', '1 2');
+  await third.click('#sim-render');
+  const refused = await waitFor(third, 'the refused pose', (s) => /7 numbers/.test(s.message), 30_000);
+  check('a malformed sensor pose is named, not rendered', refused.sensor.rendered === 2 && thirdErrors.length === 0, `message "${refused.message}"${thirdErrors.length ? '; page errors: ' + thirdErrors.join(' | ') : ''}`);
+  await within(third.close(), 30_000);
 } catch (error) {
   check('e2e run', false, `${error.stack ?? String(error)} (at: ${stage})`);
 } finally {

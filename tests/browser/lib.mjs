@@ -27,9 +27,9 @@ export function launchChromium() {
   return chromium.launch({ executablePath: process.env.CHROMIUM ?? '/usr/bin/chromium', headless: true, args: CHROMIUM_ARGS });
 }
 
-/** Starts `webfusion serve` on `bind` and resolves with its address once it prints its URL. */
-export function startBridge(webfusion, sample, dist, bind) {
-  const child = spawn(webfusion, ['serve', '--source', sample, '--bind', bind, '--web-dir', dist], { stdio: ['ignore', 'pipe', 'inherit'] });
+/** Starts `webfusion serve` on `bind` (with `extra` arguments) and resolves with its address once it prints its URL. */
+export function startBridge(webfusion, sample, dist, bind, extra = []) {
+  const child = spawn(webfusion, ['serve', '--source', sample, '--bind', bind, '--web-dir', dist, ...extra], { stdio: ['ignore', 'pipe', 'inherit'] });
   return new Promise((resolveAddr, reject) => {
     let text = '';
     child.stdout.on('data', (chunk) => {
@@ -49,10 +49,14 @@ export function parseTum(text) {
   });
 }
 
-/** Decodes an 8-bit RGB/RGBA, non-interlaced PNG (what Chromium writes) to {width, height, channels, pixels}. */
+/**
+ * Decodes a non-interlaced PNG, 8-bit RGB/RGBA (what Chromium writes) or 16-bit grayscale
+ * (depth, the TUM format) to {width, height, channels, pixels} (bytes), plus `depth16` (the
+ * 16-bit values) for the latter.
+ */
 export function decodePng(buffer) {
   let offset = 8;
-  let width = 0, height = 0, channels = 0;
+  let width = 0, height = 0, channels = 0, bitDepth = 8;
   const idat = [];
   while (offset < buffer.length) {
     const length = buffer.readUInt32BE(offset);
@@ -61,28 +65,38 @@ export function decodePng(buffer) {
     if (type === 'IHDR') {
       width = data.readUInt32BE(0); height = data.readUInt32BE(4);
       const [depth, colour, , , interlace] = [data[8], data[9], data[10], data[11], data[12]];
-      if (depth !== 8 || interlace !== 0 || (colour !== 2 && colour !== 6)) throw new Error(`unsupported PNG (depth ${depth}, colour type ${colour}, interlace ${interlace})`);
-      channels = colour === 6 ? 4 : 3;
+      const rgb = depth === 8 && (colour === 2 || colour === 6);
+      const grey16 = depth === 16 && colour === 0;
+      if (interlace !== 0 || !(rgb || grey16)) throw new Error(`unsupported PNG (depth ${depth}, colour type ${colour}, interlace ${interlace})`);
+      channels = colour === 6 ? 4 : colour === 2 ? 3 : 1;
+      bitDepth = depth;
     } else if (type === 'IDAT') idat.push(data);
     offset += 12 + length;
   }
   const raw = inflateSync(Buffer.concat(idat));
-  const stride = width * channels;
+  // Filters work on bytes, each against the byte one pixel (bpp bytes) to the left.
+  const bpp = channels * (bitDepth / 8);
+  const stride = width * bpp;
   const pixels = Buffer.alloc(stride * height);
   for (let y = 0; y < height; y++) {
     const filter = raw[y * (stride + 1)];
     for (let x = 0; x < stride; x++) {
       const cur = raw[y * (stride + 1) + 1 + x];
-      const a = x >= channels ? pixels[y * stride + x - channels] : 0;
+      const a = x >= bpp ? pixels[y * stride + x - bpp] : 0;
       const b = y > 0 ? pixels[(y - 1) * stride + x] : 0;
-      const c = x >= channels && y > 0 ? pixels[(y - 1) * stride + x - channels] : 0;
+      const c = x >= bpp && y > 0 ? pixels[(y - 1) * stride + x - bpp] : 0;
       const p = a + b - c, pa = Math.abs(p - a), pb = Math.abs(p - b), pc = Math.abs(p - c);
       const paeth = pa <= pb && pa <= pc ? a : pb <= pc ? b : c;
       const predictor = [0, a, b, (a + b) >> 1, paeth][filter];
       pixels[y * stride + x] = (cur + predictor) & 0xff;
     }
   }
-  return { width, height, channels, pixels };
+  const image = { width, height, channels, pixels };
+  if (bitDepth === 16) {
+    image.depth16 = new Uint16Array(width * height);
+    for (let i = 0; i < width * height; i++) image.depth16[i] = pixels.readUInt16BE(2 * i);
+  }
+  return image;
 }
 
 /** Longest a page may take to answer one evaluation: a hung renderer fails the run by name. */

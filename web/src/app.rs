@@ -20,7 +20,8 @@ use webfusion_core::protocol::{Control, Delivery, FrameMessage, Hello, Message, 
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, VolumePlacement};
 use webfusion_core::{Gpu, GpuOptions, RgbdCalibration};
 
-use crate::fusion_mode::{FREE_VIEW, FusionMode, Received};
+use crate::fusion_mode::{FREE_VIEW, FusionMode, Received, SensorPose};
+use crate::sim::OpenedMap;
 use crate::link::{Event, Inbox, Link, Ui, js_text, push_later};
 use crate::status::Status;
 use crate::ui;
@@ -579,7 +580,64 @@ impl App {
                 }
             }
             Ui::ViewColour(on) => self.mode.set_free_colour(on),
+            Ui::SimRender => match crate::sim::parse_pose(&ui::value("sim-pose")) {
+                Ok(pose) => self.render_sensor(SensorPose::At(pose)),
+                Err(message) => self.last_error = Some(format!("virtual sensor pose: {message}")),
+            },
+            Ui::SimFromView => self.render_sensor(SensorPose::FreeView),
+            Ui::SimAtFrame => self.render_sensor(SensorPose::LastFrame),
+            Ui::SimFollow(on) => self.mode.set_sensor_follow(on),
+            Ui::SimNoise => match sensor_noise_from_form() {
+                Ok(seed) => {
+                    self.mode.set_sensor_noise(seed);
+                    self.render_sensor(SensorPose::Again);
+                }
+                Err(message) => self.last_error = Some(format!("virtual sensor: {message}")),
+            },
+            Ui::SimDownload => {
+                if let Err(message) = self.mode.download_sensor() {
+                    self.last_error = Some(format!("simulated depth download: {message}"));
+                }
+            }
+            Ui::OpenMapFile => match ui::chosen_file("open-map").await {
+                Ok(Some((name, bytes))) => self.open_map(&bytes, &name),
+                Ok(None) => {}
+                Err(message) => self.last_error = Some(format!("opening the map: {message}")),
+            },
+            Ui::MapFromBridge => match map_url(&ui::value("bridge-url"), &ui::value("bridge-token")) {
+                Ok(url) => match ui::fetch_bytes(&url).await {
+                    Ok(bytes) => self.open_map(&bytes, "the bridge's map"),
+                    Err(message) => self.last_error = Some(format!("the bridge's map: {message}")),
+                },
+                Err(message) => self.last_error = Some(format!("the bridge's map: {message}")),
+            },
+            Ui::CloseMap => {
+                self.mode.close_map();
+                self.pending = None;
+            }
             Ui::LoseDevice => self.gpu.device.destroy(),
+        }
+    }
+
+    fn render_sensor(&mut self, at: SensorPose) {
+        if let Err(message) = self.mode.render_sensor(&self.gpu, at) {
+            self.last_error = Some(message);
+        }
+    }
+
+    /// Opens a saved map's bytes: playback pauses, the fused run is dropped and the free view
+    /// and the virtual sensor show the map.
+    fn open_map(&mut self, bytes: &[u8], name: &str) {
+        match OpenedMap::load(&self.gpu, bytes, name).and_then(|map| self.mode.open_map(&self.gpu, map)) {
+            Ok(()) => {
+                if self.playing {
+                    self.playing = false;
+                    self.send(Control::Pause);
+                }
+                self.pending = None;
+                self.last_error = None;
+            }
+            Err(message) => self.last_error = Some(format!("opening the map: {message}")),
         }
     }
 
@@ -741,6 +799,7 @@ impl App {
             time_to_first_frame_ms: self.first_frame_ms,
             startup_ms: self.startup_ms.iter().map(|(w, ms)| ((*w).to_owned(), *ms)).collect(),
             fusion,
+            sensor: self.mode.sensor_status(),
         };
         match serde_json::to_string(&status) {
             Ok(json) => publish_json(&json),
@@ -820,6 +879,9 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         Some(p) => format!("planes: {} in frame {} ({} curved surfaces rejected) · {:.0} ms/frame", p.count, p.frame, p.curved_rejected, p.median_ms),
         None => "plane segmentation off".to_owned(),
     });
+    if let Some(line) = s.sensor.line() {
+        lines.push(line);
+    }
     if s.frames_skipped > 0 {
         lines.push(format!("⚠ the bridge skipped {} damaged frame(s) of the source", s.frames_skipped));
     }
@@ -827,6 +889,33 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         lines.push(format!("⚠ {}", s.message));
     }
     lines.join("\n")
+}
+
+/// The noise setting of the virtual sensor's form: the seed, or `None` for exact depth.
+fn sensor_noise_from_form() -> Result<Option<u32>, String> {
+    if ui::value("sim-noise").is_empty() {
+        return Ok(None);
+    }
+    let text = ui::value("sim-seed");
+    text.trim().parse::<u32>().map(Some).map_err(|_| format!("the noise seed {text:?} is not a whole number in 0..=4294967295"))
+}
+
+/// Where a bridge at WebSocket URL `bridge` offers its map (`serve --map`): the same host,
+/// over HTTP(S), at `/map.wfm`, with the token.
+fn map_url(bridge: &str, token: &str) -> Result<String, String> {
+    let url = web_sys::Url::new(bridge).map_err(|_| format!("{bridge:?} is not a URL"))?;
+    let scheme = match url.protocol().as_str() {
+        "ws:" | "http:" => "http:",
+        "wss:" | "https:" => "https:",
+        other => return Err(format!("{bridge:?}: a bridge URL is ws:// or wss://, not {other}")),
+    };
+    url.set_protocol(scheme);
+    url.set_pathname("/map.wfm");
+    url.set_search("");
+    if !token.is_empty() {
+        url.search_params().set("token", token);
+    }
+    Ok(url.href())
 }
 
 /// The `window.webfusion` object (created on first use).

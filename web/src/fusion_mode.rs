@@ -37,6 +37,7 @@ use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, LabelView, Norma
 use webfusion_core::{Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
 
 use crate::canvas::GpuCanvas;
+use crate::sim::{OpenedMap, RealFrame, SensorPanel, SensorStatus};
 use crate::status::{HostPerFrame, STATS_WINDOW, StageMedians, VolumeStatus, Window};
 use crate::ui;
 use crate::view::{self, FrameImage, Orbit};
@@ -59,6 +60,9 @@ struct InFlight {
     arrived: Instant,
     decode_ms: f64,
     views_ms: f64,
+    /// The frame's depth and calibration, for the virtual sensor's comparison at its pose.
+    depth_units: Rc<Vec<u16>>,
+    calibration: RgbdCalibration,
 }
 
 /// The per-frame views, coloured on the GPU from the pipeline's own buffers.
@@ -76,6 +80,27 @@ struct FreeView {
     target: RaycastTarget,
     shading: NormalView,
     canvas: GpuCanvas,
+}
+
+impl FreeView {
+    fn new(gpu: &Gpu, store: &webfusion_core::map::Map) -> Result<Self, String> {
+        let target = RaycastTarget::new(gpu, store, FREE_VIEW, "web.free_view");
+        let shading = NormalView::new(gpu, "web.view.free", &target.normal_in_world, [FREE_VIEW.width_px, FREE_VIEW.height_px]);
+        Ok(Self { target, shading, canvas: GpuCanvas::new(gpu, "view-free", [FREE_VIEW.width_px, FREE_VIEW.height_px])? })
+    }
+}
+
+/// Where the virtual sensor is asked to render.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum SensorPose {
+    /// A pose typed into the panel (the map's frame).
+    At(Se3),
+    /// The free view's camera.
+    FreeView,
+    /// The last real frame with a pose in the map, beside its real depth.
+    LastFrame,
+    /// The last render's pose again (its settings changed).
+    Again,
 }
 
 /// Plane segmentation of each frame and its view.
@@ -123,9 +148,7 @@ impl Pipeline {
             normals_canvas: GpuCanvas::new(gpu, "view-normals", size)?,
             model_canvas: GpuCanvas::new(gpu, "view-model", size)?,
         };
-        let target = RaycastTarget::new(gpu, fusion.volume(), FREE_VIEW, "web.free_view");
-        let shading = NormalView::new(gpu, "web.view.free", &target.normal_in_world, [FREE_VIEW.width_px, FREE_VIEW.height_px]);
-        let free = FreeView { target, shading, canvas: GpuCanvas::new(gpu, "view-free", [FREE_VIEW.width_px, FREE_VIEW.height_px])? };
+        let free = FreeView::new(gpu, fusion.volume())?;
         let planes = if planes {
             let segmenter = GpuPlaneSegmenter::new(gpu, pre, &PlaneConfig::default()).map_err(|e| format!("cannot build plane segmentation: {e}"))?;
             let view = LabelView::new(gpu, "web.view.planes", &segmenter.labels, &pre.color, size);
@@ -194,6 +217,13 @@ pub(crate) struct FusionMode {
     reported: bool,
     /// Frames segmented and when, until their plane table comes back.
     planes_sent: VecDeque<(u64, Instant)>,
+    /// The virtual sensor (seed 000), in the fused map or the opened one.
+    sensor: SensorPanel,
+    /// A real frame arrived while the sensor follows frames: render at it at the next poll.
+    sensor_due: bool,
+    /// A saved map opened in the page and its free view: while one is open frames are not
+    /// fused, only compared with the map at their ground-truth pose.
+    opened: Option<(OpenedMap, FreeView)>,
 }
 
 /// How a frame reached the page: its ground truth (if the source has it), when it arrived and
@@ -317,6 +347,9 @@ impl FusionMode {
             plane_ms: Window::default(),
             reported: false,
             planes_sent: VecDeque::new(),
+            sensor: SensorPanel::default(),
+            sensor_due: false,
+            opened: None,
         }
     }
 
@@ -325,15 +358,23 @@ impl FusionMode {
         self.config = config;
         self.features = features;
         self.planes = planes;
-        self.pipeline = None;
+        self.drop_fused_map();
         self.planes_sent.clear();
+    }
+
+    /// Drops the pipeline (and the fused map the sensor may be bound to).
+    fn drop_fused_map(&mut self) {
+        self.pipeline = None;
+        if self.opened.is_none() {
+            self.sensor.unbind();
+        }
     }
 
     /// Drops everything built on the GPU (the device was lost, or the source changed); the
     /// next frame rebuilds it. With `keep_trajectory` the run goes on: the new pipeline's
     /// poses continue from the last one.
     pub(crate) fn drop_pipeline(&mut self, keep_trajectory: bool) {
-        self.pipeline = None;
+        self.drop_fused_map();
         self.in_flight.clear();
         self.planes_sent.clear();
         if keep_trajectory {
@@ -354,6 +395,9 @@ impl FusionMode {
         self.in_flight.clear();
         self.planes_sent.clear();
         self.reset_run_state();
+        if let Some((o, _)) = &self.opened {
+            self.orbit = Some(first_look(o));
+        }
     }
 
     fn reset_run_state(&mut self) {
@@ -386,7 +430,7 @@ impl FusionMode {
 
     /// Whether anything submitted is still to come back (frame reports, plane tables).
     pub(crate) fn awaiting_gpu(&self) -> bool {
-        !self.in_flight.is_empty() || !self.planes_sent.is_empty()
+        !self.in_flight.is_empty() || !self.planes_sent.is_empty() || self.sensor.awaiting_gpu() || self.sensor_due
     }
 
     /// The trajectory so far, TUM text (kept current as reports arrive).
@@ -415,7 +459,18 @@ impl FusionMode {
     /// the GPU (unless two frames are in flight already: then for the oldest's report).
     pub(crate) async fn submit(&mut self, gpu: &Gpu, calibration: RgbdCalibration, frame: &RgbdFrame, received: Received, draw_views: bool) -> Result<(), String> {
         let Received { ground_truth, arrived, decode_ms } = received;
+        if let Some((opened, _)) = &self.opened {
+            // A saved map is open: the frame is compared with it, not fused.
+            self.last_submitted = Some(frame.index);
+            if opened.header.frame == webfusion_core::map::file::MapFrame::GivenPoses
+                && let Some(gt) = ground_truth
+            {
+                self.sensor_due |= self.sensor.observe(real_frame(frame, calibration, gt));
+            }
+            return Ok(());
+        }
         if self.pipeline.is_none() {
+            self.sensor.unbind();
             self.pipeline = Some(Pipeline::new(gpu, calibration, &self.config, self.features, self.planes)?);
         }
         let Some(p) = self.pipeline.as_mut() else { return Ok(()) };
@@ -446,7 +501,16 @@ impl FusionMode {
         {
             self.planes_sent.push_back((frame.index, Instant::now()));
         }
-        self.in_flight.push_back(InFlight { index: frame.index, timestamp_ns: frame.depth_timestamp_ns, ground_truth, arrived, decode_ms, views_ms });
+        self.in_flight.push_back(InFlight {
+            index: frame.index,
+            timestamp_ns: frame.depth_timestamp_ns,
+            ground_truth,
+            arrived,
+            decode_ms,
+            views_ms,
+            depth_units: Rc::new(frame.depth.units.clone()),
+            calibration,
+        });
         self.last_submitted = Some(frame.index);
         if p.assist.is_some() {
             // The next frame's guess needs this one's verdict.
@@ -479,13 +543,81 @@ impl FusionMode {
     /// Takes the reports (and plane tables) that came back (never waits); true if a report
     /// did since the last call (including those `submit` took itself, with feature odometry on).
     pub(crate) fn poll(&mut self, gpu: &Gpu) -> Result<bool, String> {
-        let Some(p) = self.pipeline.as_mut() else { return Ok(std::mem::take(&mut self.reported)) };
-        let reports = p.fusion.poll_reports(gpu).map_err(|e| e.to_string())?;
-        for report in reports {
-            self.apply(report);
+        if let Some(p) = self.pipeline.as_mut() {
+            let reports = p.fusion.poll_reports(gpu).map_err(|e| e.to_string())?;
+            for report in reports {
+                self.apply(report);
+            }
+            self.collect_planes(gpu)?;
         }
-        self.collect_planes(gpu)?;
+        if std::mem::take(&mut self.sensor_due) {
+            self.render_sensor(gpu, SensorPose::LastFrame)?;
+        }
+        self.sensor.poll(gpu)?;
         Ok(std::mem::take(&mut self.reported))
+    }
+
+    /// Renders the virtual sensor in the opened map, or else in the fused one.
+    pub(crate) fn render_sensor(&mut self, gpu: &Gpu, at: SensorPose) -> Result<(), String> {
+        let (store, map_from_world) = match (&self.opened, &self.pipeline) {
+            (Some((o, _)), _) => (&o.map, Se3::IDENTITY),
+            // The pipeline's world frame is the run's after `run_origin`.
+            (None, Some(p)) => (p.fusion.volume(), self.run_origin.inverse()),
+            (None, None) => return Err("virtual sensor: no map yet (fuse a frame, or open a saved map)".to_owned()),
+        };
+        let real = self.sensor.real().cloned();
+        let (pose, real) = match at {
+            SensorPose::At(pose) => (pose, None),
+            SensorPose::FreeView => match self.orbit {
+                Some(orbit) => (map_from_world * orbit.world_from_viewer(), None),
+                None => return Err("virtual sensor: the free view has no camera yet".to_owned()),
+            },
+            SensorPose::LastFrame => match real {
+                Some(r) => (r.map_from_camera, Some(r)),
+                None => return Err("virtual sensor: no real frame with a pose in this map yet".to_owned()),
+            },
+            SensorPose::Again => match self.sensor.last_pose() {
+                Some(pose) => (pose, real.filter(|r| r.map_from_camera == pose)),
+                None => return Ok(()),
+            },
+        };
+        self.sensor.render(gpu, store, pose, real)?;
+        self.free_dirty = true;
+        Ok(())
+    }
+
+    pub(crate) fn set_sensor_follow(&mut self, on: bool) {
+        self.sensor.set_follow(on);
+    }
+
+    pub(crate) fn set_sensor_noise(&mut self, seed: Option<u32>) {
+        self.sensor.set_noise(seed);
+    }
+
+    pub(crate) fn download_sensor(&self) -> Result<(), String> {
+        self.sensor.download()
+    }
+
+    /// Opens a saved map: the pipeline and the run are dropped (frames are compared with the
+    /// map, not fused, until it is closed) and the free view looks at the map.
+    pub(crate) fn open_map(&mut self, gpu: &Gpu, map: OpenedMap) -> Result<(), String> {
+        // The old free view's canvas is let go before the new one configures it.
+        self.opened = None;
+        self.drop_pipeline(false);
+        self.sensor.unbind();
+        let free = FreeView::new(gpu, &map.map)?;
+        self.orbit = Some(first_look(&map));
+        self.opened = Some((map, free));
+        self.free_dirty = true;
+        Ok(())
+    }
+
+    /// Closes the opened map: the next frame starts a new run.
+    pub(crate) fn close_map(&mut self) {
+        if self.opened.take().is_some() {
+            self.sensor.unbind();
+            self.reset_run_state();
+        }
     }
 
     /// Takes the plane tables that came back (never waits) into the status and the caption.
@@ -530,6 +662,10 @@ impl FusionMode {
         self.tracking = report.state.name();
         if report.map.is_some() {
             self.map = report.map;
+        }
+        if !report.state.is_lost() {
+            let real = RealFrame { index: meta.index, depth_units: Rc::clone(&meta.depth_units), units_per_metre: meta.calibration.depth_units_per_metre, intrinsics: meta.calibration.intrinsics, map_from_camera: report.world_from_camera };
+            self.sensor_due |= self.sensor.observe(real);
         }
         match report.state {
             TrackingState::Lost(_) => self.lost_frames += 1,
@@ -585,19 +721,19 @@ impl FusionMode {
         if self.free_view_due_in_ms() != Some(0.0) {
             return Ok(());
         }
-        let (Some(p), Some(orbit)) = (&self.pipeline, self.orbit) else { return Ok(()) };
-        if self.trajectory.is_empty() {
-            return Ok(());
-        }
+        let Some(orbit) = self.orbit else { return Ok(()) };
+        let world_from_viewer = orbit.world_from_viewer();
+        let (free, store, map_from_viewer) = match (&self.opened, &self.pipeline) {
+            (Some((o, free)), _) => (free, &o.map, world_from_viewer),
+            // The pipeline's world frame is the run's after `run_origin`.
+            (None, Some(p)) if !self.trajectory.is_empty() => (&p.free, p.fusion.volume(), self.run_origin.inverse() * world_from_viewer),
+            _ => return Ok(()),
+        };
         self.free_dirty = false;
         self.free_model_dirty = false;
         self.free_drawn_at = Some(Instant::now());
-        let world_from_viewer = orbit.world_from_viewer();
-        // The pipeline's world frame is the run's after `run_origin`.
-        let pipeline_from_viewer = self.run_origin.inverse() * world_from_viewer;
-        let free = &p.free;
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.free_view") });
-        free.target.render(gpu, &mut encoder, p.fusion.volume(), &pipeline_from_viewer, FREE_VIEW_RANGE_M).map_err(|e| e.to_string())?;
+        free.target.render(gpu, &mut encoder, store, &map_from_viewer, FREE_VIEW_RANGE_M).map_err(|e| e.to_string())?;
         let texture = if self.free_colour {
             free.canvas.draw_packed(&mut encoder, &free.target.color_rgba8, FREE_VIEW.width_px)?
         } else {
@@ -626,7 +762,17 @@ impl FusionMode {
         if let Some(last) = self.trajectory.last() {
             view::draw_camera(&ctx, &FREE_VIEW, world_from_viewer, &last.world_from_camera, "#ff5252");
         }
+        if let Some(map_from_sensor) = self.sensor.last_pose() {
+            // The virtual Kinect, in the run's frame (an opened map's is the world's).
+            let world_from_sensor = if self.opened.is_some() { map_from_sensor } else { self.run_origin * map_from_sensor };
+            view::draw_camera(&ctx, &FREE_VIEW, world_from_viewer, &world_from_sensor, "#40c4ff");
+        }
         Ok(())
+    }
+
+    /// The virtual sensor's status section.
+    pub(crate) fn sensor_status(&self) -> SensorStatus {
+        self.sensor.status(self.opened.as_ref().map(|(o, _)| o))
     }
 
     /// This mode's status section.
@@ -753,4 +899,15 @@ fn draw_odometry_view(pair: Option<&PairView>, reference: Option<&FrameImage>, c
     {
         view::draw_odometry_pair(&canvas, r, c, pair, stage).ok();
     }
+}
+
+/// A real frame at `map_from_camera`, for the virtual sensor's comparison.
+fn real_frame(frame: &RgbdFrame, calibration: RgbdCalibration, map_from_camera: Se3) -> RealFrame {
+    RealFrame { index: frame.index, depth_units: Rc::new(frame.depth.units.clone()), units_per_metre: calibration.depth_units_per_metre, intrinsics: calibration.intrinsics, map_from_camera }
+}
+
+/// The free view's first look at an opened map: at the mean of its blocks, from twice their
+/// RMS spread (within the sensor's useful range).
+fn first_look(map: &OpenedMap) -> Orbit {
+    Orbit::looking_at(map.centre_m, (2.0 * map.spread_m).clamp(0.5, 6.0))
 }

@@ -55,6 +55,20 @@ pub(crate) enum Ui {
     ViewColour(bool),
     /// The odometry view's next stage (after the last: the next frame, paused).
     OdometryStage,
+    /// The virtual sensor: render at the pose typed into its panel, at the free view's camera,
+    /// or at the last real frame's pose (beside its depth).
+    SimRender,
+    SimFromView,
+    SimAtFrame,
+    /// Render at every real frame's pose as it arrives.
+    SimFollow(bool),
+    /// The noise checkbox or its seed changed.
+    SimNoise,
+    SimDownload,
+    /// Open the saved map chosen in the file input, or the bridge's (`serve --map`); close it.
+    OpenMapFile,
+    MapFromBridge,
+    CloseMap,
 }
 
 /// Events waiting for the app loop, and the loop's wake-up call.

@@ -105,6 +105,8 @@ pub(crate) struct Status {
     pub(crate) startup_ms: std::collections::BTreeMap<String, f64>,
     #[serde(flatten)]
     pub(crate) fusion: crate::fusion_mode::FusionStatus,
+    /// The virtual sensor (seed 000) and the saved map open in the page.
+    pub(crate) sensor: crate::sim::SensorStatus,
 }
 
 #[cfg(test)]

@@ -121,6 +121,12 @@ pub(crate) fn bind_controls(inbox: &Rc<Inbox>) {
         ("export-glb", Ui::ExportGlb),
         ("export-trajectory", Ui::ExportTrajectory),
         ("odometry-step", Ui::OdometryStage),
+        ("sim-render", Ui::SimRender),
+        ("sim-from-view", Ui::SimFromView),
+        ("sim-at-frame", Ui::SimAtFrame),
+        ("sim-download", Ui::SimDownload),
+        ("map-from-bridge", Ui::MapFromBridge),
+        ("map-close", Ui::CloseMap),
     ] {
         on(inbox, id, "click", move || Some(ui.clone()));
     }
@@ -129,6 +135,10 @@ pub(crate) fn bind_controls(inbox: &Rc<Inbox>) {
     on(inbox, "loop", "change", || Some(Ui::Playback(Control::Loop(!value("loop").is_empty()))));
     on(inbox, "every-frame", "change", || Some(Ui::EveryFrame(!value("every-frame").is_empty())));
     on(inbox, "free-colour", "change", || Some(Ui::ViewColour(!value("free-colour").is_empty())));
+    on(inbox, "sim-follow", "change", || Some(Ui::SimFollow(!value("sim-follow").is_empty())));
+    on(inbox, "sim-noise", "change", || Some(Ui::SimNoise));
+    on(inbox, "sim-seed", "change", || Some(Ui::SimNoise));
+    on(inbox, "open-map", "change", || Some(Ui::OpenMapFile));
 }
 
 /// Orbit (drag), pan (shift- or right-drag, two-finger drag) and zoom (wheel, pinch) on the
@@ -209,4 +219,28 @@ pub(crate) fn download(name: &str, bytes: &[u8], mime: &str) -> Result<(), JsVal
     anchor.set_download(name);
     anchor.click();
     web_sys::Url::revoke_object_url(&url)
+}
+
+/// The bytes at `url` (a GET); an HTTP error is named with the server's text.
+pub(crate) async fn fetch_bytes(url: &str) -> Result<Vec<u8>, String> {
+    let window = web_sys::window().ok_or("no window")?;
+    let response = wasm_bindgen_futures::JsFuture::from(window.fetch_with_str(url)).await.map_err(|e| format!("{url}: {}", crate::link::js_text(&e)))?;
+    let response: web_sys::Response = response.dyn_into().map_err(|_| format!("{url}: no response"))?;
+    if !response.ok() {
+        let text = match response.text() {
+            Ok(promise) => wasm_bindgen_futures::JsFuture::from(promise).await.ok().and_then(|t| t.as_string()).unwrap_or_default(),
+            Err(_) => String::new(),
+        };
+        return Err(format!("{url}: HTTP {} {}", response.status(), text.trim()));
+    }
+    let buffer = wasm_bindgen_futures::JsFuture::from(response.array_buffer().map_err(|e| crate::link::js_text(&e))?).await.map_err(|e| format!("{url}: {}", crate::link::js_text(&e)))?;
+    Ok(js_sys::Uint8Array::new(&buffer).to_vec())
+}
+
+/// The name and bytes of the file chosen in file input `id` (`None`: none chosen).
+pub(crate) async fn chosen_file(id: &str) -> Result<Option<(String, Vec<u8>)>, String> {
+    let input: web_sys::HtmlInputElement = element(id)?;
+    let Some(file) = input.files().and_then(|files| files.get(0)) else { return Ok(None) };
+    let buffer = wasm_bindgen_futures::JsFuture::from(file.array_buffer()).await.map_err(|e| format!("{}: {}", file.name(), crate::link::js_text(&e)))?;
+    Ok(Some((file.name(), js_sys::Uint8Array::new(&buffer).to_vec())))
 }
