@@ -155,3 +155,29 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
     );
     Ok(())
 }
+
+/// Reads a grid `export-occupancy` wrote: its description (`G.json`, or the grid's own path
+/// `G.bin` with the description beside it) and the cells it names. A description of another
+/// format, a grid of the wrong size or values outside the three states are errors naming the
+/// file.
+pub(crate) fn read_grid(path: &std::path::Path) -> anyhow::Result<(webfusion_core::map::occupancy::OccupancyGrid, String)> {
+    let sidecar = path.with_extension("json");
+    let text = std::fs::read_to_string(&sidecar).with_context(|| format!("reading the grid's description {}", sidecar.display()))?;
+    let d: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{}: not JSON", sidecar.display()))?;
+    let bad = |what: &str| anyhow::anyhow!("{}: {what}", sidecar.display());
+    anyhow::ensure!(d["format"] == "webfusion occupancy grid 1", bad("not a webfusion occupancy grid description (format)"));
+    let dims: [u32; 3] = serde_json::from_value(d["dims"].clone()).map_err(|_| bad("dims is not three whole numbers"))?;
+    let cell_m = d["cell_size_m"].as_f64().ok_or_else(|| bad("no cell_size_m"))?;
+    let center_m: [f64; 3] = serde_json::from_value(d["center_m"].clone()).map_err(|_| bad("center_m is not three numbers"))?;
+    let frame = d["frame"].as_str().unwrap_or("unknown").to_owned();
+    let spec = GridSpec { dims, cell_m, center_m };
+    spec.validate().map_err(|e| bad(&e.to_string()))?;
+    let file = d["file"].as_str().ok_or_else(|| bad("no file"))?;
+    let cells_path = sidecar.with_file_name(file);
+    let cells = std::fs::read(&cells_path).with_context(|| format!("reading the grid {}", cells_path.display()))?;
+    anyhow::ensure!(cells.len() as u64 == spec.cell_count(), "{}: {} bytes, but {} describes {}x{}x{} = {} cells", cells_path.display(), cells.len(), sidecar.display(), dims[0], dims[1], dims[2], spec.cell_count());
+    if let Some(at) = cells.iter().position(|&c| c != OCCUPIED && c != FREE && c != UNKNOWN) {
+        anyhow::bail!("{}: byte {at} is {}, not one of the three states ({OCCUPIED}, {FREE}, {UNKNOWN})", cells_path.display(), cells[at]);
+    }
+    Ok((webfusion_core::map::occupancy::OccupancyGrid { spec, cells }, frame))
+}

@@ -11,6 +11,7 @@ use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::io::tum::ImageListWriter;
 use webfusion_core::io::{CALIBRATION_FILE, WrittenCalibration, format_calibration_file, format_timestamp_s};
 use webfusion_core::map::file::{read_map_file, read_map_file_recovering};
+use webfusion_core::map::occupancy::OccupancyGrid;
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, SimulatedFrame, VirtualSensor};
 use webfusion_core::tsdf::TsdfStore as _;
 use webfusion_core::{ColorImage, DepthImage, Gpu, GpuOptions, PinholeIntrinsics, RgbdCalibration};
@@ -63,6 +64,12 @@ pub(crate) struct SimulateArgs {
     /// Load the intact blocks of a damaged map file (with a warning) instead of stopping.
     #[arg(long)]
     skip_corrupt: bool,
+    /// The map's occupancy grid (`export-occupancy`'s G.json or G.bin): also write, per frame,
+    /// which pixels looked through never-observed space between the sensor's near range and
+    /// their return (or the far range, without one): unknown/*.png, 255 marked, 0 not, listed
+    /// in unknown.txt.
+    #[arg(long, value_name = "GRID")]
+    occupancy: Option<PathBuf>,
     /// Time the renders (submit to readback, one frame at a time, nothing written) and print the
     /// rate instead of writing a directory.
     #[arg(long)]
@@ -126,7 +133,7 @@ pub(crate) fn kinect_sensor(units_per_metre: f32, radial: bool, noise_seed: Opti
     let far = range_m.1.unwrap_or(model.max_depth_m);
     anyhow::ensure!(near.is_finite() && far.is_finite() && near >= 0.0 && far > near, "--min-depth {near} / --max-depth {far}: an empty range");
     let model = KinectModel { min_depth_m: near.max(0.01), ..model };
-    Ok(SensorOptions { units_per_metre, radial, noise: noise_seed.map(|seed| (model, seed)), depth_range_m: (near, far), color })
+    Ok(SensorOptions { units_per_metre, radial, noise: noise_seed.map(|seed| (model, seed)), depth_range_m: (near, far), color, hits: false })
 }
 
 /// A TUM-layout directory being written: depth (and colour) image folders with their lists, the
@@ -136,17 +143,24 @@ struct SimDir {
     depth: ImageListWriter,
     rgb: Option<ImageListWriter>,
     assoc: String,
+    /// `--occupancy`: the grid, the mask list, and the pixels marked so far.
+    unknown: Option<(OccupancyGrid, ImageListWriter, u64)>,
 }
 
 impl SimDir {
-    fn create(dir: &Path, color: bool) -> anyhow::Result<Self> {
+    fn create(dir: &Path, color: bool, grid: Option<OccupancyGrid>) -> anyhow::Result<Self> {
         anyhow::ensure!(!dir.join("depth.txt").exists(), "{} holds a simulation already (depth.txt): choose an empty directory", dir.display());
         let depth = ImageListWriter::create(dir, "depth", "# simulated depth (webfusion simulate)").with_context(|| format!("creating {}", dir.display()))?;
         let rgb = color.then(|| ImageListWriter::create(dir, "rgb", "# map colour (webfusion simulate)")).transpose().with_context(|| format!("creating {}", dir.display()))?;
-        Ok(Self { dir: dir.to_owned(), depth, rgb, assoc: String::new() })
+        let unknown = grid
+            .map(|g| ImageListWriter::create(dir, "unknown", "# pixels whose ray crossed never-observed space before its return: 255 (webfusion simulate --occupancy)").map(|list| (g, list, 0)))
+            .transpose()
+            .with_context(|| format!("creating {}", dir.display()))?;
+        Ok(Self { dir: dir.to_owned(), depth, rgb, assoc: String::new(), unknown })
     }
 
-    fn write(&mut self, k: &PinholeIntrinsics, index: usize, t_ns: i64, frame: &SimulatedFrame) -> anyhow::Result<()> {
+    fn write(&mut self, k: &PinholeIntrinsics, index: usize, pose: &TimedPose, range_m: (f32, f32), frame: &SimulatedFrame) -> anyhow::Result<()> {
+        let t_ns = pose.timestamp_ns;
         let depth = DepthImage::new(k.width_px, k.height_px, frame.depth_units.clone())?;
         let name = self.depth.write(index, t_ns, &webfusion_core::codec::png::encode_depth16(&depth)?)?;
         if let (Some(list), Some(rgb)) = (&mut self.rgb, &frame.color_rgb8) {
@@ -155,12 +169,22 @@ impl SimDir {
             let t = format_timestamp_s(t_ns);
             self.assoc.push_str(&format!("{t} {rgb_name} {t} {name}\n"));
         }
+        if let (Some((grid, list, marked)), Some(hit_m)) = (&mut self.unknown, &frame.hit_m) {
+            let threads = std::thread::available_parallelism().map_or(1, usize::from);
+            let marks = grid.rays_through_unknown(*k, &pose.world_from_camera, hit_m, false, (f64::from(range_m.0), f64::from(range_m.1)), threads)?;
+            *marked += marks.iter().filter(|&&m| m).count() as u64;
+            let mask: Vec<u8> = marks.iter().map(|&m| if m { 255 } else { 0 }).collect();
+            list.write(index, t_ns, &webfusion_core::codec::png::encode_gray8(k.width_px, k.height_px, &mask)?)?;
+        }
         Ok(())
     }
 
     fn finish(self, calibration: WrittenCalibration, poses: &[TimedPose]) -> anyhow::Result<()> {
         let write = |name: &str, text: &str| std::fs::write(self.dir.join(name), text).with_context(|| format!("writing {}", self.dir.join(name).display()));
         self.depth.finish()?;
+        if let Some((_, list, _)) = self.unknown {
+            list.finish()?;
+        }
         if let Some(list) = self.rgb {
             list.finish()?;
             write("rgbd_assoc.txt", &self.assoc)?;
@@ -180,7 +204,7 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<()> {
     let k = intrinsics(args)?;
     let poses = poses(args)?;
-    let sensor_options = sensor_options(args)?;
+    let sensor_options = SensorOptions { hits: args.occupancy.is_some(), ..sensor_options(args)? };
     anyhow::ensure!(args.bench || args.out.is_some(), "--out DIR is needed (or --bench)");
     let file = if args.skip_corrupt { read_map_file_recovering(&args.map) } else { read_map_file(&args.map) }.with_context(|| format!("reading the map {}", args.map.display()))?;
     if let Some(damage) = &file.damage {
@@ -207,12 +231,24 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
         return Ok(());
     }
     let out = args.out.as_ref().expect("checked");
-    let mut dir = SimDir::create(out, args.color)?;
+    let grid = match &args.occupancy {
+        Some(path) => {
+            let (grid, grid_frame) = crate::occupancy::read_grid(path)?;
+            let map_frame = match file.header.frame {
+                webfusion_core::map::file::MapFrame::FirstCamera => "first_camera",
+                webfusion_core::map::file::MapFrame::GivenPoses => "given_poses",
+            };
+            anyhow::ensure!(grid_frame == map_frame, "{}: the grid is in the {grid_frame} frame, the map {} in the {map_frame} frame", path.display(), args.map.display());
+            Some(grid)
+        }
+        None => None,
+    };
+    let mut dir = SimDir::create(out, args.color, grid)?;
     let started = std::time::Instant::now();
     let mut returns = 0u64;
     let mut write = |frame: SimulatedFrame, dir: &mut SimDir| -> anyhow::Result<()> {
         returns += frame.depth_units.iter().filter(|&&u| u > 0).count() as u64;
-        dir.write(&k, frame.tag as usize, poses[frame.tag as usize].timestamp_ns, &frame)
+        dir.write(&k, frame.tag as usize, &poses[frame.tag as usize], sensor_options.depth_range_m, &frame)
     };
     for (i, p) in poses.iter().enumerate() {
         while !sensor.can_submit() {
@@ -230,8 +266,12 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "the GPU reported errors: {}", errors.join("; "));
     let calibration = WrittenCalibration { calibration: RgbdCalibration { intrinsics: k, depth_units_per_metre: args.depth_scale }, radial_depth: args.radial };
+    let marked = dir.unknown.as_ref().map(|(_, _, marked)| *marked);
     dir.finish(calibration, &poses)?;
     let elapsed = started.elapsed().as_secs_f64();
+    if let Some(marked) = marked {
+        println!("{:.2} % of the pixels looked through never-observed space (unknown/)", 100.0 * marked as f64 / (poses.len() as f64 * k.pixel_count() as f64));
+    }
     println!(
         "{}: {} frames in {elapsed:.1} s ({:.1} frames/s with PNG writing); {:.1} % of the pixels have a return",
         out.display(),

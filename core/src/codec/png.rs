@@ -97,6 +97,14 @@ pub fn encode_rgb8(image: &ColorImage) -> Result<Vec<u8>> {
     encode(image.width_px, image.height_px, png::ColorType::Rgb, png::BitDepth::Eight, &image.rgb8)
 }
 
+/// Encodes one byte per pixel as an 8-bit grayscale PNG (masks).
+pub fn encode_gray8(width_px: u32, height_px: u32, values: &[u8]) -> Result<Vec<u8>> {
+    if values.len() != width_px as usize * height_px as usize {
+        return Err(codec_error(format!("{} values for a {width_px}x{height_px} image", values.len())));
+    }
+    encode(width_px, height_px, png::ColorType::Grayscale, png::BitDepth::Eight, values)
+}
+
 /// Encodes a depth image as a 16-bit grayscale PNG, the TUM depth format (lossless).
 pub fn encode_depth16(image: &DepthImage) -> Result<Vec<u8>> {
     let big_endian: Vec<u8> = image.units.iter().flat_map(|u| u.to_be_bytes()).collect();

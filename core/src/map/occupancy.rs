@@ -152,6 +152,66 @@ impl OccupancyGrid {
     }
 }
 
+impl OccupancyGrid {
+    /// Which pixels of a view looked through space this grid does not know to be free: the
+    /// sensor's "the ray left observed space before it hit anything". A pixel's ray, from the
+    /// camera at `world_from_camera` (the grid's frame) through the pixel of `k`, is sampled
+    /// every half cell over the sensor's measuring range `range_m` (near, far; planar depths
+    /// along z, or distances along the ray with `radial`): from the near end (a depth sensor
+    /// sees nothing nearer, and no view carves the cells it stands in; at least √3 cells out)
+    /// to √3 cells short of its hit, `hit_m[i]` (0 or NaN: no hit, then to the far end), so the
+    /// surface's own band is not counted. The pixel is marked if a sample falls in an
+    /// [`UNKNOWN`] cell or outside the grid. Rows are split over `threads`.
+    pub fn rays_through_unknown(&self, k: PinholeIntrinsics, world_from_camera: &Se3, hit_m: &[f32], radial: bool, range_m: (f64, f64), threads: usize) -> Result<Vec<bool>> {
+        if hit_m.len() != k.pixel_count() {
+            return Err(Error::InvalidConfig(format!("{} depths for a {}x{} camera", hit_m.len(), k.width_px, k.height_px)));
+        }
+        let (near_m, far_m) = range_m;
+        if !(near_m.is_finite() && far_m.is_finite() && near_m >= 0.0 && far_m > near_m) {
+            return Err(Error::InvalidConfig(format!("the sensor's range [{near_m}, {far_m}] m is empty")));
+        }
+        let spec = &self.spec;
+        let (corner, cell, guard) = (spec.corner_m(), spec.cell_m, 3_f64.sqrt() * spec.cell_m);
+        let dims = spec.dims.map(i64::from);
+        let eye = world_from_camera.translation_m;
+        let ray_marks = |x: u32, y: u32, hit: f32| -> bool {
+            let ray = DVec3::new((f64::from(x) - f64::from(k.cx_px)) / f64::from(k.fx_px), (f64::from(y) - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
+            let along = ray.length();
+            let to_ray = if radial { 1.0 } else { along };
+            let end_m = if hit.is_finite() && hit > 0.0 { f64::from(hit) * to_ray - guard } else { far_m * to_ray };
+            let dir = world_from_camera.rotation * (ray / along);
+            let mut t = (near_m * to_ray).max(guard);
+            while t <= end_m {
+                let c = ((eye + t * dir - corner) / cell).floor();
+                let (cx, cy, cz) = (c.x as i64, c.y as i64, c.z as i64);
+                if cx < 0 || cy < 0 || cz < 0 || cx >= dims[0] || cy >= dims[1] || cz >= dims[2] {
+                    return true;
+                }
+                if self.cells[spec.index(cx as u32, cy as u32, cz as u32)] == UNKNOWN {
+                    return true;
+                }
+                t += 0.5 * cell;
+            }
+            false
+        };
+        let mut marks = vec![false; hit_m.len()];
+        let width = k.width_px as usize;
+        let rows_per_thread = (k.height_px as usize).div_ceil(threads.max(1)).max(1);
+        std::thread::scope(|scope| {
+            for (chunk_index, chunk) in marks.chunks_mut(rows_per_thread * width).enumerate() {
+                let ray_marks = &ray_marks;
+                scope.spawn(move || {
+                    for (i, mark) in chunk.iter_mut().enumerate() {
+                        let pixel = chunk_index * rows_per_thread * width + i;
+                        *mark = ray_marks((pixel % width) as u32, (pixel / width) as u32, hit_m[pixel]);
+                    }
+                });
+            }
+        });
+        Ok(marks)
+    }
+}
+
 /// An occupancy grid being built: free space carved from views, then the TSDF's cells marked.
 #[derive(Debug)]
 pub struct OccupancyBuilder {
@@ -411,6 +471,53 @@ mod tests {
         let v = f64::from(k.fy_px) * p.y / p.z + f64::from(k.cy_px);
         let r_px = f64::from(k.fx_px) * r / near;
         u - r_px >= 0.0 && v - r_px >= 0.0 && u + r_px <= f64::from(k.width_px - 1) && v + r_px <= f64::from(k.height_px - 1)
+    }
+
+    #[test]
+    fn rays_through_never_observed_cells_are_marked_and_the_rest_not() {
+        // A grid of 5 cm cells over x, y in [-1, 1), z in [0, 4): free, except an unknown slab
+        // at z in [2, 2.5) over x < 0, and an occupied wall at z in [3.5, 3.6).
+        let spec = GridSpec { dims: [40, 40, 80], cell_m: 0.05, center_m: [0.0, 0.0, 2.0] };
+        let mut cells = vec![FREE; spec.cell_count() as usize];
+        for z in 0..80 {
+            for y in 0..40 {
+                for x in 0..40 {
+                    let c = spec.cell_center(x, y, z);
+                    if (2.0..2.5).contains(&c.z) && c.x < 0.0 {
+                        cells[spec.index(x, y, z)] = UNKNOWN;
+                    } else if (3.5..3.6).contains(&c.z) {
+                        cells[spec.index(x, y, z)] = OCCUPIED;
+                    }
+                }
+            }
+        }
+        let grid = OccupancyGrid { spec, cells };
+        // A camera at the origin looking along +z; 21x21 pixels spanning ±0.2 rad.
+        let k = PinholeIntrinsics { fx_px: 50.0, fy_px: 50.0, cx_px: 10.0, cy_px: 10.0, width_px: 21, height_px: 21 };
+        let (near, wall, none) = (vec![1.5_f32; 441], vec![3.5_f32; 441], vec![0.0_f32; 441]);
+        let at = Se3::IDENTITY;
+        let left = |marks: &[bool]| (0..441).filter(|&i| i % 21 < 10 && marks[i]).count();
+        let right = |marks: &[bool]| (0..441).filter(|&i| i % 21 > 10 && marks[i]).count();
+        // Hits at 1.5 m stop before the slab: nothing marked.
+        let m = grid.rays_through_unknown(k, &at, &near, false, (0.0, 8.0), 2).expect("marks");
+        assert_eq!(m.iter().filter(|&&b| b).count(), 0);
+        // Hits on the wall at 3.5 m: the left half (x < 0 at the slab) looked through it.
+        let m = grid.rays_through_unknown(k, &at, &wall, false, (0.0, 8.0), 3).expect("marks");
+        assert_eq!((left(&m), right(&m)), (210, 0), "every left ray, no right one");
+        // No hits: every ray leaves the grid (at z = 4 m) within the 8 m range; with a 3 m range
+        // only the left half looks through unknown space.
+        assert!(grid.rays_through_unknown(k, &at, &none, false, (0.0, 8.0), 1).expect("marks").iter().all(|&b| b));
+        let m = grid.rays_through_unknown(k, &at, &none, false, (0.0, 3.0), 2).expect("marks");
+        assert_eq!((left(&m), right(&m)), (210, 0));
+        // The sensor measures from 2.6 m on: the slab lies nearer, nothing is marked.
+        assert!(grid.rays_through_unknown(k, &at, &wall, false, (2.6, 8.0), 2).expect("marks").iter().all(|&b| !b));
+        // Radial distances: a hit at 1.5 m along the ray stops before the slab everywhere.
+        assert!(grid.rays_through_unknown(k, &at, &near, true, (0.0, 8.0), 2).expect("marks").iter().all(|&b| !b));
+        // Turned half a turn about y, the camera looks out of the grid: every ray is marked.
+        let back = Se3::new(glam::DQuat::from_rotation_y(std::f64::consts::PI), DVec3::new(0.0, 0.0, 0.5));
+        assert!(grid.rays_through_unknown(k, &back, &wall, false, (0.0, 8.0), 2).expect("marks").iter().all(|&b| b));
+        assert!(grid.rays_through_unknown(k, &at, &near[..10], false, (0.0, 8.0), 2).is_err_and(|e| e.to_string().contains("10 depths")));
+        assert!(grid.rays_through_unknown(k, &at, &near, false, (0.0, f64::NAN), 2).is_err());
     }
 
     #[test]

@@ -90,12 +90,15 @@ pub struct SensorOptions {
     pub depth_range_m: (f32, f32),
     /// Also read back the map's colour.
     pub color: bool,
+    /// Also read back the exact hit of each pixel's ray (the raycast's depth along z, before
+    /// any noise): what marking rays through never-observed space needs.
+    pub hits: bool,
 }
 
 impl Default for SensorOptions {
     fn default() -> Self {
         let m = KinectModel::default();
-        Self { units_per_metre: crate::camera::TUM_DEPTH_UNITS_PER_METRE, radial: false, noise: None, depth_range_m: (m.min_depth_m, m.max_depth_m), color: false }
+        Self { units_per_metre: crate::camera::TUM_DEPTH_UNITS_PER_METRE, radial: false, noise: None, depth_range_m: (m.min_depth_m, m.max_depth_m), color: false, hits: false }
     }
 }
 
@@ -124,6 +127,9 @@ pub struct SimulatedFrame {
     pub depth_units: Vec<u16>,
     /// The map's colour at each pixel (RGB8; black where nothing was hit), when asked for.
     pub color_rgb8: Option<Vec<[u8; 3]>>,
+    /// The exact hit of each pixel's ray, depth along z in metres (NaN: none within the range),
+    /// when asked for ([`SensorOptions::hits`]).
+    pub hit_m: Option<Vec<f32>>,
 }
 
 /// Frames rendered and not yet read back, at most.
@@ -177,13 +183,14 @@ impl VirtualSensor {
             depth_raw: &depth_raw,
         }
         .bind_group(gpu);
-        let bytes = Self::readback_bytes(n, options.color);
+        let bytes = Self::readback_bytes(n, options.color, options.hits);
         let readback = ReadbackRing::new(gpu, "core.sensor", bytes, IN_FLIGHT);
         Ok(Self { target, params, params_buffer, depth_raw, bind_group, shadow, options, readback })
     }
 
-    fn readback_bytes(pixels: usize, color: bool) -> u64 {
-        4 * pixels.div_ceil(2) as u64 + if color { 4 * pixels as u64 } else { 0 }
+    /// The readback layout: depth words, then colour (RGBA8 per pixel), then hits (f32).
+    fn readback_bytes(pixels: usize, color: bool, hits: bool) -> u64 {
+        4 * pixels.div_ceil(2) as u64 + if color { 4 * pixels as u64 } else { 0 } + if hits { 4 * pixels as u64 } else { 0 }
     }
 
     /// The intrinsics it renders with.
@@ -232,8 +239,12 @@ impl VirtualSensor {
         let (slot, buffer) = self.readback.free_slot().expect("checked");
         let depth_bytes = self.depth_raw.size();
         encoder.copy_buffer_to_buffer(&self.depth_raw, 0, buffer, 0, depth_bytes);
+        let color_bytes = if self.options.color { self.target.color_rgba8.size() } else { 0 };
         if self.options.color {
-            encoder.copy_buffer_to_buffer(&self.target.color_rgba8, 0, buffer, depth_bytes, self.target.color_rgba8.size());
+            encoder.copy_buffer_to_buffer(&self.target.color_rgba8, 0, buffer, depth_bytes, color_bytes);
+        }
+        if self.options.hits {
+            encoder.copy_buffer_to_buffer(&self.target.depth_m, 0, buffer, depth_bytes + color_bytes, self.target.depth_m.size());
         }
         let submission = gpu.submit([encoder.finish()]);
         self.readback.start(gpu, slot, submission, tag);
@@ -273,6 +284,8 @@ impl VirtualSensor {
                 [b[0], b[1], b[2]]
             }).collect()
         });
-        SimulatedFrame { tag, depth_units, color_rgb8 }
+        let hits_at = depth_bytes + if self.options.color { 4 * n } else { 0 };
+        let hit_m = self.options.hits.then(|| bytes[hits_at..hits_at + 4 * n].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect());
+        SimulatedFrame { tag, depth_units, color_rgb8, hit_m }
     }
 }
