@@ -617,6 +617,7 @@ async fn session(socket: WebSocket, shared: Arc<Shared>) {
         Some(hub) => drive_live_session(&mut stream, hub, shared.renderer.as_ref(), &queue).await,
         None => drive_session(&mut stream, &shared, &queue).await,
     };
+    let client_left = outcome.is_ok();
     if let Err((code, reason)) = outcome {
         queue.reply(WsMessage::Binary(Message::Error { code, message: reason.clone() }.encode().into()));
         let close_code = if code == ErrorCode::SourceFailed { 1011 } else { 1008 };
@@ -624,11 +625,15 @@ async fn session(socket: WebSocket, shared: Arc<Shared>) {
         reason_utf8.truncate(reason_utf8.char_indices().map(|(i, _)| i).take_while(|&i| i <= 120).last().unwrap_or(0));
         queue.reply(WsMessage::Close(Some(CloseFrame { code: close_code, reason: reason_utf8.into() })));
     } else {
-        queue.reply(WsMessage::Close(None));
+        // The client left: its close was answered by the WebSocket layer, and nothing more can
+        // reach it.
+        queue.close();
     }
     // Let the writer drain what is queued, but never wait forever on a stuck client.
     match tokio::time::timeout(Duration::from_secs(5), writer).await {
         Ok(Ok(Ok(()))) => {}
+        // Messages still queued when the client closed cannot be sent: not a failure.
+        Ok(Ok(Err(_))) if client_left => {}
         Ok(Ok(Err(e))) => eprintln!("serve: client #{id}: sending failed, session ended: {e}"),
         Ok(Err(e)) => eprintln!("serve: client #{id}: the sending task failed: {e}"),
         Err(_) => eprintln!("serve: client #{id}: took none of its last messages within 5 s; closed"),
