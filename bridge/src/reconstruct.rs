@@ -24,7 +24,9 @@ pub(crate) struct ReconstructArgs {
     /// TUM RGB-D directory or `.wfr` recording.
     #[arg(default_value = crate::DEFAULT_SAMPLE)]
     source: PathBuf,
-    /// Output directory (created): trajectory.txt, mesh.ply, mesh.glb, stats.json.
+    /// Output directory (created): trajectory.txt, mesh.ply, mesh.glb, stats.json, and the
+    /// source's ground truth as groundtruth.txt when it has one (a recording carries it
+    /// inside; `--poses OUT/groundtruth.txt` then fuses at it).
     #[arg(long)]
     out: PathBuf,
     /// Frames to process, `A..B` (end exclusive); default all.
@@ -351,6 +353,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     }
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
+    write_ground_truth(args, &*source)?;
     let given_json = given.as_ref().map(|_| given_report(args, &without_pose, Some(&refined))).transpose()?;
     save_map(&gpu, fusion.mapper_mut(), &config, args, &source.name(), trajectory.len())?;
     if !args.no_mesh {
@@ -559,6 +562,7 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
     }
     let trajectory_path = args.out.join("trajectory.txt");
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
+    write_ground_truth(args, &*source)?;
     let given_json = given_report(args, &without_pose, None)?;
     save_map(gpu, mapper.mapper_mut(), config, args, &source.name(), trajectory.len())?;
     if !args.no_mesh {
@@ -612,4 +616,12 @@ fn feature_assist(args: &ReconstructArgs, gpu: &webfusion_core::Gpu, fusion: &Ki
         }
         Err(e) => Err(e.into()),
     }
+}
+
+/// Writes the source's ground truth (all of it, in its own frame) as `groundtruth.txt`, if it
+/// has one: a recording's is otherwise only inside the file.
+fn write_ground_truth(args: &ReconstructArgs, source: &dyn webfusion_core::source::FrameSource) -> anyhow::Result<()> {
+    let Some(gt) = source.ground_truth() else { return Ok(()) };
+    let path = args.out.join("groundtruth.txt");
+    write_tum_trajectory(&path, gt).with_context(|| format!("writing {}", path.display()))
 }
