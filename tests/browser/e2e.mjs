@@ -15,7 +15,8 @@
 //      frame with seed 000's metrics, exact and with Kinect noise, downloaded as a 16-bit PNG;
 //      then the native run's saved map, offered by `serve --map`, opened in a fresh page without
 //      fusing, shown in the free view, and rendered at a pose of the native trajectory as
-//      `webfusion simulate` renders it there.
+//      `webfusion simulate` renders it there; finally a map fused at the ground-truth poses,
+//      opened, and the streamed frames compared with it at their ground truth.
 // Prints one line per check and a closing "e2e: N passed, M failed"; exits non-zero on failure.
 //
 // usage: node tests/browser/e2e.mjs [--webfusion target/release/webfusion] [--dist dist]
@@ -208,6 +209,18 @@ try {
   check('virtual sensor with Kinect noise, downloaded', noisy.frame === exact.frame && noisy.valid_pixels < exact.valid_pixels && noisy.compare.coverage_percent > 75 && simPng.width === noisy.width_px && simPng.height === noisy.height_px && simValid === noisy.valid_pixels && simDownload.suggestedFilename() === `sim_depth_frame${noisy.frame}_noise1.png`,
     `${noisy.valid_pixels} valid pixels with noise vs ${exact.valid_pixels} exact; ${JSON.stringify(noisy.compare)}; ${simDownload.suggestedFilename()} ${simPng.width}x${simPng.height}, ${simValid} non-zero`);
 
+  // A pose picked from the trajectory: the first fused frame's (no real depth is kept for it).
+  const before = (await evaluateWithin(page, () => window.webfusion.status, 'the status')).sensor.rendered;
+  await page.fill('#sim-trajectory', '0');
+  await page.click('#sim-at-trajectory');
+  const picked = (await waitFor(page, 'the render at trajectory pose 0', (s) => s.sensor?.rendered > before && s.sensor.in_flight === 0, 120_000)).sensor.last;
+  const p0 = browserTrajectory[0].p;
+  await page.fill('#sim-trajectory', '100000');
+  await page.click('#sim-at-trajectory');
+  const noPose = await waitFor(page, 'the refused trajectory pose', (s) => /no pose 100000/.test(s.message), 30_000);
+  check('virtual sensor at a trajectory pose', Math.hypot(picked.pose[0] - p0[0], picked.pose[1] - p0[1], picked.pose[2] - p0[2]) < 1e-4 && picked.compare === null && picked.valid_pixels > 0.3 * picked.width_px * picked.height_px && noPose.sensor.rendered === before + 1,
+    `pose ${JSON.stringify(picked.pose.map((v) => +v.toFixed(4)))} (trajectory pose 0 at ${JSON.stringify(p0.map((v) => +v.toFixed(4)))}); ${picked.valid_pixels} valid pixels; index 100000: "${noPose.message}"`);
+
   // 7. Bad settings in the URL, then a lost device, in a browser of their own (a fresh GPU
   // process, as a new visitor would have).
   stage = 'the second browser';
@@ -287,6 +300,31 @@ try {
   const refused = await waitFor(third, 'the refused pose', (s) => /7 numbers/.test(s.message), 30_000);
   check('a malformed sensor pose is named, not rendered', refused.sensor.rendered === 2 && thirdErrors.length === 0, `message "${refused.message}"${thirdErrors.length ? '; page errors: ' + thirdErrors.join(' | ') : ''}`);
   await within(third.close(), 30_000);
+
+  // 9. Seed 000's experiment, live: a map fused natively at the sample's ground-truth poses,
+  // opened from the bridge; the frames then streamed are not fused but compared, each at its
+  // ground-truth pose, with the virtual sensor's view of the map ("follow frames").
+  stage = 'sim vs real at ground truth';
+  const gtMapPath = join(out, 'gt_map.wfm');
+  const gtRun = spawnSync(webfusion, ['reconstruct', sample, '--out', join(out, 'native_gt'), '--poses', join(native, 'groundtruth.txt'), '--map-kind', map, '--voxel-size', String(voxelMm / 1000), '--no-mesh', '--save-map', gtMapPath], { encoding: 'utf8' });
+  if (gtRun.status !== 0) throw new Error(`webfusion reconstruct --poses failed: ${gtRun.stderr}`);
+  bridge.child.kill('SIGKILL');
+  bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0', ['--map', gtMapPath]);
+  const fourth = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+  const fourthErrors = [];
+  fourth.on('pageerror', (e) => fourthErrors.push(String(e)));
+  await fourth.goto(`http://${bridge.addr}/`);
+  await waitFor(fourth, 'the link', (s) => s.link === 'connected', 60_000);
+  await fourth.click('#map-from-bridge');
+  await waitFor(fourth, 'the ground-truth map', (s) => s.sensor?.map, 120_000);
+  await fourth.check('#sim-follow');
+  await fourth.click('#play');
+  const live = await waitFor(fourth, 'three compared frames', (s) => s.sensor?.rendered >= 3 && s.sensor.last?.compare && s.sensor.last.frame > 0, FRAME_TIMEOUT_MS * 3);
+  await fourth.click('#pause');
+  const lc = live.sensor.last.compare;
+  check('frames compared at their ground truth, not fused', live.sensor.map.frame === 'given poses' && live.frames_done === 0 && lc.coverage_percent > 70 && lc.pixels_rel_error_over_10pct_percent < 25 && fourthErrors.length === 0,
+    `frame ${live.sensor.last.frame}: ${JSON.stringify(lc)}; ${live.sensor.rendered} renders, ${live.sensor.skipped} frames skipped while the sensor was busy; fused ${live.frames_done}${fourthErrors.length ? '; page errors: ' + fourthErrors.join(' | ') : ''}`);
+  await within(fourth.close(), 30_000);
 } catch (error) {
   check('e2e run', false, `${error.stack ?? String(error)} (at: ${stage})`);
 } finally {

@@ -66,5 +66,8 @@ pub(crate) fn fused_room(dir: &Path, frames: usize, voxel: &str) -> FusedRoom {
     let map = dir.join("room.wfm");
     let fused = dir.join("fused");
     ok(&["reconstruct", s(&room), "--poses", s(&poses), "--voxel-size", voxel, "--save-map", s(&map), "--no-mesh", "--out", s(&fused)]);
+    // The recording's ground truth comes out beside the trajectory, as it was recorded.
+    let written = std::fs::read_to_string(fused.join("groundtruth.txt")).expect("groundtruth.txt");
+    assert_eq!(written, format_tum_trajectory(&gt), "reconstruct writes the source's ground truth");
     FusedRoom { room, gt, poses, map, fused }
 }
