@@ -25,7 +25,7 @@
 // The main page fuses into --map (default sparse: the voxel-block map, the app's default); the
 // second page fuses into the dense box, so both kinds run in the browser.
 import { spawnSync } from 'node:child_process';
-import { readdirSync, readFileSync, writeFileSync } from 'node:fs';
+import { readdirSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { decodePng, evaluateWithin, launchChromium, options, parseTum, startBridge, waitFor, within } from './lib.mjs';
 
@@ -49,6 +49,19 @@ const watchdog = setTimeout(() => {
   if (bridge) bridge.child.kill('SIGKILL');
   process.exit(1);
 }, RUN_TIMEOUT_MS);
+
+/** A fresh page of `bridge` that opens the bridge's map (`serve --map`): the page, its page
+ * errors, and its status once the map is open (or the page has said why not). */
+async function openBridgeMap(browser, bridge) {
+  const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(String(e)));
+  await page.goto(`http://${bridge.addr}/`);
+  await waitFor(page, 'the link', (s) => s.link === 'connected', 60_000);
+  await page.click('#map-from-bridge');
+  const opened = await waitFor(page, 'the opened map', (s) => s.sensor?.map || s.message, 120_000);
+  return { page, errors, opened };
+}
 
 const results = [];
 function check(name, ok, detail) {
@@ -256,13 +269,7 @@ try {
   const mapBlocks = Number(mapBytes.readBigUInt64LE(mapBytes.length - 16));
   bridge.child.kill('SIGKILL');
   bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0', ['--map', mapPath]);
-  const third = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
-  const thirdErrors = [];
-  third.on('pageerror', (e) => thirdErrors.push(String(e)));
-  await third.goto(`http://${bridge.addr}/`);
-  await waitFor(third, 'the link', (s) => s.link === 'connected', 60_000);
-  await third.click('#map-from-bridge');
-  const opened = await waitFor(third, 'the opened map', (s) => s.sensor?.map || s.message, 120_000);
+  const { page: third, errors: thirdErrors, opened } = await openBridgeMap(browser, bridge);
   const om = opened.sensor.map;
   await new Promise((r) => setTimeout(r, 2000));
   const mapShot = decodePng(await third.locator('#view-free').screenshot({ path: join(out, 'opened_map_view.png') }));
@@ -278,6 +285,8 @@ try {
   const poseLine = readFileSync(join(native, 'trajectory.txt'), 'utf8').split('\n').filter((l) => l && !l.startsWith('#'))[Math.floor(nativeTrajectory.length / 2)];
   writeFileSync(join(out, 'sim_pose.txt'), poseLine + '\n');
   const simDir = join(out, 'native_sim');
+  // simulate never writes over a simulation: a directory left by an earlier run goes first.
+  rmSync(simDir, { recursive: true, force: true });
   const simRun = spawnSync(webfusion, ['simulate', '--map', mapPath, '--poses', join(out, 'sim_pose.txt'), '--out', simDir], { encoding: 'utf8' });
   if (simRun.status !== 0) throw new Error(`webfusion simulate failed: ${simRun.stderr}`);
   const nativeSim = decodePng(readFileSync(join(simDir, 'depth', readdirSync(join(simDir, 'depth'))[0]))).depth16;
@@ -310,13 +319,7 @@ try {
   if (gtRun.status !== 0) throw new Error(`webfusion reconstruct --poses failed: ${gtRun.stderr}`);
   bridge.child.kill('SIGKILL');
   bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0', ['--map', gtMapPath]);
-  const fourth = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
-  const fourthErrors = [];
-  fourth.on('pageerror', (e) => fourthErrors.push(String(e)));
-  await fourth.goto(`http://${bridge.addr}/`);
-  await waitFor(fourth, 'the link', (s) => s.link === 'connected', 60_000);
-  await fourth.click('#map-from-bridge');
-  await waitFor(fourth, 'the ground-truth map', (s) => s.sensor?.map, 120_000);
+  const { page: fourth, errors: fourthErrors } = await openBridgeMap(browser, bridge);
   await fourth.check('#sim-follow');
   await fourth.click('#play');
   const live = await waitFor(fourth, 'three compared frames', (s) => s.sensor?.rendered >= 3 && s.sensor.last?.compare && s.sensor.last.frame > 0, FRAME_TIMEOUT_MS * 3);
