@@ -586,6 +586,10 @@ impl App {
             },
             Ui::SimFromView => self.render_sensor(SensorPose::FreeView),
             Ui::SimAtFrame => self.render_sensor(SensorPose::LastFrame),
+            Ui::SimAtTrajectory => match ui::value("sim-trajectory").trim().parse::<usize>() {
+                Ok(i) => self.render_sensor(SensorPose::Trajectory(i)),
+                Err(_) => self.last_error = Some(format!("virtual sensor: trajectory pose {:?} is not a whole number", ui::value("sim-trajectory"))),
+            },
             Ui::SimFollow(on) => self.mode.set_sensor_follow(on),
             Ui::SimNoise => match sensor_noise_from_form() {
                 Ok(seed) => {

@@ -99,6 +99,8 @@ pub(crate) enum SensorPose {
     FreeView,
     /// The last real frame with a pose in the map, beside its real depth.
     LastFrame,
+    /// The i-th pose of the run's trajectory (beside its depth if it is the last frame's).
+    Trajectory(usize),
     /// The last render's pose again (its settings changed).
     Again,
 }
@@ -575,6 +577,13 @@ impl FusionMode {
             SensorPose::LastFrame => match real {
                 Some(r) => (r.map_from_camera, Some(r)),
                 None => return Err("virtual sensor: no real frame with a pose in this map yet".to_owned()),
+            },
+            SensorPose::Trajectory(i) => match self.trajectory.get(i) {
+                Some(p) => {
+                    let pose = map_from_world * p.world_from_camera;
+                    (pose, real.filter(|r| (r.map_from_camera.translation_m - pose.translation_m).length() < 1e-9 && r.map_from_camera.rotation.angle_between(pose.rotation) < 1e-9))
+                }
+                None => return Err(format!("virtual sensor: the trajectory has {} poses; there is no pose {i}", self.trajectory.len())),
             },
             SensorPose::Again => match self.sensor.last_pose() {
                 Some(pose) => (pose, real.filter(|r| r.map_from_camera == pose)),

@@ -60,6 +60,8 @@ pub(crate) enum Ui {
     SimRender,
     SimFromView,
     SimAtFrame,
+    /// Render at the trajectory's pose whose index is typed into the panel.
+    SimAtTrajectory,
     /// Render at every real frame's pose as it arrives.
     SimFollow(bool),
     /// The noise checkbox or its seed changed.

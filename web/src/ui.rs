@@ -124,6 +124,7 @@ pub(crate) fn bind_controls(inbox: &Rc<Inbox>) {
         ("sim-render", Ui::SimRender),
         ("sim-from-view", Ui::SimFromView),
         ("sim-at-frame", Ui::SimAtFrame),
+        ("sim-at-trajectory", Ui::SimAtTrajectory),
         ("sim-download", Ui::SimDownload),
         ("map-from-bridge", Ui::MapFromBridge),
         ("map-close", Ui::CloseMap),
