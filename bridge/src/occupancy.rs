@@ -105,9 +105,10 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
     let tsdf_s = marking.elapsed().as_secs_f64();
     let counts = grid.counts();
     std::fs::write(&args.out, &grid.cells).with_context(|| format!("writing {}", args.out.display()))?;
-    let (frame, axes) = match header.frame {
-        MapFrame::FirstCamera => ("first_camera", "the first camera's: x right, y down, z forward (optical axis), metres"),
-        MapFrame::GivenPoses => ("given_poses", "the frame of the poses the map was fused at (reconstruct --poses / --robot-poses), metres"),
+    let frame = frame_name(header.frame);
+    let axes = match header.frame {
+        MapFrame::FirstCamera => "the first camera's: x right, y down, z forward (optical axis), metres",
+        MapFrame::GivenPoses => "the frame of the poses the map was fused at (reconstruct --poses / --robot-poses), metres",
     };
     let corner = spec.corner_m();
     let total = spec.cell_count() as f64;
@@ -154,6 +155,14 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
         sidecar.display()
     );
     Ok(())
+}
+
+/// A map frame as the grid's description names it (`frame`).
+pub(crate) fn frame_name(frame: MapFrame) -> &'static str {
+    match frame {
+        MapFrame::FirstCamera => "first_camera",
+        MapFrame::GivenPoses => "given_poses",
+    }
 }
 
 /// Reads a grid `export-occupancy` wrote: its description (`G.json`, or the grid's own path

@@ -260,14 +260,23 @@ fn origin_allowed(headers: &HeaderMap, allowed: &[String]) -> bool {
     origin == format!("http://{host}") || origin == format!("https://{host}") || allowed.iter().any(|a| a == origin)
 }
 
-async fn ws_handler(ws: WebSocketUpgrade, headers: HeaderMap, Query(query): Query<HashMap<String, String>>, State(shared): State<Arc<Shared>>) -> Response {
+/// The edge checks of the frames and the map: the token, then the `Origin`; the refusal, if
+/// any.
+fn refused(headers: &HeaderMap, query: &HashMap<String, String>, shared: &Shared) -> Option<Response> {
     if let Some(token) = &shared.token
         && !query.get("token").is_some_and(|given| same_secret(given, token))
     {
-        return (StatusCode::UNAUTHORIZED, "missing or wrong ?token=").into_response();
+        return Some((StatusCode::UNAUTHORIZED, "missing or wrong ?token=").into_response());
     }
-    if !origin_allowed(&headers, &shared.allowed_origins) {
-        return (StatusCode::FORBIDDEN, "Origin not allowed (use --allow-origin)").into_response();
+    if !origin_allowed(headers, &shared.allowed_origins) {
+        return Some((StatusCode::FORBIDDEN, "Origin not allowed (use --allow-origin)").into_response());
+    }
+    None
+}
+
+async fn ws_handler(ws: WebSocketUpgrade, headers: HeaderMap, Query(query): Query<HashMap<String, String>>, State(shared): State<Arc<Shared>>) -> Response {
+    if let Some(refusal) = refused(&headers, &query, &shared) {
+        return refusal;
     }
     ws.max_message_size(MAX_CLIENT_MESSAGE_BYTES).max_frame_size(MAX_CLIENT_MESSAGE_BYTES).on_upgrade(move |socket| session(socket, shared))
 }
@@ -279,13 +288,8 @@ const MAP_ROUTE: &str = "/map.wfm";
 /// The `--map` file as it is on disk now (the page parses it and keeps its intact blocks),
 /// behind the same token as the frames; pages of an allowed origin may fetch it cross-origin.
 async fn map_handler(headers: HeaderMap, Query(query): Query<HashMap<String, String>>, State(shared): State<Arc<Shared>>) -> Response {
-    if let Some(token) = &shared.token
-        && !query.get("token").is_some_and(|given| same_secret(given, token))
-    {
-        return (StatusCode::UNAUTHORIZED, "missing or wrong ?token=").into_response();
-    }
-    if !origin_allowed(&headers, &shared.allowed_origins) {
-        return (StatusCode::FORBIDDEN, "Origin not allowed (use --allow-origin)").into_response();
+    if let Some(refusal) = refused(&headers, &query, &shared) {
+        return refusal;
     }
     let Some(path) = &shared.map_path else {
         return (StatusCode::NOT_FOUND, "this bridge serves no map (start it with serve --map FILE.wfm)").into_response();

@@ -94,7 +94,7 @@ pub(crate) fn camera(intrinsics: Option<&str>, image_size: Option<&str>, default
     let size = image_size.map(crate::calib::parse_image_size).transpose()?;
     let Some(spec) = intrinsics else {
         let (w, h) = size.unwrap_or(default_size);
-        return Ok(crate::synth::intrinsics(w, h));
+        return Ok(PinholeIntrinsics::nominal_kinect(w, h));
     };
     let calibration = crate::calib::CalibrationArgs { intrinsics: Some(spec.to_owned()), depth_scale: None, image_size: image_size.map(str::to_owned) }.resolve()?.expect("--intrinsics given");
     Ok(calibration.intrinsics)
@@ -234,10 +234,7 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
     let grid = match &args.occupancy {
         Some(path) => {
             let (grid, grid_frame) = crate::occupancy::read_grid(path)?;
-            let map_frame = match file.header.frame {
-                webfusion_core::map::file::MapFrame::FirstCamera => "first_camera",
-                webfusion_core::map::file::MapFrame::GivenPoses => "given_poses",
-            };
+            let map_frame = crate::occupancy::frame_name(file.header.frame);
             anyhow::ensure!(grid_frame == map_frame, "{}: the grid is in the {grid_frame} frame, the map {} in the {map_frame} frame", path.display(), args.map.display());
             Some(grid)
         }

@@ -30,20 +30,13 @@ pub(crate) struct SynthRoomArgs {
     height: u32,
 }
 
-/// Intrinsics of a `width` x `height` camera with the field of view of TUM's default Kinect
-/// calibration (525 px focal length at 640 x 480, principal point at the centre).
-pub(crate) fn intrinsics(width: u32, height: u32) -> PinholeIntrinsics {
-    let f = 525.0 * width as f32 / 640.0;
-    PinholeIntrinsics { fx_px: f, fy_px: f, cx_px: 0.5 * width as f32 - 0.5, cy_px: 0.5 * height as f32 - 0.5, width_px: width, height_px: height }
-}
-
 pub(crate) fn run(args: &SynthRoomArgs) -> anyhow::Result<()> {
     let [w, h, d] = <[f64; 3]>::try_from(args.size.as_slice()).map_err(|_| anyhow::anyhow!("--size takes three numbers (width, height, depth in metres), not {}", args.size.len()))?;
     anyhow::ensure!([w, h, d].iter().all(|s| s.is_finite() && *s >= 2.0), "--size {w},{h},{d}: a room of at least 2 m each way");
     anyhow::ensure!(args.frames >= 2, "--frames {}: a path needs at least 2", args.frames);
     anyhow::ensure!((16..=4096).contains(&args.width) && (16..=4096).contains(&args.height), "--width/--height {}x{} must be 16..=4096 pixels", args.width, args.height);
     let room = SyntheticRoom::new(w, h, d);
-    let k = intrinsics(args.width, args.height);
+    let k = PinholeIntrinsics::nominal_kinect(args.width, args.height);
     let path = room.path(args.frames);
     let calibration = RgbdCalibration { intrinsics: k, depth_units_per_metre: 5000.0 };
     let mut writer = RecordingWriter::create(&args.out, calibration, RecordingOptions::default()).with_context(|| format!("creating {}", args.out.display()))?;

@@ -24,6 +24,14 @@ pub struct PinholeIntrinsics {
 }
 
 impl PinholeIntrinsics {
+    /// The Kinect's nominal camera, 525 px at 640x480, scaled to `width_px` x `height_px`
+    /// (what `simulate` and `synth-room` use without `--intrinsics`, and the page's virtual
+    /// sensor at a pose no real frame has).
+    pub fn nominal_kinect(width_px: u32, height_px: u32) -> Self {
+        let f = 525.0 * width_px as f32 / 640.0;
+        Self { fx_px: f, fy_px: f, cx_px: 0.5 * width_px as f32 - 0.5, cy_px: 0.5 * height_px as f32 - 0.5, width_px, height_px }
+    }
+
     /// Intrinsics of the image made by averaging 2x2 blocks (`depth_pyramid_down`).
     ///
     /// A coarse pixel u covers fine pixels 2u and 2u+1, whose centre is 2u + 0.5, so

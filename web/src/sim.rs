@@ -32,9 +32,6 @@ use crate::status::Window;
 use crate::ui;
 use crate::view;
 
-/// The sensor at a pose no real frame has: the Kinect's nominal 525 px at 640x480 (as
-/// `webfusion simulate` without `--intrinsics`).
-pub(crate) const NOMINAL_KINECT: PinholeIntrinsics = PinholeIntrinsics { fx_px: 525.0, fy_px: 525.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 };
 /// |sim − real| drawn at the top of the difference image's colour map, mm.
 const DIFFERENCE_MAX_MM: f32 = 50.0;
 /// The panel's canvases and inputs.
@@ -207,7 +204,7 @@ impl SensorPanel {
     /// skipped (counted) rather than waited for.
     pub(crate) fn render(&mut self, gpu: &Gpu, store: &dyn TsdfStore, map_from_camera: Se3, real: Option<RealFrame>) -> Result<(), String> {
         let key = SensorKey {
-            intrinsics: real.as_ref().map_or(NOMINAL_KINECT, |r| r.intrinsics),
+            intrinsics: real.as_ref().map_or_else(|| PinholeIntrinsics::nominal_kinect(640, 480), |r| r.intrinsics),
             units_per_metre: real.as_ref().map_or(TUM_DEPTH_UNITS_PER_METRE, |r| r.units_per_metre),
             noise_seed: self.noise_seed,
         };

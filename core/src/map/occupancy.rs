@@ -150,9 +150,7 @@ impl OccupancyGrid {
         }
         counts
     }
-}
 
-impl OccupancyGrid {
     /// Which pixels of a view looked through space this grid does not know to be free: the
     /// sensor's "the ray left observed space before it hit anything". A pixel's ray, from the
     /// camera at `world_from_camera` (the grid's frame) through the pixel of `k`, is sampled
