@@ -467,12 +467,11 @@ impl FusionMode {
             if opened.header.frame == webfusion_core::map::file::MapFrame::GivenPoses
                 && let Some(gt) = ground_truth
             {
-                self.sensor_due |= self.sensor.observe(real_frame(frame, calibration, gt));
+                self.sensor_due |= self.sensor.observe(real_frame(frame.index, Rc::new(frame.depth.units.clone()), calibration, gt));
             }
             return Ok(());
         }
         if self.pipeline.is_none() {
-            self.sensor.unbind();
             self.pipeline = Some(Pipeline::new(gpu, calibration, &self.config, self.features, self.planes)?);
         }
         let Some(p) = self.pipeline.as_mut() else { return Ok(()) };
@@ -559,12 +558,18 @@ impl FusionMode {
         Ok(std::mem::take(&mut self.reported))
     }
 
+    /// The frame of the map on show (the opened one, or the pipeline's) from the run's world:
+    /// an opened map's frame is the world; the pipeline's world is the run's after `run_origin`.
+    fn map_from_world(&self) -> Se3 {
+        if self.opened.is_some() { Se3::IDENTITY } else { self.run_origin.inverse() }
+    }
+
     /// Renders the virtual sensor in the opened map, or else in the fused one.
     pub(crate) fn render_sensor(&mut self, gpu: &Gpu, at: SensorPose) -> Result<(), String> {
-        let (store, map_from_world) = match (&self.opened, &self.pipeline) {
-            (Some((o, _)), _) => (&o.map, Se3::IDENTITY),
-            // The pipeline's world frame is the run's after `run_origin`.
-            (None, Some(p)) => (p.fusion.volume(), self.run_origin.inverse()),
+        let map_from_world = self.map_from_world();
+        let store = match (&self.opened, &self.pipeline) {
+            (Some((o, _)), _) => &o.map,
+            (None, Some(p)) => p.fusion.volume(),
             (None, None) => return Err("virtual sensor: no map yet (fuse a frame, or open a saved map)".to_owned()),
         };
         let real = self.sensor.real().cloned();
@@ -613,7 +618,6 @@ impl FusionMode {
         // The old free view's canvas is let go before the new one configures it.
         self.opened = None;
         self.drop_pipeline(false);
-        self.sensor.unbind();
         let free = FreeView::new(gpu, &map.map)?;
         self.orbit = Some(first_look(&map));
         self.opened = Some((map, free));
@@ -673,8 +677,7 @@ impl FusionMode {
             self.map = report.map;
         }
         if !report.state.is_lost() {
-            let real = RealFrame { index: meta.index, depth_units: Rc::clone(&meta.depth_units), units_per_metre: meta.calibration.depth_units_per_metre, intrinsics: meta.calibration.intrinsics, map_from_camera: report.world_from_camera };
-            self.sensor_due |= self.sensor.observe(real);
+            self.sensor_due |= self.sensor.observe(real_frame(meta.index, Rc::clone(&meta.depth_units), meta.calibration, report.world_from_camera));
         }
         match report.state {
             TrackingState::Lost(_) => self.lost_frames += 1,
@@ -732,10 +735,10 @@ impl FusionMode {
         }
         let Some(orbit) = self.orbit else { return Ok(()) };
         let world_from_viewer = orbit.world_from_viewer();
-        let (free, store, map_from_viewer) = match (&self.opened, &self.pipeline) {
-            (Some((o, free)), _) => (free, &o.map, world_from_viewer),
-            // The pipeline's world frame is the run's after `run_origin`.
-            (None, Some(p)) if !self.trajectory.is_empty() => (&p.free, p.fusion.volume(), self.run_origin.inverse() * world_from_viewer),
+        let map_from_viewer = self.map_from_world() * world_from_viewer;
+        let (free, store) = match (&self.opened, &self.pipeline) {
+            (Some((o, free)), _) => (free, &o.map),
+            (None, Some(p)) if !self.trajectory.is_empty() => (&p.free, p.fusion.volume()),
             _ => return Ok(()),
         };
         self.free_dirty = false;
@@ -772,9 +775,8 @@ impl FusionMode {
             view::draw_camera(&ctx, &FREE_VIEW, world_from_viewer, &last.world_from_camera, "#ff5252");
         }
         if let Some(map_from_sensor) = self.sensor.last_pose() {
-            // The virtual Kinect, in the run's frame (an opened map's is the world's).
-            let world_from_sensor = if self.opened.is_some() { map_from_sensor } else { self.run_origin * map_from_sensor };
-            view::draw_camera(&ctx, &FREE_VIEW, world_from_viewer, &world_from_sensor, "#40c4ff");
+            // The virtual Kinect, in the run's frame.
+            view::draw_camera(&ctx, &FREE_VIEW, world_from_viewer, &(self.map_from_world().inverse() * map_from_sensor), "#40c4ff");
         }
         Ok(())
     }
@@ -910,9 +912,9 @@ fn draw_odometry_view(pair: Option<&PairView>, reference: Option<&FrameImage>, c
     }
 }
 
-/// A real frame at `map_from_camera`, for the virtual sensor's comparison.
-fn real_frame(frame: &RgbdFrame, calibration: RgbdCalibration, map_from_camera: Se3) -> RealFrame {
-    RealFrame { index: frame.index, depth_units: Rc::new(frame.depth.units.clone()), units_per_metre: calibration.depth_units_per_metre, intrinsics: calibration.intrinsics, map_from_camera }
+/// Frame `index`'s depth at `map_from_camera`, for the virtual sensor's comparison.
+fn real_frame(index: u64, depth_units: Rc<Vec<u16>>, calibration: RgbdCalibration, map_from_camera: Se3) -> RealFrame {
+    RealFrame { index, depth_units, units_per_metre: calibration.depth_units_per_metre, intrinsics: calibration.intrinsics, map_from_camera }
 }
 
 /// The free view's first look at an opened map: at the mean of its blocks, from twice their
