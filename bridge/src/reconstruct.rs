@@ -467,7 +467,7 @@ fn print_map_stats(stats: &MapStats, memory_bytes: u64) {
     let used_mib = (u64::from(stats.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR) as f64 / 1048576.0;
     println!("sparse map: {} of {} blocks used ({used_mib:.1} MiB of {:.1} MiB)", stats.blocks_used, stats.pool_blocks, memory_bytes as f64 / 1048576.0);
     if stats.swapped_out_total > 0 {
-        println!("swapping: {} blocks on the host ({:.1} MiB of host memory); {} swapped out, {} swapped in; {} band samples met a block still on the host", stats.blocks_on_host, stats.host_bytes as f64 / 1048576.0, stats.swapped_out_total, stats.swapped_in_total, stats.swapped_hits);
+        println!("swapping: {} blocks on the host ({:.1} MiB of host memory); {} swapped out, {} swapped in; {} band samples met a block still on the host; margins shrank {} times under pressure (now {} %)", stats.blocks_on_host, stats.host_bytes as f64 / 1048576.0, stats.swapped_out_total, stats.swapped_in_total, stats.swapped_hits, stats.swap_margin_shrinks, stats.swap_margin_percent);
     }
     if stats.exhausted() {
         eprintln!("warning: the map ran out of room ({} insertions without a hash slot, {} blocks refused by the full pool): surfaces there were not fused; raise --map-budget-mib or the voxel size", stats.hash_full, stats.pool_full);
@@ -476,7 +476,7 @@ fn print_map_stats(stats: &MapStats, memory_bytes: u64) {
 
 /// A sparse map's part of stats.json.
 fn map_stats_json(m: &MapStats) -> serde_json::Value {
-    serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "used_bytes": u64::from(m.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR, "hash_full": m.hash_full, "pool_full": m.pool_full, "out_of_range": m.out_of_range, "blocks_on_host": m.blocks_on_host, "host_bytes": m.host_bytes, "swapped_out_total": m.swapped_out_total, "swapped_in_total": m.swapped_in_total, "swapped_hits": m.swapped_hits, "swap_in_refused": m.swap_in_refused })
+    serde_json::json!({ "blocks_used": m.blocks_used, "pool_blocks": m.pool_blocks, "used_bytes": u64::from(m.blocks_used) * webfusion_core::map::BLOCK_BYTES_WITH_COLOR, "hash_full": m.hash_full, "pool_full": m.pool_full, "out_of_range": m.out_of_range, "blocks_on_host": m.blocks_on_host, "host_bytes": m.host_bytes, "swapped_out_total": m.swapped_out_total, "swapped_in_total": m.swapped_in_total, "swapped_hits": m.swapped_hits, "swap_in_refused": m.swap_in_refused, "swap_margin_shrinks": m.swap_margin_shrinks, "swap_margin_percent": m.swap_margin_percent })
 }
 
 /// `--poses`' part of stats.json: the file, the frames without a pose and, with `--refine`, how

@@ -861,7 +861,8 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         None => "ATE: the source has no ground truth".to_owned(),
     };
     let v = &f.volume;
-    let on_host = if v.blocks_on_host > 0 { format!(", {} swapped out to memory ({:.0} MiB)", v.blocks_on_host, v.host_bytes as f64 / 1048576.0) } else { String::new() };
+    let pressure = if v.swap_margin_percent > 0 && v.swap_margin_percent < 100 { format!(", swap margins at {} % (the pool is tight)", v.swap_margin_percent) } else { String::new() };
+    let on_host = if v.blocks_on_host > 0 { format!(", {} swapped out to memory ({:.0} MiB){pressure}", v.blocks_on_host, v.host_bytes as f64 / 1048576.0) } else { String::new() };
     let map = if v.pool_blocks > 0 { format!("sparse map, {} of {} blocks of 8³ on the GPU{on_host}{}", v.blocks_used, v.pool_blocks, if v.full { " (FULL: new surfaces are not fused; raise the voxel size)" } else { "" }) } else { format!("volume {}³", v.dims_voxels[0]) };
     lines.push(format!(
         "{ate} · latency {} · in flight {} · dropped {} · reconnects {} · {map} × {:.1} mm = {:.0} MiB",

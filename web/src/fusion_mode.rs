@@ -814,6 +814,7 @@ impl FusionMode {
                 blocks_used: self.map.map_or(0, |m| m.blocks_used),
                 blocks_on_host: self.map.map_or(0, |m| m.blocks_on_host),
                 host_bytes: self.map.map_or(0, |m| m.host_bytes),
+                swap_margin_percent: self.map.map_or(0, |m| m.swap_margin_percent),
                 full: self.map.is_some_and(|m| m.exhausted()),
                 voxel_size_m: t.voxel_size_m,
                 truncation_m: t.truncation_m,

@@ -63,6 +63,9 @@ pub(crate) struct VolumeStatus {
     pub(crate) blocks_on_host: u32,
     /// Bytes they take there.
     pub(crate) host_bytes: u64,
+    /// The swapping regions' margins in force, percent of the full ones (below 100 while the
+    /// map's surroundings do not fit the pool; 0 without swapping).
+    pub(crate) swap_margin_percent: u32,
     /// A sparse map ran out of pool blocks or hash slots: surfaces seen since were not fused.
     pub(crate) full: bool,
     pub(crate) voxel_size_m: f32,

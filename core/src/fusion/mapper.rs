@@ -225,7 +225,8 @@ impl Mapper {
         }
     }
 
-    fn swapper_mut(&mut self) -> Option<&mut MapSwapper> {
+    /// A swapping sparse map's swapper, mutably (to pin its margins).
+    pub fn swapper_mut(&mut self) -> Option<&mut MapSwapper> {
         match &mut self.integration {
             Integration::Sparse { swapper, .. } => swapper.as_deref_mut(),
             Integration::Dense { .. } => None,
@@ -315,7 +316,7 @@ impl Mapper {
             // Blocks the camera may see first (the swapper's fetch region), then by distance.
             let c = pose.translation_m.as_vec3().to_array();
             let axis = (pose.rotation * glam::DVec3::Z).as_vec3().to_array();
-            let fetch = swapper.as_ref().map(|s| s.config().fetch);
+            let fetch = swapper.as_ref().map(|s| s.fetch_region());
             let priority = |b: &MapBlock| {
                 let (centre, radius_m) = crate::cpu::map::block_swap_out::block_centre(&d, b.coords);
                 let v: [f32; 3] = std::array::from_fn(|i| centre[i] - c[i]);

@@ -118,6 +118,12 @@ pub struct MapStats {
     pub swapped_out_total: u64,
     /// Blocks swapped back in so far (each time counted).
     pub swapped_in_total: u64,
+    /// Times the swapper shrank its regions' margins because the kept region did not fit the
+    /// pool ([`swap::MapSwapper::prepare`]).
+    pub swap_margin_shrinks: u32,
+    /// The regions' margins in force, percent of the full ones (100 without pressure; 0 without
+    /// swapping).
+    pub swap_margin_percent: u32,
 }
 
 impl MapStats {
@@ -136,6 +142,8 @@ impl MapStats {
             host_bytes: 0,
             swapped_out_total: 0,
             swapped_in_total: 0,
+            swap_margin_shrinks: 0,
+            swap_margin_percent: 0,
         }
     }
 

@@ -46,10 +46,30 @@ pub struct SwapConfig {
     /// Blocks are swapped in only while fewer than this fraction of the pool is resident (room
     /// left for the blocks new surfaces allocate).
     pub fill_below: f32,
-    /// Resident blocks outside this region may be swapped out.
-    pub keep: ViewRegion,
-    /// Blocks on the host inside this region (a subset of `keep`) are swapped back in.
-    pub fetch: ViewRegion,
+    /// What the camera sees: the cone of its image about the optical axis, as far as a fused
+    /// sample's truncation band reaches.
+    pub seen: ViewRegion,
+    /// How far the kept region extends beyond `seen` at full margins: resident blocks outside it
+    /// may be swapped out.
+    pub keep_margin: RegionMargin,
+    /// How far the fetch region extends beyond `seen` at full margins: blocks on the host inside
+    /// it are swapped back in. Never wider than `keep_margin`, so the fetch region lies inside
+    /// the kept one at every scale.
+    pub fetch_margin: RegionMargin,
+    /// The smallest fraction of the margins the swapper shrinks them to when the kept region no
+    /// longer fits the pool ([`MapSwapper`]'s pressure rule).
+    pub min_margin_scale: f32,
+}
+
+/// How far a region extends beyond what the camera sees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RegionMargin {
+    /// Radius around the camera centre that is always inside, metres.
+    pub near_m: f32,
+    /// Added to the reach of the seen cone, metres.
+    pub range_m: f32,
+    /// Added to the seen cone's half-angle, degrees.
+    pub angle_deg: f32,
 }
 
 impl SwapConfig {
@@ -57,22 +77,89 @@ impl SwapConfig {
     /// truncation `truncation_m`. The camera sees a cone of half-angle θ (the image's half
     /// diagonal) up to `max_depth_m` / cos θ + μ from its centre (depth is measured along the
     /// axis: a corner ray's samples lie farther away). The fetch region widens it by 15° and
-    /// 0.5 m and always
-    /// holds the 1 m around the camera: a hand-held or robot camera at 30 Hz moves a few cm and
-    /// turns a few degrees per frame, so blocks come back many frames before they are seen, from
-    /// a pose a frame or two old and at most `blocks_per_frame` a frame. The kept region widens it
-    /// by 30° and 1 m (1.5 m around the camera), so a block between the two stays where it is.
+    /// 0.5 m and always holds the 1 m around the camera: a hand-held or robot camera at 30 Hz
+    /// moves a few cm and turns a few degrees per frame, so blocks come back many frames before
+    /// they are seen, from a pose a frame or two old and at most `blocks_per_frame` a frame. The
+    /// kept region widens it by 30° and 1 m (1.5 m around the camera), so a block between the two
+    /// stays where it is. Under pressure the margins shrink to an eighth (fetch: 1.9°, 6 cm,
+    /// 12.5 cm around the camera), still more than a frame's motion at 30 Hz.
     pub fn for_camera(k: &PinholeIntrinsics, max_depth_m: f32, truncation_m: f32) -> Self {
         let half_diagonal_px = (0.5 * k.width_px as f32).hypot(0.5 * k.height_px as f32);
         let theta = (half_diagonal_px / k.fx_px.min(k.fy_px)).atan();
         let reach = max_depth_m / theta.cos() + truncation_m;
-        let cos = |extra_deg: f32| (theta + extra_deg.to_radians()).min(std::f32::consts::PI).cos();
         Self {
             blocks_per_frame: DEFAULT_BLOCKS_PER_FRAME,
             evict_above: 0.75,
             fill_below: 0.9,
-            keep: ViewRegion { near_m: 1.5, range_m: reach + 1.0, cos_half_angle: cos(30.0) },
-            fetch: ViewRegion { near_m: 1.0, range_m: reach + 0.5, cos_half_angle: cos(15.0) },
+            seen: ViewRegion { near_m: 0.0, range_m: reach, cos_half_angle: theta.cos() },
+            keep_margin: RegionMargin { near_m: 1.5, range_m: 1.0, angle_deg: 30.0 },
+            fetch_margin: RegionMargin { near_m: 1.0, range_m: 0.5, angle_deg: 15.0 },
+            min_margin_scale: 0.125,
+        }
+    }
+
+    /// The kept region with its margins scaled by `scale` (1: full margins).
+    pub fn keep_region(&self, scale: f32) -> ViewRegion {
+        Self::widened(&self.seen, &self.keep_margin, scale)
+    }
+
+    /// The fetch region with its margins scaled by `scale` (1: full margins).
+    pub fn fetch_region(&self, scale: f32) -> ViewRegion {
+        Self::widened(&self.seen, &self.fetch_margin, scale)
+    }
+
+    fn widened(seen: &ViewRegion, margin: &RegionMargin, scale: f32) -> ViewRegion {
+        let half_angle = seen.cos_half_angle.clamp(-1.0, 1.0).acos() + (scale * margin.angle_deg).to_radians();
+        ViewRegion {
+            near_m: seen.near_m + scale * margin.near_m,
+            range_m: seen.range_m + scale * margin.range_m,
+            cos_half_angle: half_angle.min(std::f32::consts::PI).cos(),
+        }
+    }
+}
+
+/// Consecutive frames with the pool below the eviction mark and every wanted block swapped in
+/// before the swapper doubles shrunk margins again (a second at 30 Hz: margins grow back only
+/// once the smaller ones have kept the map comfortably within the pool for a while, so the
+/// regions do not flap between two sizes every few frames).
+const RELAX_AFTER_FRAMES: u32 = 30;
+
+/// The pressure rule of [`MapSwapper::prepare`]: the fraction of the regions' margins in force.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Margins {
+    /// 1, or less while the kept region does not fit the pool.
+    scale: f32,
+    /// Whether the last swap-out list made at `scale` held every resident block outside the
+    /// kept region (fewer than the list's capacity): eviction can make no more room.
+    eviction_exhausted: bool,
+    /// Consecutive comfortable frames at shrunk margins.
+    calm_frames: u32,
+    /// Times the margins shrank.
+    shrinks: u32,
+}
+
+impl Margins {
+    fn new() -> Self {
+        Self { scale: 1.0, eviction_exhausted: false, calm_frames: 0, shrinks: 0 }
+    }
+
+    /// One frame's plan: `above_mark`, the pool is above the eviction mark; `starved`, the fetch
+    /// region holds more blocks on the host than the pool has room for.
+    fn adapt(&mut self, config: &SwapConfig, above_mark: bool, starved: bool) {
+        if starved && above_mark && self.eviction_exhausted && self.scale > config.min_margin_scale {
+            self.scale = (0.5 * self.scale).max(config.min_margin_scale);
+            self.shrinks += 1;
+            // The smaller region is judged by a swap-out list made with it.
+            self.eviction_exhausted = false;
+            self.calm_frames = 0;
+        } else if !starved && !above_mark && self.scale < 1.0 {
+            self.calm_frames += 1;
+            if self.calm_frames >= RELAX_AFTER_FRAMES {
+                self.scale = (2.0 * self.scale).min(1.0);
+                self.calm_frames = 0;
+            }
+        } else {
+            self.calm_frames = 0;
         }
     }
 }
@@ -106,7 +193,7 @@ pub struct MapSwapper {
     transfer_out: wgpu::Buffer,
     in_params: wgpu::Buffer,
     in_bind_group: wgpu::BindGroup,
-    _out_params: wgpu::Buffer,
+    out_params: wgpu::Buffer,
     out_bind_group: wgpu::BindGroup,
     out_readback: ReadbackRing<u64>,
     /// Incremented by every reset: a swap-out list of an earlier generation is dropped.
@@ -122,6 +209,10 @@ pub struct MapSwapper {
     last: Option<MapStats>,
     swapped_out_total: u64,
     swapped_in_total: u64,
+    /// The regions' margins under pressure.
+    margins: Margins,
+    /// The margin scale of the kept region in `out_params`.
+    out_params_scale: f32,
 }
 
 impl MapSwapper {
@@ -150,15 +241,7 @@ impl MapSwapper {
         .bind_group(gpu);
         let out_params = gpu.uniform_buffer(
             "core.block_swap_out.params",
-            &BlockSwapOutParams {
-                volume: desc,
-                capacity,
-                color_enabled,
-                keep_near_m: config.keep.near_m,
-                keep_range_m: config.keep.range_m,
-                keep_cos_half_angle: config.keep.cos_half_angle,
-                ..Default::default()
-            },
+            &Self::out_params_for(desc, capacity, color, &config.keep_region(1.0)),
         );
         let out_bind_group = block_swap_out::Bindings {
             params: &out_params,
@@ -183,7 +266,7 @@ impl MapSwapper {
             transfer_out,
             in_params,
             in_bind_group,
-            _out_params: out_params,
+            out_params,
             out_bind_group,
             out_readback,
             generation: 0,
@@ -195,6 +278,20 @@ impl MapSwapper {
             last: None,
             swapped_out_total: 0,
             swapped_in_total: 0,
+            margins: Margins::new(),
+            out_params_scale: 1.0,
+        }
+    }
+
+    fn out_params_for(volume: VolumeDesc, capacity: u32, color: bool, keep: &ViewRegion) -> BlockSwapOutParams {
+        BlockSwapOutParams {
+            volume,
+            capacity,
+            color_enabled: u32::from(color),
+            keep_near_m: keep.near_m,
+            keep_range_m: keep.range_m,
+            keep_cos_half_angle: keep.cos_half_angle,
+            ..Default::default()
         }
     }
 
@@ -207,6 +304,27 @@ impl MapSwapper {
     /// The settings.
     pub fn config(&self) -> &SwapConfig {
         &self.config
+    }
+
+    /// The fraction of the regions' margins in force: 1, or less while the kept region does not
+    /// fit the pool (see [`Self::prepare`]).
+    pub fn margin_scale(&self) -> f32 {
+        self.margins.scale
+    }
+
+    /// The fetch region in force (margins scaled by [`Self::margin_scale`]).
+    pub fn fetch_region(&self) -> ViewRegion {
+        self.config.fetch_region(self.margins.scale)
+    }
+
+    /// Sets the smallest margin scale the pressure rule may shrink to: 1 pins the full margins.
+    pub fn set_min_margin_scale(&mut self, scale: f32) {
+        self.config.min_margin_scale = scale.clamp(0.0, 1.0);
+    }
+
+    /// Times the margins shrank under pressure.
+    pub fn margin_shrinks(&self) -> u32 {
+        self.margins.shrinks
     }
 
     /// Blocks held in host memory.
@@ -225,11 +343,23 @@ impl MapSwapper {
         self.swap_out_now = false;
         self.swapped_out_total = 0;
         self.swapped_in_total = 0;
+        self.margins = Margins::new();
     }
 
     /// Plans this frame's swapping from the last report and the camera pose the host knows
     /// best (the last reported, or the given pose of a pose-driven mapper), and uploads the
     /// blocks to swap in. Without a report yet, nothing moves.
+    ///
+    /// **Pressure.** The regions' margins are sized for a camera whose surroundings fit the
+    /// pool. When they do not (fine voxels, a camera turning in place in a large room), the kept
+    /// region alone can fill the pool: eviction then finds nothing more to move, swap-ins have
+    /// no room, and the camera meets blocks still on the host. So when the host holds blocks of
+    /// the fetch region that it cannot swap in for want of room while the pool is above the
+    /// eviction mark and the last swap-out list took every block outside the kept region, both
+    /// margins halve (down to `min_margin_scale`): the next swap-out evicts the blocks the
+    /// camera is least likely to see soon, the ones farthest outside its view, and the fetch
+    /// region follows the camera more tightly. They double again after [`RELAX_AFTER_FRAMES`]
+    /// comfortable frames (pool below the eviction mark, nothing wanted left on the host).
     pub fn prepare(&mut self, gpu: &Gpu, world_from_camera: Option<&Se3>) {
         self.swap_in_now = 0;
         self.swap_out_now = false;
@@ -237,28 +367,36 @@ impl MapSwapper {
         let pool = self.desc.pool_blocks as f32;
         let in_flight: usize = self.unconfirmed.iter().map(Vec::len).sum();
         let resident = last.blocks_used as f32 + in_flight as f32;
-        self.swap_out_now = self.out_readback.free_slot().is_some() && resident > self.config.evict_above * pool;
+        let above_mark = resident > self.config.evict_above * pool;
+        self.swap_out_now = self.out_readback.free_slot().is_some() && above_mark;
         let room = (self.config.fill_below * pool - resident).max(0.0) as usize;
-        let Some(pose) = world_from_camera else { return };
-        if self.store.is_empty() || room == 0 {
+        let mut wanted: Vec<(f32, u32)> = match world_from_camera {
+            Some(pose) if !self.store.is_empty() => {
+                let camera = pose.translation_m.as_vec3().to_array();
+                let axis = (pose.rotation * glam::DVec3::Z).as_vec3().to_array();
+                let fetch = self.fetch_region();
+                self.store
+                    .keys()
+                    .filter_map(|&key| {
+                        let (centre, radius_m) = block_centre(&self.desc, block_of_key(key));
+                        let v: [f32; 3] = std::array::from_fn(|i| centre[i] - camera[i]);
+                        fetch.contains(v, axis, radius_m).then(|| ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(), key))
+                    })
+                    .collect()
+            }
+            _ => Vec::new(),
+        };
+        self.margins.adapt(&self.config, above_mark, wanted.len() > room);
+        if self.swap_out_now && self.out_params_scale != self.margins.scale {
+            let keep = self.config.keep_region(self.margins.scale);
+            gpu.write_buffer(&self.out_params, &[Self::out_params_for(self.desc, self.capacity, self.color, &keep)]);
+            self.out_params_scale = self.margins.scale;
+        }
+        if wanted.is_empty() || room == 0 {
             return;
         }
-        let camera = pose.translation_m.as_vec3().to_array();
-        let axis = (pose.rotation * glam::DVec3::Z).as_vec3().to_array();
-        let mut wanted: Vec<(f32, u32)> = self
-            .store
-            .keys()
-            .filter_map(|&key| {
-                let (centre, radius_m) = block_centre(&self.desc, block_of_key(key));
-                let v: [f32; 3] = std::array::from_fn(|i| centre[i] - camera[i]);
-                self.config.fetch.contains(v, axis, radius_m).then(|| ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(), key))
-            })
-            .collect();
         wanted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         wanted.truncate(room.min(self.capacity as usize));
-        if wanted.is_empty() {
-            return;
-        }
         let n = BLOCK_VOXELS as usize;
         let c = self.capacity as usize;
         let mut keys = Vec::with_capacity(wanted.len());
@@ -328,7 +466,7 @@ impl MapSwapper {
         }
         if self.swap_out_now {
             let (slot, _) = self.out_readback.free_slot().expect("checked when planned");
-            self.out_readback.start(gpu, slot, submission, self.generation);
+            self.out_readback.start(gpu, slot, submission, self.out_tag());
         }
         self.swap_in_now = 0;
         self.swap_out_now = false;
@@ -362,14 +500,20 @@ impl MapSwapper {
         stats.host_bytes = self.store_bytes;
         stats.swapped_out_total = self.swapped_out_total;
         stats.swapped_in_total = self.swapped_in_total;
+        stats.swap_margin_shrinks = self.margins.shrinks;
+        stats.swap_margin_percent = (100.0 * self.margins.scale).round() as u32;
+    }
+
+    /// A swap-out list's tag: the map's generation (high half) and the margin scale its kept
+    /// region was made with (low half).
+    fn out_tag(&self) -> u64 {
+        (self.generation << 32) | u64::from(self.out_params_scale.to_bits())
     }
 
     /// Moves a completed swap-out list into the store (never waits).
     pub fn poll(&mut self, gpu: &Gpu) -> Result<()> {
         for done in self.out_readback.collect(gpu)? {
-            if done.tag == self.generation {
-                self.take_out_list(&done.bytes);
-            }
+            self.take_out_list(done.tag, &done.bytes);
         }
         Ok(())
     }
@@ -377,16 +521,20 @@ impl MapSwapper {
     /// Waits for a swap-out list in flight and moves it into the store.
     pub async fn flush(&mut self, gpu: &Gpu) -> Result<()> {
         while let Some(done) = self.out_readback.wait_oldest(gpu).await? {
-            if done.tag == self.generation {
-                self.take_out_list(&done.bytes);
-            }
+            self.take_out_list(done.tag, &done.bytes);
         }
         Ok(())
     }
 
-    fn take_out_list(&mut self, bytes: &[u8]) {
+    /// Takes a swap-out list tagged `tag` (a list of an earlier generation is dropped).
+    fn take_out_list(&mut self, tag: u64, bytes: &[u8]) {
+        if tag >> 32 != self.generation {
+            return;
+        }
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(bytes);
         let count = words[0].min(self.capacity) as usize;
+        // Fewer than the capacity: every block outside the kept region in force went.
+        self.margins.eviction_exhausted = words[0] < self.capacity && tag as u32 == self.margins.scale.to_bits();
         let list = &words[1..];
         let (c, n) = (self.capacity as usize, BLOCK_VOXELS as usize);
         self.swapped_out_total += count as u64;
@@ -445,26 +593,81 @@ mod tests {
                 // The far end of the sample's truncation band, along its ray.
                 let far = (z * norm + mu) / norm;
                 let p = ray.map(|r| r * far);
-                assert!(c.fetch.contains(p, axis, 0.0), "pixel ({x}, {y}) at {z} m lies outside the fetch region");
-                assert!(c.keep.contains(p, axis, 0.0), "pixel ({x}, {y}) at {z} m lies outside the kept region");
+                for scale in [1.0, c.min_margin_scale] {
+                    assert!(c.fetch_region(scale).contains(p, axis, 0.0), "pixel ({x}, {y}) at {z} m lies outside the fetch region at margin scale {scale}");
+                    assert!(c.keep_region(scale).contains(p, axis, 0.0), "pixel ({x}, {y}) at {z} m lies outside the kept region at margin scale {scale}");
+                }
                 checked += 1;
             }
         }
         assert_eq!(checked, 30);
-        // The fetch region lies inside the kept one: points on a grid around the camera.
+        // The fetch region lies inside the kept one at every scale, and a shrunk one inside the
+        // full one: points on a grid around the camera.
+        let (fetch, keep) = (c.fetch_region(1.0), c.keep_region(1.0));
+        let (fetch_min, keep_min) = (c.fetch_region(c.min_margin_scale), c.keep_region(c.min_margin_scale));
+        let (mut fetched, mut fetched_min) = (0, 0);
         for i in -20..=20 {
             for j in -20..=20 {
                 for k in -20..=20 {
                     let p = [i as f32 * 0.4, j as f32 * 0.4, k as f32 * 0.4];
-                    assert!(!c.fetch.contains(p, axis, 0.0) || c.keep.contains(p, axis, 0.0), "{p:?} is fetched but not kept");
+                    assert!(!fetch.contains(p, axis, 0.0) || keep.contains(p, axis, 0.0), "{p:?} is fetched but not kept");
+                    assert!(!fetch_min.contains(p, axis, 0.0) || keep_min.contains(p, axis, 0.0), "{p:?} is fetched but not kept at the smallest margins");
+                    assert!(!keep_min.contains(p, axis, 0.0) || keep.contains(p, axis, 0.0), "{p:?} is kept at the smallest margins only");
+                    fetched += usize::from(fetch.contains(p, axis, 0.0));
+                    fetched_min += usize::from(fetch_min.contains(p, axis, 0.0));
                 }
             }
         }
+        assert!(fetched_min * 3 < fetched * 2, "the smallest margins fetch clearly less ({fetched_min} of {fetched} grid points)");
+        // Full margins are the regions the swapper always used.
+        let theta = (400.0f32 / 525.0).atan();
+        let reach = max_depth_m / theta.cos() + mu;
+        assert!((keep.range_m - (reach + 1.0)).abs() < 1e-5 && (keep.cos_half_angle - (theta + 30f32.to_radians()).cos()).abs() < 1e-5 && keep.near_m == 1.5, "{keep:?}");
         // Negative control: with the depth taken as a distance (the old reach), a corner ray's
         // far samples fall outside the fetch region.
         let theta = (400.0f32 / 525.0).atan();
         let corner_far = [(0.0 - K.cx_px) / K.fx_px, (0.0 - K.cy_px) / K.fy_px, 1.0].map(|r| r * max_depth_m);
-        let short = ViewRegion { range_m: max_depth_m + mu + 0.5, ..c.fetch };
-        assert!(!short.contains(corner_far, axis, 0.0) && c.fetch.contains(corner_far, axis, 0.0), "the corner at {} rad needs the radial reach", theta);
+        let short = ViewRegion { range_m: max_depth_m + mu + 0.5, ..fetch };
+        assert!(!short.contains(corner_far, axis, 0.0) && fetch.contains(corner_far, axis, 0.0), "the corner at {} rad needs the radial reach", theta);
+    }
+
+    #[test]
+    fn margins_shrink_only_when_eviction_cannot_make_room_and_grow_back_after_calm_frames() {
+        let c = SwapConfig::for_camera(&K, 5.0, 0.047);
+        let mut m = Margins::new();
+        // Starved and above the mark, but eviction has not been seen to run dry: no change.
+        m.adapt(&c, true, true);
+        assert_eq!(m.scale, 1.0);
+        // Eviction ran dry but nothing is wanted (or the pool is below the mark): no change.
+        m.eviction_exhausted = true;
+        m.adapt(&c, true, false);
+        m.adapt(&c, false, true);
+        assert_eq!((m.scale, m.shrinks), (1.0, 0));
+        // All three: the margins halve, and wait for a list made at the new scale.
+        m.adapt(&c, true, true);
+        assert_eq!((m.scale, m.shrinks, m.eviction_exhausted), (0.5, 1, false));
+        m.adapt(&c, true, true);
+        assert_eq!(m.scale, 0.5, "not again before a list made with the smaller region");
+        for _ in 0..10 {
+            m.eviction_exhausted = true;
+            m.adapt(&c, true, true);
+        }
+        assert_eq!((m.scale, m.shrinks), (c.min_margin_scale, 3), "down to the floor, no further");
+        // Calm frames: the scale doubles after RELAX_AFTER_FRAMES of them in a row; a busy frame
+        // restarts the count.
+        for _ in 0..RELAX_AFTER_FRAMES - 1 {
+            m.adapt(&c, false, false);
+        }
+        m.adapt(&c, true, false);
+        for _ in 0..RELAX_AFTER_FRAMES - 1 {
+            m.adapt(&c, false, false);
+        }
+        assert_eq!(m.scale, c.min_margin_scale, "a busy frame restarted the count");
+        m.adapt(&c, false, false);
+        assert_eq!(m.scale, 2.0 * c.min_margin_scale);
+        for _ in 0..3 * RELAX_AFTER_FRAMES {
+            m.adapt(&c, false, false);
+        }
+        assert_eq!(m.scale, 1.0, "back to full margins, and no further");
     }
 }

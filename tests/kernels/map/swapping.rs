@@ -100,3 +100,46 @@ fn a_swapping_pool_builds_the_map_a_large_pool_builds() {
     assert!(unswapped_stats.last().expect("frames").pool_full > 0, "without swapping the pool runs out");
     assert_ne!(unswapped, reference, "and its map differs from the large pool's");
 }
+
+/// Fuses every frame into a swapping pool of `pool_blocks` whose margins may shrink down to
+/// `min_margin_scale` (1: pinned): (all blocks, the last frame's stats).
+fn fuse_under_pressure(pool_blocks: u32, min_margin_scale: f32) -> (Vec<MapBlock>, MapStats) {
+    let gpu = gpu();
+    let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_M };
+    let mut mapper = PoseDrivenMapper::new(&gpu, calibration, PreprocessConfig::default(), TsdfConfig::sparse(VOXEL_M, pool_blocks), &pose(0), false).expect("mapper");
+    mapper.mapper_mut().swapper_mut().expect("a swapping map").set_min_margin_scale(min_margin_scale);
+    for i in 0..FRAMES {
+        pollster::block_on(mapper.submit_frame(&gpu, &frame(i), &pose(i))).expect("fuse");
+        pollster::block_on(mapper.flush(&gpu)).expect("flush");
+    }
+    let stats = mapper.map_stats().expect("a sparse map reports");
+    let blocks = pollster::block_on(mapper.download_blocks(&gpu)).expect("download");
+    finish(&gpu);
+    (blocks, stats)
+}
+
+/// A pool of 45 % of the room: the kept region at full margins (the image's cone + 30°, 1.5 m
+/// around the camera) holds more than the pool's eviction mark, so eviction runs dry, swap-ins
+/// find no room and the turning camera meets blocks still on the host. Under the pressure rule
+/// the margins halve and the camera meets none; pinned at full margins (the negative control),
+/// it misses thousands of band samples.
+#[test]
+fn a_pool_too_small_for_the_kept_region_shrinks_the_margins_and_misses_nothing() {
+    let (reference, _) = fuse(16384, false);
+    let total = reference.len() as u32;
+    let pool = total * 45 / 100;
+    let (pinned_blocks, pinned) = fuse_under_pressure(pool, 1.0);
+    let (adaptive_blocks, adaptive) = fuse_under_pressure(pool, 0.125);
+    let differing = |blocks: &[MapBlock]| {
+        let by_key: std::collections::HashMap<[u32; 3], &MapBlock> = reference.iter().map(|b| (b.coords, b)).collect();
+        blocks.iter().filter(|b| by_key.get(&b.coords).is_none_or(|r| *r != *b)).count() + reference.len().saturating_sub(blocks.len())
+    };
+    let (pinned_differ, adaptive_differ) = (differing(&pinned_blocks), differing(&adaptive_blocks));
+    eprintln!("room: {total} blocks, pool {pool}: pinned margins: {} band samples met a block on the host, {} refused by the full pool, {pinned_differ} blocks differ; adaptive: {} met, {} refused, margins shrank {} times to {} %, {adaptive_differ} differ", pinned.swapped_hits, pinned.pool_full, adaptive.swapped_hits, adaptive.pool_full, adaptive.swap_margin_shrinks, adaptive.swap_margin_percent);
+    assert!(pinned.swapped_hits > 1000, "the negative control: at full margins the camera meets blocks on the host ({})", pinned.swapped_hits);
+    assert_eq!(pinned.swap_margin_shrinks, 0, "pinned margins never shrink");
+    assert!(adaptive.swap_margin_shrinks >= 1 && adaptive.swap_margin_percent < 100, "the margins shrank");
+    assert_eq!(adaptive.swapped_hits, 0, "under the pressure rule the camera finds every block it sees on the GPU");
+    assert!(adaptive.pool_full <= pinned.pool_full, "and the pool refuses no more than before ({} vs {})", adaptive.pool_full, pinned.pool_full);
+    assert!(adaptive_differ < pinned_differ, "the map is closer to the large pool's ({adaptive_differ} vs {pinned_differ} blocks differ)");
+}
