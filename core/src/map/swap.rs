@@ -124,6 +124,10 @@ impl SwapConfig {
 /// regions do not flap between two sizes every few frames).
 const RELAX_AFTER_FRAMES: u32 = 30;
 
+/// Plans over which the swapper remembers the camera's largest motion between two plans (a
+/// second at 30 Hz).
+const MOTION_WINDOW: u32 = 30;
+
 /// The pressure rule of [`MapSwapper::prepare`]: the fraction of the regions' margins in force.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Margins {
@@ -144,10 +148,17 @@ impl Margins {
     }
 
     /// One frame's plan: `above_mark`, the pool is above the eviction mark; `starved`, the fetch
-    /// region holds more blocks on the host than the pool has room for.
-    fn adapt(&mut self, config: &SwapConfig, above_mark: bool, starved: bool) {
-        if starved && above_mark && self.eviction_exhausted && self.scale > config.min_margin_scale {
-            self.scale = (0.5 * self.scale).max(config.min_margin_scale);
+    /// region holds more blocks on the host than the pool has room for, or the full pool refused
+    /// new blocks.
+    /// `floor` is the smallest scale allowed now (the camera's motion, [`MapSwapper::motion_floor`]);
+    /// a scale below it rises to it at once.
+    fn adapt(&mut self, config: &SwapConfig, floor: f32, above_mark: bool, starved: bool) {
+        let floor = floor.max(config.min_margin_scale).min(1.0);
+        if self.scale < floor {
+            self.scale = floor;
+            self.calm_frames = 0;
+        } else if starved && above_mark && self.eviction_exhausted && self.scale > floor {
+            self.scale = (0.5 * self.scale).max(floor);
             self.shrinks += 1;
             // The smaller region is judged by a swap-out list made with it.
             self.eviction_exhausted = false;
@@ -211,6 +222,12 @@ pub struct MapSwapper {
     swapped_in_total: u64,
     /// The regions' margins under pressure.
     margins: Margins,
+    /// Whether the last report counted new blocks the full pool refused.
+    allocation_refused: bool,
+    /// The pose the last plan used, and the camera's largest motion between two plans over the
+    /// last [`MOTION_WINDOW`] plans (degrees, metres) with its age in plans.
+    last_plan_pose: Option<Se3>,
+    recent_motion: (f32, f32, u32),
     /// The margin scale of the kept region in `out_params`.
     out_params_scale: f32,
 }
@@ -279,6 +296,9 @@ impl MapSwapper {
             swapped_out_total: 0,
             swapped_in_total: 0,
             margins: Margins::new(),
+            allocation_refused: false,
+            last_plan_pose: None,
+            recent_motion: (0.0, 0.0, 0),
             out_params_scale: 1.0,
         }
     }
@@ -317,6 +337,25 @@ impl MapSwapper {
         self.config.fetch_region(self.margins.scale)
     }
 
+    /// The smallest margin scale the camera's recent motion allows: the fetch region plans from a
+    /// pose up to two frames old for a frame to come, so its margins must cover three frames of
+    /// the largest motion between plans seen over the last [`MOTION_WINDOW`] (angle beyond the
+    /// cone, distance beyond the near radius); never below the configured floor.
+    fn motion_floor(&mut self, world_from_camera: Option<&Se3>) -> f32 {
+        if let (Some(pose), Some(last)) = (world_from_camera, self.last_plan_pose.as_ref()) {
+            let step = last.inverse() * *pose;
+            let (deg, m) = (step.rotation_angle_rad().to_degrees() as f32, step.translation_m.length() as f32);
+            let (max_deg, max_m, age) = self.recent_motion;
+            self.recent_motion = if age >= MOTION_WINDOW || (deg >= max_deg && m >= max_m) { (deg, m, 0) } else { (max_deg.max(deg), max_m.max(m), age + 1) };
+        }
+        if let Some(pose) = world_from_camera {
+            self.last_plan_pose = Some(*pose);
+        }
+        let (deg, m, _) = self.recent_motion;
+        let fetch = &self.config.fetch_margin;
+        (3.0 * deg / fetch.angle_deg).max(3.0 * m / fetch.near_m).max(self.config.min_margin_scale).min(1.0)
+    }
+
     /// Sets the smallest margin scale the pressure rule may shrink to: 1 pins the full margins.
     pub fn set_min_margin_scale(&mut self, scale: f32) {
         self.config.min_margin_scale = scale.clamp(0.0, 1.0);
@@ -344,6 +383,9 @@ impl MapSwapper {
         self.swapped_out_total = 0;
         self.swapped_in_total = 0;
         self.margins = Margins::new();
+        self.allocation_refused = false;
+        self.last_plan_pose = None;
+        self.recent_motion = (0.0, 0.0, 0);
     }
 
     /// Plans this frame's swapping from the last report and the camera pose the host knows
@@ -353,8 +395,9 @@ impl MapSwapper {
     /// **Pressure.** The regions' margins are sized for a camera whose surroundings fit the
     /// pool. When they do not (fine voxels, a camera turning in place in a large room), the kept
     /// region alone can fill the pool: eviction then finds nothing more to move, swap-ins have
-    /// no room, and the camera meets blocks still on the host. So when the host holds blocks of
-    /// the fetch region that it cannot swap in for want of room while the pool is above the
+    /// no room, the camera meets blocks still on the host and new surfaces find no free block.
+    /// So when the host holds blocks of the fetch region that it cannot swap in for want of room,
+    /// or the last frame's new blocks were refused by the full pool, while the pool is above the
     /// eviction mark and the last swap-out list took every block outside the kept region, both
     /// margins halve (down to `min_margin_scale`): the next swap-out evicts the blocks the
     /// camera is least likely to see soon, the ones farthest outside its view, and the fetch
@@ -386,7 +429,8 @@ impl MapSwapper {
             }
             _ => Vec::new(),
         };
-        self.margins.adapt(&self.config, above_mark, wanted.len() > room);
+        let floor = self.motion_floor(world_from_camera);
+        self.margins.adapt(&self.config, floor, above_mark, wanted.len() > room || self.allocation_refused);
         if self.swap_out_now && self.out_params_scale != self.margins.scale {
             let keep = self.config.keep_region(self.margins.scale);
             gpu.write_buffer(&self.out_params, &[Self::out_params_for(self.desc, self.capacity, self.color, &keep)]);
@@ -490,6 +534,7 @@ impl MapSwapper {
                 }
             }
         }
+        self.allocation_refused = stats.pool_full > self.last.map_or(0, |s| s.pool_full);
         self.last = Some(*stats);
         self.fill_stats(stats);
     }
@@ -636,38 +681,44 @@ mod tests {
         let c = SwapConfig::for_camera(&K, 5.0, 0.047);
         let mut m = Margins::new();
         // Starved and above the mark, but eviction has not been seen to run dry: no change.
-        m.adapt(&c, true, true);
+        m.adapt(&c, c.min_margin_scale, true, true);
         assert_eq!(m.scale, 1.0);
         // Eviction ran dry but nothing is wanted (or the pool is below the mark): no change.
         m.eviction_exhausted = true;
-        m.adapt(&c, true, false);
-        m.adapt(&c, false, true);
+        m.adapt(&c, c.min_margin_scale, true, false);
+        m.adapt(&c, c.min_margin_scale, false, true);
         assert_eq!((m.scale, m.shrinks), (1.0, 0));
         // All three: the margins halve, and wait for a list made at the new scale.
-        m.adapt(&c, true, true);
+        m.adapt(&c, c.min_margin_scale, true, true);
         assert_eq!((m.scale, m.shrinks, m.eviction_exhausted), (0.5, 1, false));
-        m.adapt(&c, true, true);
+        m.adapt(&c, c.min_margin_scale, true, true);
         assert_eq!(m.scale, 0.5, "not again before a list made with the smaller region");
         for _ in 0..10 {
             m.eviction_exhausted = true;
-            m.adapt(&c, true, true);
+            m.adapt(&c, c.min_margin_scale, true, true);
         }
         assert_eq!((m.scale, m.shrinks), (c.min_margin_scale, 3), "down to the floor, no further");
         // Calm frames: the scale doubles after RELAX_AFTER_FRAMES of them in a row; a busy frame
         // restarts the count.
         for _ in 0..RELAX_AFTER_FRAMES - 1 {
-            m.adapt(&c, false, false);
+            m.adapt(&c, c.min_margin_scale, false, false);
         }
-        m.adapt(&c, true, false);
+        m.adapt(&c, c.min_margin_scale, true, false);
         for _ in 0..RELAX_AFTER_FRAMES - 1 {
-            m.adapt(&c, false, false);
+            m.adapt(&c, c.min_margin_scale, false, false);
         }
         assert_eq!(m.scale, c.min_margin_scale, "a busy frame restarted the count");
-        m.adapt(&c, false, false);
+        m.adapt(&c, c.min_margin_scale, false, false);
         assert_eq!(m.scale, 2.0 * c.min_margin_scale);
         for _ in 0..3 * RELAX_AFTER_FRAMES {
-            m.adapt(&c, false, false);
+            m.adapt(&c, c.min_margin_scale, false, false);
         }
         assert_eq!(m.scale, 1.0, "back to full margins, and no further");
+        // The camera's motion sets a floor: margins never shrink below it, and rise to it.
+        m.eviction_exhausted = true;
+        m.adapt(&c, 0.6, true, true);
+        assert_eq!(m.scale, 0.6, "halving stops at the motion's floor");
+        m.adapt(&c, 0.8, true, false);
+        assert_eq!(m.scale, 0.8, "a faster camera widens shrunk margins at once");
     }
 }
