@@ -47,7 +47,7 @@ pub(crate) struct ReconstructArgs {
     #[arg(long)]
     no_swap: bool,
     /// GPU memory for a sparse map's voxel pool and colour, MiB (at most 65536 blocks of 8³;
-    /// default: 32768 blocks, 129 MiB).
+    /// default: that largest pool, 261 MiB; the browser's default is 32768 blocks, 130 MiB).
     #[arg(long)]
     map_budget_mib: Option<u64>,
     /// Put the first camera at a dense cube's centre instead of in front of it (for a camera
@@ -134,7 +134,7 @@ impl ReconstructArgs {
     fn config(&self) -> anyhow::Result<FusionConfig> {
         let mut config = FusionConfig::default();
         let voxel = self.voxel_size.unwrap_or(webfusion_core::tsdf::DEFAULT_VOLUME_SIZE_M / self.volume as f32);
-        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, kind: self.map_kind, pool_blocks: self.map_budget_mib.map_or(webfusion_core::map::DEFAULT_POOL_BLOCKS, |mib| webfusion_core::map::pool_blocks_for_budget(mib << 20)), swap: !self.no_swap, ..TsdfConfig::cube(self.volume, voxel) };
+        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, kind: self.map_kind, pool_blocks: self.map_budget_mib.map_or(webfusion_core::map::NATIVE_POOL_BLOCKS, |mib| webfusion_core::map::pool_blocks_for_budget(mib << 20)), swap: !self.no_swap, ..TsdfConfig::cube(self.volume, voxel) };
         config.icp.iterations_per_level = self.icp_iterations.clone();
         config.icp.dist_thresh_m = self.icp_dist;
         config.icp.angle_thresh_rad = self.icp_angle_deg.to_radians();

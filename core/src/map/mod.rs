@@ -41,6 +41,13 @@ pub const SPARSE_DIMS_VOXELS: [u32; 3] = [2048 * 8, 2048 * 8, 1023 * 8];
 pub const DEFAULT_POOL_BLOCKS: u32 = 32768;
 /// Most pool blocks: the voxel words of one pool are one binding, at most 128 MiB in the browser.
 pub const MAX_POOL_BLOCKS: u32 = 65536;
+/// Default pool size of the native commands, blocks of 8³ voxels: the largest pool (its voxel
+/// words fill the 128 MiB binding every device webfusion opens has; 261 MiB with colour). A
+/// native GPU has the memory, and fine voxels need it: at 6 mm, TUM fr1_rpy's office needs
+/// about 49,000 resident blocks, which the browser's default pool cannot hold even with
+/// swapping (the camera's view alone fills it). It costs no time at the default voxel size
+/// (the per-block kernels skip unused blocks at once).
+pub const NATIVE_POOL_BLOCKS: u32 = MAX_POOL_BLOCKS;
 /// Bytes one pool block costs with colour: TSDF and colour words, its surface-brick word, its
 /// key, its visible-list and free-list slots and eight hash slots ([`hash_slots_for_pool`]).
 pub const BLOCK_BYTES_WITH_COLOR: u64 = BLOCK_VOXELS as u64 * 8 + 4 + 4 + 4 + 4 + 8 * 8;
