@@ -224,10 +224,10 @@ pub struct MapSwapper {
     margins: Margins,
     /// Whether the last report counted new blocks the full pool refused.
     allocation_refused: bool,
-    /// The pose the last plan used, and the camera's largest motion between two plans over the
-    /// last [`MOTION_WINDOW`] plans (degrees, metres) with its age in plans.
+    /// The pose the last plan used, and the camera's motion between consecutive plans over the
+    /// last [`MOTION_WINDOW`] plans (degrees, metres), oldest first.
     last_plan_pose: Option<Se3>,
-    recent_motion: (f32, f32, u32),
+    recent_motion: VecDeque<(f32, f32)>,
     /// The margin scale of the kept region in `out_params`.
     out_params_scale: f32,
 }
@@ -298,7 +298,7 @@ impl MapSwapper {
             margins: Margins::new(),
             allocation_refused: false,
             last_plan_pose: None,
-            recent_motion: (0.0, 0.0, 0),
+            recent_motion: VecDeque::with_capacity(MOTION_WINDOW as usize),
             out_params_scale: 1.0,
         }
     }
@@ -344,14 +344,15 @@ impl MapSwapper {
     fn motion_floor(&mut self, world_from_camera: Option<&Se3>) -> f32 {
         if let (Some(pose), Some(last)) = (world_from_camera, self.last_plan_pose.as_ref()) {
             let step = last.inverse() * *pose;
-            let (deg, m) = (step.rotation_angle_rad().to_degrees() as f32, step.translation_m.length() as f32);
-            let (max_deg, max_m, age) = self.recent_motion;
-            self.recent_motion = if age >= MOTION_WINDOW || (deg >= max_deg && m >= max_m) { (deg, m, 0) } else { (max_deg.max(deg), max_m.max(m), age + 1) };
+            if self.recent_motion.len() == MOTION_WINDOW as usize {
+                self.recent_motion.pop_front();
+            }
+            self.recent_motion.push_back((step.rotation_angle_rad().to_degrees() as f32, step.translation_m.length() as f32));
         }
         if let Some(pose) = world_from_camera {
             self.last_plan_pose = Some(*pose);
         }
-        let (deg, m, _) = self.recent_motion;
+        let (deg, m) = self.recent_motion.iter().fold((0.0f32, 0.0f32), |(d, t), &(a, b)| (d.max(a), t.max(b)));
         let fetch = &self.config.fetch_margin;
         (3.0 * deg / fetch.angle_deg).max(3.0 * m / fetch.near_m).max(self.config.min_margin_scale).min(1.0)
     }
@@ -385,7 +386,7 @@ impl MapSwapper {
         self.margins = Margins::new();
         self.allocation_refused = false;
         self.last_plan_pose = None;
-        self.recent_motion = (0.0, 0.0, 0);
+        self.recent_motion.clear();
     }
 
     /// Plans this frame's swapping from the last report and the camera pose the host knows
