@@ -255,6 +255,17 @@ impl Mapper {
         }
     }
 
+    /// The map's counters read back now, completed with the swapper's host side (what a
+    /// frame's report carries); `None` for a dense box, which keeps none.
+    pub async fn stats(&self, gpu: &Gpu) -> Result<Option<MapStats>> {
+        let Some(sparse) = self.sparse() else { return Ok(None) };
+        let mut stats = sparse.stats(gpu).await?;
+        if let Some(s) = self.swapper() {
+            s.fill_stats(&mut stats);
+        }
+        Ok(Some(stats))
+    }
+
     /// Takes completed swap-out lists into host memory (never waits).
     pub fn poll(&mut self, gpu: &Gpu) -> Result<()> {
         match self.swapper_mut() {

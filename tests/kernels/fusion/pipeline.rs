@@ -133,7 +133,7 @@ fn a_sparse_map_tracks_real_frames_as_the_dense_box_does() {
         let diff = d.world_from_camera.inverse() * s.world_from_camera;
         worst = (worst.0.max(diff.translation_m.length() * 1e3), worst.1.max(diff.rotation_angle_rad().to_degrees()));
     }
-    let stats = pollster::block_on(sparse.mapper().sparse().expect("a sparse map").stats(&gpu)).expect("map stats");
+    let stats = pollster::block_on(sparse.mapper().stats(&gpu)).expect("map stats").expect("a sparse map");
     eprintln!("sparse vs dense over 20 frames: at most {:.3} mm, {:.4}°; {stats:?}", worst.0, worst.1);
     assert!(worst.0 < 1.0 && worst.1 < 0.1, "trajectories apart by up to {:.3} mm / {:.4}°", worst.0, worst.1);
     assert!(!stats.exhausted() && stats.out_of_range == 0, "the map had room: {stats:?}");
