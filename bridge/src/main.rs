@@ -422,6 +422,7 @@ fn bench(options: &GpuOptions, args: &BenchArgs) -> anyhow::Result<()> {
 /// alone (one submission each, repeated): what a frame's GPU time is made of.
 fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> anyhow::Result<()> {
     use webfusion_core::engine::FrameEncoder;
+    use webfusion_core::fusion::predictor::RaycastPart;
     use webfusion_core::fusion::{FusionConfig, KinectFusion};
     let n = args.fusion_frames.min(source.frame_count().saturating_sub(1));
     let mut config = FusionConfig::default();
@@ -443,6 +444,10 @@ fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> an
         ("keep the reference", Box::new(|fe| fusion.tracker().encode_keep_previous(gpu, &mut fe.stage("keep")))),
         ("integrate", Box::new(|fe| fusion.mapper().encode(gpu, fe, "integrate"))),
         ("raycast + prediction pyramid", Box::new(|fe| fusion.predictor().encode(gpu, fe, "predict"))),
+        ("  depth-range tiles", Box::new(|fe| fusion.predictor().finest().encode_part(gpu, fe, "predict", RaycastPart::RangeTiles))),
+        ("  rays (finest level)", Box::new(|fe| fusion.predictor().finest().encode_part(gpu, fe, "predict", RaycastPart::Rays))),
+        ("  surface normals", Box::new(|fe| fusion.predictor().finest().encode_part(gpu, fe, "predict", RaycastPart::Normals))),
+        ("  prediction pyramid (downsampling)", Box::new(|fe| fusion.predictor().encode_downsampling(gpu, fe, "predict"))),
     ];
     let tracker = fusion.tracker();
     for (level, name) in ITERATION_NAMES.iter().enumerate().take(tracker.levels()) {

@@ -54,6 +54,17 @@ impl<'a> DepthHint<'a> {
 /// camera touches tens of tiles rather than thousands.
 pub const RANGE_TILE_PX: u32 = 8;
 
+/// The parts of a render, in order (timed alone by `bench`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RaycastPart {
+    /// `raycast_hint_tiles` (with a depth hint) and `raycast_range`: each tile's depth interval.
+    RangeTiles,
+    /// `raycast`: the rays.
+    Rays,
+    /// `surface_normals`.
+    Normals,
+}
+
 /// Images `raycast` renders at one resolution (and `surface_normals` completes), bound to a
 /// store and a pose buffer.
 #[derive(Debug)]
@@ -223,20 +234,40 @@ impl RaycastTarget {
     /// Records the range tiles (those a hinted prediction reads), the raycast and the normals
     /// into an open compute pass (the tiles cleared before it).
     fn dispatch_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
-        if let Some((_, hint_tiles)) = &self.hint_tiles {
-            let tiles = Self::tiles(self.intrinsics);
-            gpu.kernels.raycast_hint_tiles.dispatch_in(pass, hint_tiles, [tiles[0], tiles[1], 1]);
+        for part in [RaycastPart::RangeTiles, RaycastPart::Rays, RaycastPart::Normals] {
+            self.dispatch_part(gpu, pass, part);
         }
-        gpu.kernels.raycast_range.dispatch_in(pass, &self.range_bind_group, [self.bricks, 1, 1]);
+    }
+
+    /// Records one part of the render into an open compute pass.
+    fn dispatch_part(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, part: RaycastPart) {
         let size = [self.intrinsics.width_px, self.intrinsics.height_px, 1];
-        gpu.kernels.raycast.dispatch_in(pass, &self.bind_group, size);
-        gpu.kernels.surface_normals.dispatch_in(pass, &self.normals_bind_group, size);
+        match part {
+            RaycastPart::RangeTiles => {
+                if let Some((_, hint_tiles)) = &self.hint_tiles {
+                    let tiles = Self::tiles(self.intrinsics);
+                    gpu.kernels.raycast_hint_tiles.dispatch_in(pass, hint_tiles, [tiles[0], tiles[1], 1]);
+                }
+                gpu.kernels.raycast_range.dispatch_in(pass, &self.range_bind_group, [self.bricks, 1, 1]);
+            }
+            RaycastPart::Rays => gpu.kernels.raycast.dispatch_in(pass, &self.bind_group, size),
+            RaycastPart::Normals => gpu.kernels.surface_normals.dispatch_in(pass, &self.normals_bind_group, size),
+        }
     }
 
     /// Records the render as stage `stage` of a frame.
     pub fn encode(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
         self.clear(frame.encoder());
         self.dispatch_in(gpu, &mut frame.stage(stage));
+    }
+
+    /// Records one part of the render alone as stage `stage` (what `bench` times; the parts
+    /// read what the earlier ones wrote, so run alone they time the same work as in a frame).
+    pub fn encode_part(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str, part: RaycastPart) {
+        if part == RaycastPart::RangeTiles {
+            self.clear(frame.encoder());
+        }
+        self.dispatch_part(gpu, &mut frame.stage(stage), part);
     }
 
     /// Renders `store` from `world_from_camera` (a target that owns its pose): sets the
@@ -317,6 +348,15 @@ impl Predictor {
     /// Changes the depth range of the raycast.
     pub fn set_depth_range(&self, gpu: &Gpu, store: &dyn TsdfStore, depth_range_m: (f32, f32)) {
         self.finest.set_params(gpu, store, depth_range_m);
+    }
+
+    /// Records the coarser levels' downsampling of the finest prediction alone (what `bench`
+    /// times).
+    pub fn encode_downsampling(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
+        let mut pass = frame.stage(stage);
+        for c in &self.coarser {
+            gpu.kernels.prediction_down.dispatch_in(&mut pass, &c.bind_group, [c.intrinsics.width_px, c.intrinsics.height_px, 1]);
+        }
     }
 
     /// Records the raycast (skipped on the GPU when the pose is disabled) and the downsampling
