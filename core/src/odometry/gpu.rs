@@ -100,7 +100,8 @@ struct Level {
     layout: LevelLayout,
     _params: Vec<wgpu::Buffer>,
     fast: wgpu::BindGroup,
-    smooth: wgpu::BindGroup,
+    /// The smoothing along x (intensity -> smoothed_x), then along y (-> smoothed).
+    smooth: [wgpu::BindGroup; 2],
     /// Per set written.
     select: [wgpu::BindGroup; SETS],
     describe: [wgpu::BindGroup; SETS],
@@ -203,18 +204,23 @@ impl FeatureExtractor {
                 let n = (l.width_px * l.height_px) as usize;
                 let image = &preprocessor.levels[l.level as usize].intensity;
                 let score = gpu.storage_buffer::<f32>(&format!("core.fast_score.score[{}]", l.level), n);
+                let smoothed_x = gpu.storage_buffer::<f32>(&format!("core.feature_smooth.smoothed_x[{}]", l.level), n);
                 let smoothed = gpu.storage_buffer::<f32>(&format!("core.feature_smooth.smoothed[{}]", l.level), n);
                 let fast_p = gpu.uniform_buffer("core.fast_score.params", &l.fast_params(&config));
-                let smooth_p = gpu.uniform_buffer("core.feature_smooth.params", &feature_smooth::FeatureSmoothParams { width_px: l.width_px, height_px: l.height_px });
+                let smooth_p = [0, 1].map(|axis| gpu.uniform_buffer("core.feature_smooth.params", &feature_smooth::FeatureSmoothParams { width_px: l.width_px, height_px: l.height_px, axis, ..Default::default() }));
                 let select_p = gpu.uniform_buffer("core.keypoint_select.params", &l.select_params(&config, &k0));
                 let describe_p = gpu.uniform_buffer("core.orb_describe.params", &l.describe_params(&config));
                 let fast = fast_score::Bindings { params: &fast_p, intensity: image, score: &score }.bind_group(gpu);
-                let smooth = feature_smooth::Bindings { params: &smooth_p, intensity: image, smoothed: &smoothed }.bind_group(gpu);
+                let smooth = [
+                    feature_smooth::Bindings { params: &smooth_p[0], intensity: image, smoothed: &smoothed_x }.bind_group(gpu),
+                    feature_smooth::Bindings { params: &smooth_p[1], intensity: &smoothed_x, smoothed: &smoothed }.bind_group(gpu),
+                ];
                 let select = [0, 1, 2].map(|s: usize| keypoint_select::Bindings { params: &select_p, score: &score, depth_m, keypoints: &sets[s].keypoints, points: &sets[s].points }.bind_group(gpu));
                 let describe = [0, 1, 2].map(|s: usize| {
                     orb_describe::Bindings { params: &describe_p, smoothed: &smoothed, keypoints: &sets[s].keypoints, pattern: &pattern, descriptors: &sets[s].descriptors, features: &sets[s].features }.bind_group(gpu)
                 });
-                Level { layout: *l, _params: vec![fast_p, smooth_p, select_p, describe_p, score, smoothed], fast, smooth, select, describe }
+                let [smooth_x_p, smooth_y_p] = smooth_p;
+                Level { layout: *l, _params: vec![fast_p, smooth_x_p, smooth_y_p, select_p, describe_p, score, smoothed_x, smoothed], fast, smooth, select, describe }
             })
             .collect();
         let forward = gpu.storage_buffer::<[u32; 4]>("core.hamming_match.forward", slots);
@@ -356,7 +362,9 @@ impl FeatureExtractor {
         {
             let mut pass = fe.stage("description");
             for l in &self.levels {
-                gpu.kernels.feature_smooth.dispatch_in(&mut pass, &l.smooth, [l.layout.width_px, l.layout.height_px, 1]);
+                for smooth in &l.smooth {
+                    gpu.kernels.feature_smooth.dispatch_in(&mut pass, smooth, [l.layout.width_px, l.layout.height_px, 1]);
+                }
                 gpu.kernels.orb_describe.dispatch_in(&mut pass, &l.describe[s], [l.layout.slot_count(), 1, 1]);
             }
         }

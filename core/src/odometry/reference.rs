@@ -4,7 +4,6 @@
 use super::{FeatureConfig, Features, descriptor_pattern, slot_count};
 use crate::PinholeIntrinsics;
 use crate::cpu;
-use crate::kernels::feature_smooth::FeatureSmoothParams;
 use crate::kernels::hamming_match::HammingMatchParams;
 
 /// Keypoints, points and descriptors of one frame: `intensity[l]` is pyramid level l's
@@ -22,8 +21,7 @@ pub fn extract(config: &FeatureConfig, k0: &PinholeIntrinsics, intensity: &[&[f3
         let mut score = vec![0.0; n];
         cpu::fast_score(&level.fast_params(config), image, &mut score);
         cpu::keypoint_select(&level.select_params(config, k0), &score, depth_m, &mut out.keypoints, &mut out.points);
-        let mut smoothed = vec![0.0; n];
-        cpu::feature_smooth(&FeatureSmoothParams { width_px: level.width_px, height_px: level.height_px }, image, &mut smoothed);
+        let smoothed = cpu::odometry::feature_smooth::smooth_image(level.width_px, level.height_px, image);
         cpu::orb_describe(&level.describe_params(config), &smoothed, &out.keypoints, &pattern, &mut out.descriptors, &mut out.features);
     }
     out

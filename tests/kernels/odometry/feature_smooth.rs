@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
-//! `feature_smooth`: the 5x5 binomial smoothing against the CPU twin (1e-6 relative: the sums
-//! may be reassociated), on an impulse (whose answer is the kernel itself) and a real frame.
+//! `feature_smooth`: the binomial smoothing along each axis against the CPU twin (1e-6 relative:
+//! the sums may be reassociated), on an impulse (whose two passes give the 5x5 kernel itself)
+//! and a real frame.
 
 use webfusion_core::cpu;
 use webfusion_core::kernels::feature_smooth::FeatureSmoothParams;
@@ -17,15 +18,28 @@ fn run(p: &FeatureSmoothParams, intensity: &[f32]) -> (Vec<f32>, Vec<f32>) {
     (cast(&out[0]), c)
 }
 
+/// The x pass on the GPU, then the y pass on the GPU's x output, each against the twin on the
+/// same input; returns the GPU's final image.
+fn both_passes(what: &str, w: u32, h: u32, image: &[f32]) -> Vec<f32> {
+    let mut input = image.to_vec();
+    for axis in [0, 1] {
+        let (g, c) = run(&FeatureSmoothParams { width_px: w, height_px: h, axis, ..Default::default() }, &input);
+        let what = format!("{what}, axis {axis}");
+        compare_f32(&what, &g, &c, TOL).unwrap();
+        assert_negative_control(&what, &g, &c, TOL);
+        input = g;
+    }
+    let c = cpu::odometry::feature_smooth::smooth_image(w, h, image);
+    compare_f32(&format!("{what}, both passes"), &input, &c, TOL).unwrap();
+    input
+}
+
 #[test]
 fn an_impulse_spreads_into_the_binomial_kernel() {
     let (w, h) = (16u32, 12u32);
     let mut image = vec![0.0f32; (w * h) as usize];
     image[(6 * w + 8) as usize] = 256.0;
-    let p = FeatureSmoothParams { width_px: w, height_px: h };
-    let (g, c) = run(&p, &image);
-    compare_f32("impulse", &g, &c, TOL).unwrap();
-    assert_negative_control("impulse", &g, &c, TOL);
+    let g = both_passes("impulse", w, h, &image);
     let b = [1.0, 4.0, 6.0, 4.0, 1.0];
     for dy in -2i32..=2 {
         for dx in -2i32..=2 {
@@ -34,6 +48,12 @@ fn an_impulse_spreads_into_the_binomial_kernel() {
         }
     }
     assert_eq!(g.iter().sum::<f32>(), 256.0);
+    // At a corner the clamped taps fold onto the edge pixel: (6 + 4 + 1) / 16 of it along each
+    // axis, (5 + 1) / 16 from a pixel beside it, 1 / 16 from the next.
+    let mut corner = vec![0.0f32; (w * h) as usize];
+    corner[0] = 256.0;
+    let g = both_passes("corner impulse", w, h, &corner);
+    assert_eq!((g[0], g[1], g[2], g[w as usize]), (11.0 * 11.0, 5.0 * 11.0, 11.0, 11.0 * 5.0));
 }
 
 #[test]
@@ -41,7 +61,5 @@ fn a_real_frame_smooths_like_the_twin() {
     let (calibration, frame) = sample_frame(0);
     let pre = webfusion_core::cpu::preprocess::chain::preprocess(&calibration, &Default::default(), &frame);
     let k = calibration.intrinsics;
-    let (g, c) = run(&FeatureSmoothParams { width_px: k.width_px, height_px: k.height_px }, &pre.intensity);
-    compare_f32("real frame", &g, &c, TOL).unwrap();
-    assert_negative_control("real frame", &g, &c, TOL);
+    both_passes("real frame", k.width_px, k.height_px, &pre.intensity);
 }

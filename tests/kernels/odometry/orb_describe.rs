@@ -7,7 +7,6 @@
 
 use webfusion_core::cpu;
 use webfusion_core::cpu::preprocess::chain::preprocess;
-use webfusion_core::kernels::feature_smooth::FeatureSmoothParams;
 use webfusion_core::kernels::orb_describe::OrbDescribeParams;
 use webfusion_core::odometry::{FeatureConfig, descriptor_pattern, slot_count};
 use webfusion_core::preprocess::PreprocessConfig;
@@ -63,8 +62,7 @@ fn a_real_frame_describes_like_the_twin() {
     }
     for level in &layout {
         let image = &pre.levels[level.level as usize].intensity;
-        let mut smoothed = vec![0.0; image.len()];
-        cpu::feature_smooth(&FeatureSmoothParams { width_px: level.width_px, height_px: level.height_px }, image, &mut smoothed);
+        let smoothed = cpu::odometry::feature_smooth::smooth_image(level.width_px, level.height_px, image);
         let ((dg, fg), (dc, fc)) = run(&level.describe_params(&config), &smoothed, &keypoints);
         let own = level.slot_offset as usize..(level.slot_offset + level.slot_count()) as usize;
         let what = format!("level {}", level.level);

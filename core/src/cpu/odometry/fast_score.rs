@@ -32,6 +32,8 @@ pub fn fast_score(params: &FastScoreParams, intensity: &[f32], score: &mut [f32]
                 let q = ((y as i32 + o[1]) as u32 * w + (x as i32 + o[0]) as u32) as usize;
                 *r = intensity[q] - centre;
             }
+            // Every arc's minimum, arc by arc (the kernel gets the same minima by doubling:
+            // min is exact, so the two agree bit for bit).
             let mut best = 0.0f32;
             for start in 0..16u32 {
                 let (mut brighter, mut darker) = (1.0e9f32, 1.0e9f32);
