@@ -254,6 +254,8 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     let n_frames = frames.len();
     let mut timestamps = std::collections::HashMap::new();
     let mut iterations = [0u64; 4];
+    // The finest level's condition number (of the scaled system) per tracked frame: not a time.
+    let mut conditions = Vec::new();
     let mut tracked_frames = 0u64;
     let mut host = webfusion_core::GpuCounts::default();
     // A sparse map's counters, as the last report carried them.
@@ -285,7 +287,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         for s in &report.icp {
             iterations[s.level] += u64::from(s.iterations);
             if s.level == 0 && s.condition < 1e29 {
-                times.record("finest-level condition number", s.condition);
+                conditions.push(s.condition);
             }
         }
         if !report.icp.is_empty() {
@@ -395,6 +397,10 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         mean_iterations[1],
         mean_iterations[2]
     );
+    let condition = (!conditions.is_empty()).then(|| crate::timing::summarize(&conditions));
+    if let Some(c) = &condition {
+        println!("finest-level condition number of the scaled ICP system: median {:.0}, p95 {:.0}, max {:.0}", c.median_ms, c.p95_ms, c.max_ms);
+    }
     // Sources with ground truth (TUM directories, recordings that carry it) are scored at once.
     let ate = source.ground_truth().and_then(|gt| match webfusion_core::eval::ate(gt, &trajectory, &Default::default()) {
         Ok(report) => {
@@ -418,6 +424,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
         "frames_per_s": n_frames as f64 / wall_s,
         "host_per_frame": { "submits": per_frame(host.submits), "waits": per_frame(host.host_waits), "readbacks": per_frame(host.readbacks) },
         "icp_iterations_per_frame": mean_iterations,
+        "finest_condition_number": condition.map(|c| serde_json::json!({ "median": c.median_ms, "p95": c.p95_ms, "min": c.min_ms, "max": c.max_ms, "n": conditions.len() })),
         "volume": {
             "kind": fusion.config().tsdf.kind.name(),
             "dims_voxels": fusion.config().tsdf.box_dims_voxels(),
