@@ -15,9 +15,9 @@ struct HammingMatchParams {
 @group(0) @binding(0) var<uniform> params: HammingMatchParams;
 // Per query slot, (x, y, level, score): score 0 marks an empty slot.
 @group(0) @binding(1) var<storage, read> query_keypoints: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> query_descriptors: array<u32>;
+@group(0) @binding(2) var<storage, read> query_descriptors: array<vec4<u32>>;
 @group(0) @binding(3) var<storage, read> train_keypoints: array<vec4<f32>>;
-@group(0) @binding(4) var<storage, read> train_descriptors: array<u32>;
+@group(0) @binding(4) var<storage, read> train_descriptors: array<vec4<u32>>;
 // Out: per query, (train slot of the nearest, its distance, the second-nearest distance, 0).
 @group(0) @binding(5) var<storage, read_write> matches: array<vec4<u32>>;
 
@@ -31,18 +31,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var best_d = DESCRIPTOR_BITS + 1u;
     var second_d = DESCRIPTOR_BITS + 1u;
     if query_keypoints[q].w > 0.0 {
-        var query: array<u32, DESCRIPTOR_WORDS>;
-        for (var i = 0u; i < DESCRIPTOR_WORDS; i++) {
-            query[i] = query_descriptors[q * DESCRIPTOR_WORDS + i];
-        }
+        // A descriptor is two vec4 words (DESCRIPTOR_WORDS = 8).
+        let q0 = query_descriptors[2u * q];
+        let q1 = query_descriptors[2u * q + 1u];
         for (var t = 0u; t < params.train_count; t++) {
             if !(train_keypoints[t].w > 0.0) {
                 continue;
             }
-            var d = 0u;
-            for (var i = 0u; i < DESCRIPTOR_WORDS; i++) {
-                d += countOneBits(query[i] ^ train_descriptors[t * DESCRIPTOR_WORDS + i]);
-            }
+            let c = countOneBits(q0 ^ train_descriptors[2u * t]) + countOneBits(q1 ^ train_descriptors[2u * t + 1u]);
+            let d = c.x + c.y + c.z + c.w;
             if d < best_d {
                 second_d = best_d;
                 best_d = d;
