@@ -353,9 +353,13 @@ impl Predictor {
     /// Records the coarser levels' downsampling of the finest prediction alone (what `bench`
     /// times).
     pub fn encode_downsampling(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
-        let mut pass = frame.stage(stage);
+        self.dispatch_downsampling(gpu, &mut frame.stage(stage));
+    }
+
+    /// Records each coarser level's downsampling into an open compute pass.
+    fn dispatch_downsampling(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
         for c in &self.coarser {
-            gpu.kernels.prediction_down.dispatch_in(&mut pass, &c.bind_group, [c.intrinsics.width_px, c.intrinsics.height_px, 1]);
+            gpu.kernels.prediction_down.dispatch_in(pass, &c.bind_group, [c.intrinsics.width_px, c.intrinsics.height_px, 1]);
         }
     }
 
@@ -365,8 +369,6 @@ impl Predictor {
         self.finest.clear(frame.encoder());
         let mut pass = frame.stage(stage);
         self.finest.dispatch_in(gpu, &mut pass);
-        for c in &self.coarser {
-            gpu.kernels.prediction_down.dispatch_in(&mut pass, &c.bind_group, [c.intrinsics.width_px, c.intrinsics.height_px, 1]);
-        }
+        self.dispatch_downsampling(gpu, &mut pass);
     }
 }

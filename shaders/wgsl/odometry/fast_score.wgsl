@@ -60,8 +60,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         ring[k] = intensity[q] - centre;
     }
     // The smallest difference over each arc of FAST_ARC = 9 starting at k, for both signs, by
-    // doubling: arcs of 2, 4 and 8, then the ninth pixel (16 x 4 comparisons a sign instead of
-    // 16 x 9; min is exact, so these are the arcs' minima bit for bit).
+    // doubling: arcs of 2, 4 and 8, then the arc's last pixel, k + FAST_ARC - 1 (16 x 4
+    // comparisons a sign instead of 16 x 9; min is exact, so these are the arcs' minima bit for
+    // bit). The doubling is written for FAST_ARC = 9 (FAST-9).
     var up: array<f32, 16>;
     var down: array<f32, 16>;
     for (var k = 0u; k < 16u; k++) {
@@ -76,8 +77,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     var best = 0.0;
     for (var k = 0u; k < 16u; k++) {
-        let brighter = min(min(up4[k], up4[(k + 4u) & 15u]), ring[(k + 8u) & 15u]);
-        let darker = min(min(down4[k], down4[(k + 4u) & 15u]), -ring[(k + 8u) & 15u]);
+        let last = ring[(k + FAST_ARC - 1u) & 15u];
+        let brighter = min(min(up4[k], up4[(k + 4u) & 15u]), last);
+        let darker = min(min(down4[k], down4[(k + 4u) & 15u]), -last);
         best = max(best, max(brighter, darker));
     }
     score[ix] = select(0.0, best, best > params.threshold);
