@@ -10,7 +10,7 @@ use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, TimedPose, write_tum_traje
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, TsdfStore as _, VolumePlacement};
 use webfusion_core::fusion::mapper::Mapper;
 use webfusion_core::map::{MapKind, MapStats};
-use webfusion_core::map::file::{MapFile, MapFileHeader, MapFrame, read_map_file, read_map_file_recovering, write_map_file};
+use webfusion_core::map::file::{MapFile, MapFileHeader, MapFrame, mean_camera_up, read_map_file, read_map_file_recovering, write_map_file};
 use webfusion_core::odometry::assist::{FeatureAssist, Guess};
 use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::{GpuOptions, Se3};
@@ -176,6 +176,13 @@ fn loaded_map(args: &ReconstructArgs) -> anyhow::Result<Option<MapFile>> {
     Ok(Some(file))
 }
 
+/// A loaded map's up direction, weighted as the frames it was made from (as its creation
+/// parameters say; 1 if they do not).
+fn up_of(file: &MapFile) -> Option<([f32; 3], usize)> {
+    let made_from = serde_json::from_str::<serde_json::Value>(&file.header.creation).ok().and_then(|c| c["fused_frames"].as_u64()).unwrap_or(1);
+    file.header.up_in_map.map(|up| (up, made_from as usize))
+}
+
 /// The map settings of a loaded map, in place of the command line's.
 fn apply_map_settings(config: &mut FusionConfig, header: &MapFileHeader) -> anyhow::Result<()> {
     let t = &mut config.tsdf;
@@ -192,8 +199,10 @@ fn apply_map_settings(config: &mut FusionConfig, header: &MapFileHeader) -> anyh
 }
 
 /// `--save-map`: every block of the mapper's map, with its settings and how it was made.
-fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfig, args: &ReconstructArgs, source_name: &str, fused_frames: usize) -> anyhow::Result<()> {
+/// `loaded_up`: a loaded map's up direction and how many frames it was made from.
+fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfig, args: &ReconstructArgs, source_name: &str, trajectory: &[TimedPose], loaded_up: Option<([f32; 3], usize)>) -> anyhow::Result<()> {
     let Some(path) = &args.save_map else { return Ok(()) };
+    let fused_frames = trajectory.len();
     let blocks = pollster::block_on(mapper.download_blocks(gpu)).context("downloading the map")?;
     let t = &config.tsdf;
     let creation = serde_json::json!({
@@ -213,6 +222,7 @@ fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfi
         dims_voxels: t.box_dims_voxels(),
         origin_in_world: mapper.origin_in_world(),
         frame: if args.pose_file().is_some() { MapFrame::GivenPoses } else { MapFrame::FirstCamera },
+        up_in_map: mean_camera_up(trajectory.iter().map(|p| &p.world_from_camera), loaded_up),
         creation: creation.to_string(),
     };
     write_map_file(path, &header, &blocks).with_context(|| format!("saving the map to {}", path.display()))?;
@@ -227,6 +237,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     if let Some(file) = &loaded {
         apply_map_settings(&mut config, &file.header)?;
     }
+    let loaded_up = loaded.as_ref().and_then(up_of);
     let mut source = crate::open(&args.source, &args.calibration)?;
     let range = crate::frame_range(args.frames.as_deref(), source.frame_count())?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating output directory {}", args.out.display()))?;
@@ -364,7 +375,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     write_ground_truth(args, &*source)?;
     let given_json = given.as_ref().map(|_| given_report(args, &without_pose, Some(&refined))).transpose()?;
-    save_map(&gpu, fusion.mapper_mut(), &config, args, &source.name(), trajectory.len())?;
+    save_map(&gpu, fusion.mapper_mut(), &config, args, &source.name(), &trajectory, loaded_up)?;
     if !args.no_mesh {
         let sw = crate::timing::Stopwatch::start();
         let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(&gpu)).context("extracting the mesh")?;
@@ -525,6 +536,7 @@ fn given_report(args: &ReconstructArgs, without_pose: &[usize], refined: Option<
 /// `reconstruct --poses` without `--refine`: fuses every frame at its given pose (no tracking),
 /// then writes the poses used, the mesh and the statistics as the tracked run does.
 fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &FusionConfig, source: &mut dyn webfusion_core::source::FrameSource, range: std::ops::Range<usize>, given: &GivenPoses, mut loaded: Option<MapFile>) -> anyhow::Result<()> {
+    let loaded_up = loaded.as_ref().and_then(up_of);
     use webfusion_core::fusion::pose_driven::PoseDrivenMapper;
     let n_frames = range.len();
     let mut times = StageTimes::default();
@@ -578,7 +590,7 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     write_ground_truth(args, &*source)?;
     let given_json = given_report(args, &without_pose, None)?;
-    save_map(gpu, mapper.mapper_mut(), config, args, &source.name(), trajectory.len())?;
+    save_map(gpu, mapper.mapper_mut(), config, args, &source.name(), &trajectory, loaded_up)?;
     if !args.no_mesh {
         let sw = crate::timing::Stopwatch::start();
         let mesh = pollster::block_on(mapper.extract_mesh(gpu)).context("extracting the mesh")?;

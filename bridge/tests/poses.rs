@@ -9,6 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use webfusion_core::map::file::read_map_file;
 use webfusion_core::io::trajectory::{MAX_POSE_GAP_NS, PoseTimeline, TimedPose, format_tum_trajectory, read_tum_trajectory};
 use webfusion_core::recording::RecordingReader;
 use webfusion_core::source::FrameSource as _;
@@ -137,6 +138,12 @@ fn a_saved_map_continued_at_later_poses_equals_one_run_for_both_kinds() {
         assert_eq!(h1, h2, "{kind}: the same map settings and placement");
         assert!(continued.len() > 10_000, "{kind}: the map holds blocks");
         assert!(continued == one_run, "{kind}: the continued map equals the one-run map block for block");
+        // The up direction (the mean of the fused cameras' up axes): the continued map's, its
+        // loaded half counted as the frames it was made from, is the one run's (to within the
+        // loaded half's up being a unit vector where its cameras' mean was a little shorter).
+        let up = |name: &str| read_map_file(Path::new(&path(name))).expect("map").header.up_in_map.expect("an up direction");
+        let (up_b, up_c) = (glam::Vec3::from(up("b.wfm")), glam::Vec3::from(up("c.wfm")));
+        assert!((up_b - up_c).length() < 1e-2 && (up_c.length() - 1.0).abs() < 1e-5, "{kind}: up {up_b} vs {up_c}");
         // Negative control: the first half alone differs.
         assert!(map_body(Path::new(&path("a.wfm"))).0 != one_run, "{kind}: half the frames make another map");
     }

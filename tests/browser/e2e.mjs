@@ -325,8 +325,11 @@ try {
   const live = await waitFor(fourth, 'three compared frames', (s) => s.sensor?.rendered >= 3 && s.sensor.last?.compare && s.sensor.last.frame > 0, FRAME_TIMEOUT_MS * 3);
   await fourth.click('#pause');
   const lc = live.sensor.last.compare;
-  check('frames compared at their ground truth, not fused', live.sensor.map.frame === 'given poses' && live.frames_done === 0 && lc.coverage_percent > 70 && lc.pixels_rel_error_over_10pct_percent < 25 && fourthErrors.length === 0,
-    `frame ${live.sensor.last.frame}: ${JSON.stringify(lc)}; ${live.sensor.rendered} renders, ${live.sensor.skipped} frames skipped while the sensor was busy; fused ${live.frames_done}${fourthErrors.length ? '; page errors: ' + fourthErrors.join(' | ') : ''}`);
+  // The map names the world's up (the mean of its cameras' up axes), which the free view orbits about.
+  const up = live.sensor.map.up_in_map;
+  const upUnit = Array.isArray(up) && Math.abs(Math.hypot(...up) - 1) < 1e-3;
+  check('frames compared at their ground truth, not fused', live.sensor.map.frame === 'given poses' && upUnit && live.frames_done === 0 && lc.coverage_percent > 70 && lc.pixels_rel_error_over_10pct_percent < 25 && fourthErrors.length === 0,
+    `frame ${live.sensor.last.frame}: ${JSON.stringify(lc)}; up ${JSON.stringify(up)}; ${live.sensor.rendered} renders, ${live.sensor.skipped} frames skipped while the sensor was busy; fused ${live.frames_done}${fourthErrors.length ? '; page errors: ' + fourthErrors.join(' | ') : ''}`);
   await within(fourth.close(), 30_000);
 } catch (error) {
   check('e2e run', false, `${error.stack ?? String(error)} (at: ${stage})`);

@@ -685,8 +685,8 @@ impl FusionMode {
             _ => {}
         }
         if self.orbit.is_none() {
-            // Look at a point 1.5 m in front of the first camera.
-            self.orbit = Some(Orbit::looking_at(world_from_camera.transform_point(DVec3::new(0.0, 0.0, 1.5)), 3.0));
+            // Look at a point 1.5 m in front of the first camera, about its up axis (−y).
+            self.orbit = Some(Orbit::looking_at(world_from_camera.transform_point(DVec3::new(0.0, 0.0, 1.5)), 3.0, world_from_camera.rotation * DVec3::NEG_Y));
         }
         let t = report.gpu_ms.unwrap_or_default();
         for (window, sample) in self.stages.iter_mut().zip([meta.decode_ms, t.preprocess, t.track, t.integrate, t.raycast, meta.views_ms]) {
@@ -919,7 +919,9 @@ fn real_frame(index: u64, depth_units: Rc<Vec<u16>>, calibration: RgbdCalibratio
 }
 
 /// The free view's first look at an opened map: at the mean of its blocks, from twice their
-/// RMS spread (within the sensor's useful range).
+/// RMS spread (within the sensor's useful range), about the up its file names (a file without
+/// one: −y, a first camera's up).
 fn first_look(map: &OpenedMap) -> Orbit {
-    Orbit::looking_at(map.centre_m, (2.0 * map.spread_m).clamp(0.5, 6.0))
+    let up = map.header.up_in_map.map_or(DVec3::NEG_Y, |u| DVec3::from(u.map(f64::from)));
+    Orbit::looking_at(map.centre_m, (2.0 * map.spread_m).clamp(0.5, 6.0), up)
 }

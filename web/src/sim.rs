@@ -99,6 +99,7 @@ impl OpenedMap {
             damage: self.damage.clone(),
             centre_m: self.centre_m.to_array(),
             spread_m: self.spread_m,
+            up_in_map: self.header.up_in_map,
         }
     }
 }
@@ -413,6 +414,8 @@ pub(crate) struct OpenedMapStatus {
     /// Mean of its blocks' centres and their RMS distance from it, metres.
     centre_m: [f64; 3],
     spread_m: f64,
+    /// The up direction its file names (the free view orbits about it), if any.
+    up_in_map: Option<[f32; 3]>,
 }
 
 /// The virtual sensor's part of the status.

@@ -80,31 +80,48 @@ pub(crate) fn draw_odometry_pair(canvas: &web_sys::HtmlCanvasElement, reference:
     Ok(())
 }
 
-/// The free viewer: it orbits a target point, in the world frame of the first camera
-/// (x right, y down, z forward).
+/// The free viewer: it orbits a target point about the world's up direction (`up_in_world`: −y
+/// in a tracked run's first-camera frame, where x is right, y down and z forward; a map fused at
+/// given poses says its own, e.g. +z in a mocap or robot frame).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Orbit {
     pub(crate) target_in_world: DVec3,
     pub(crate) distance_m: f64,
-    /// Turn about the world's up axis, radians (0: looking along +z like the first camera).
+    /// Turn about the up axis, radians (0: looking along the horizontal axis `forward_in_world`
+    /// gives, +z of the world where it is horizontal, like a first camera's).
     pub(crate) yaw_rad: f64,
     /// Elevation, radians (positive: looking down from above).
     pub(crate) pitch_rad: f64,
+    /// The world's up, a unit vector.
+    up_in_world: DVec3,
 }
 
 impl Orbit {
-    /// Looks at `target_in_world` from behind and above the first camera.
-    pub(crate) fn looking_at(target_in_world: DVec3, distance_m: f64) -> Self {
-        Self { target_in_world, distance_m, yaw_rad: 0.5, pitch_rad: 0.45 }
+    /// Looks at `target_in_world` from behind and above, in a world whose up is `up_in_world`
+    /// (normalised; −y when it is not a direction).
+    pub(crate) fn looking_at(target_in_world: DVec3, distance_m: f64, up_in_world: DVec3) -> Self {
+        let up_in_world = up_in_world.try_normalize().unwrap_or(DVec3::NEG_Y);
+        Self { target_in_world, distance_m, yaw_rad: 0.5, pitch_rad: 0.45, up_in_world }
     }
 
-    /// The viewer's pose: camera z towards the target, camera y towards world down.
+    /// The horizontal direction of yaw 0: the world axis most nearly horizontal (z first), made
+    /// perpendicular to up.
+    fn forward_in_world(&self) -> DVec3 {
+        let up = self.up_in_world;
+        let axis = [DVec3::Z, DVec3::X, DVec3::Y].into_iter().min_by(|a, b| a.dot(up).abs().total_cmp(&b.dot(up).abs())).unwrap_or(DVec3::Z);
+        (axis - axis.dot(up) * up).normalize()
+    }
+
+    /// The viewer's pose: camera z towards the target, camera x level, camera y towards world
+    /// down.
     pub(crate) fn world_from_viewer(&self) -> Se3 {
         let (sy, cy) = self.yaw_rad.sin_cos();
         let (sp, cp) = self.pitch_rad.sin_cos();
-        let eye = self.target_in_world + self.distance_m * DVec3::new(sy * cp, -sp, -cy * cp);
+        let up = self.up_in_world;
+        let forward = self.forward_in_world();
+        let right = forward.cross(up);
+        let eye = self.target_in_world + self.distance_m * (sy * cp * right + sp * up - cy * cp * forward);
         let z = (self.target_in_world - eye).normalize();
-        let up = DVec3::new(0.0, -1.0, 0.0);
         let x = z.cross(up).normalize();
         let y = z.cross(x);
         Se3::new(DQuat::from_mat3(&DMat3::from_cols(x, y, z)), eye)
@@ -180,22 +197,35 @@ mod tests {
     #[wasm_bindgen_test]
     fn the_orbit_camera_keeps_its_target_centred_at_its_distance() {
         let target = DVec3::new(0.3, -0.2, 1.5);
-        let mut orbit = Orbit::looking_at(target, 3.0);
-        for (dx, dy) in [(0.0, 0.0), (120.0, -40.0), (-300.0, 500.0)] {
-            orbit.orbit(dx, dy);
-            let pose = orbit.world_from_viewer();
-            assert_near(project(&K, &pose, target).expect("target in front"), (319.5, 239.5), "target at the principal point");
-            assert!((pose.translation_m.distance(target) - 3.0).abs() < 1e-9, "distance kept");
-            // The viewer's y axis points down the world (y down), so "up" stays up on screen.
-            assert!((pose.rotation * DVec3::Y).y >= 0.0, "no upside-down view");
+        // A first camera's world (y down) and a mocap or robot world (z up), and a tilted one.
+        for up in [DVec3::NEG_Y, DVec3::Z, DVec3::new(0.3, -0.9, 0.2).normalize()] {
+            let mut orbit = Orbit::looking_at(target, 3.0, up);
+            for (dx, dy) in [(0.0, 0.0), (120.0, -40.0), (-300.0, 500.0)] {
+                orbit.orbit(dx, dy);
+                let pose = orbit.world_from_viewer();
+                assert_near(project(&K, &pose, target).expect("target in front"), (319.5, 239.5), "target at the principal point");
+                assert!((pose.translation_m.distance(target) - 3.0).abs() < 1e-9, "distance kept");
+                // The viewer's x axis is level and its y axis points down the world, so the
+                // world's up is up on screen and the horizon is level.
+                assert!((pose.rotation * DVec3::X).dot(up).abs() < 1e-9, "level horizon, up {up}");
+                assert!((pose.rotation * DVec3::Y).dot(up) <= 0.0, "no upside-down view, up {up}");
+                // Elevation above the horizontal plane through the target is the pitch.
+                let elevation = ((pose.translation_m - target).dot(up) / 3.0).asin();
+                assert!((elevation - orbit.pitch_rad).abs() < 1e-9, "elevation {elevation} vs pitch {}", orbit.pitch_rad);
+            }
+            assert!(orbit.pitch_rad <= 1.5, "pitch clamped short of the pole");
         }
-        assert!(orbit.pitch_rad <= 1.5, "pitch clamped short of the pole");
+        // In a first camera's world, yaw 0 looks along +z like that camera.
+        let level = Orbit { yaw_rad: 0.0, pitch_rad: 0.0, ..Orbit::looking_at(target, 3.0, DVec3::NEG_Y) };
+        assert!((level.world_from_viewer().rotation * DVec3::Z - DVec3::Z).length() < 1e-9, "yaw 0 looks along +z");
+        // Not a direction: the first camera's up.
+        assert_eq!(Orbit::looking_at(target, 3.0, DVec3::ZERO).up_in_world, DVec3::NEG_Y);
     }
 
     #[wasm_bindgen_test]
     fn panning_moves_the_old_target_by_the_dragged_pixels() {
         let target = DVec3::new(0.0, 0.0, 2.0);
-        let mut orbit = Orbit::looking_at(target, 2.0);
+        let mut orbit = Orbit::looking_at(target, 2.0, DVec3::NEG_Y);
         orbit.pan(40.0, -25.0, K.fx_px);
         let pose = orbit.world_from_viewer();
         // The scene follows the pointer: the old target moves by the drag.
@@ -206,7 +236,7 @@ mod tests {
 
     #[wasm_bindgen_test]
     fn points_behind_the_viewer_are_not_drawn() {
-        let orbit = Orbit::looking_at(DVec3::new(0.0, 0.0, 2.0), 2.0);
+        let orbit = Orbit::looking_at(DVec3::new(0.0, 0.0, 2.0), 2.0, DVec3::Z);
         let pose = orbit.world_from_viewer();
         let behind = pose.transform_point(DVec3::new(0.0, 0.0, -1.0));
         assert_eq!(project(&K, &pose, behind), None, "behind the viewer");

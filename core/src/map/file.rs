@@ -7,14 +7,16 @@
 //! ```text
 //! header (96 bytes, little-endian)
 //!    0  magic  "WFMAP\r\n\x1a"
-//!    8  version u32 (1)            12  header bytes u32 (96)
+//!    8  version u32 (2; 1 still read)  12  header bytes u32 (96)
 //!   16  kind u32 (0 dense, 1 sparse)   20  flags u32 (bit 0: colour)
 //!   24  block edge, voxels u32 (8)     28  voxel size, m f32     32  truncation, m f32
 //!   36  max weight u32                 40  box dims, voxels [u32; 3]
 //!   52  origin (the box's voxel (0,0,0) corner) in the world, m [f32; 3]
 //!   64  frame u32 (0: the first camera of a tracked run, 1: the given poses' frame)
 //!   68  creation-parameters bytes u32 (a JSON object after the header)
-//!   72  reserved [u32; 5] (0)          92  CRC-32 of bytes 0..92
+//!   72  up, a unit vector in the map's frame [f32; 3] (version 2; all 0: not known)
+//!   84  reserved [u32; 2] (0)          92  CRC-32 of bytes 0..92
+//! (version 1 had reserved [u32; 5] at 72: read as "up not known")
 //! creation parameters: JSON, then its CRC-32 (u32)
 //! block record, one per block, in key order (z, then y, then x):
 //!    0  magic "WFBK"   4  block coordinates [u32; 3]
@@ -30,6 +32,9 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
+use glam::DVec3;
+
+use crate::Se3;
 use crate::cpu::shared::{BLOCK_VOXELS, block_key};
 use crate::map::{MapBlock, MapKind};
 use crate::{Error, Result};
@@ -37,8 +42,8 @@ use crate::{Error, Result};
 const MAGIC: &[u8; 8] = b"WFMAP\r\n\x1a";
 const BLOCK_MAGIC: &[u8; 4] = b"WFBK";
 const FOOTER_MAGIC: &[u8; 8] = b"WFMEND\0\0";
-/// The version this code writes and reads.
-pub const MAP_FILE_VERSION: u32 = 1;
+/// The version this code writes (it reads this one and version 1, which had no up direction).
+pub const MAP_FILE_VERSION: u32 = 2;
 const HEADER_BYTES: usize = 96;
 const FOOTER_BYTES: usize = 24;
 /// Largest creation-parameters block a reader accepts.
@@ -72,6 +77,10 @@ pub struct MapFileHeader {
     pub origin_in_world: [f32; 3],
     /// The frame the map is in.
     pub frame: MapFrame,
+    /// The world's up direction in the map's frame, a unit vector, where the maker knew it
+    /// (`reconstruct`: the mean of the fused cameras' up axes, −y of each camera: a handheld
+    /// or robot-mounted Kinect is held roughly level); a viewer orbits about it.
+    pub up_in_map: Option<[f32; 3]>,
     /// How it was made (source, frames, settings): the text of a JSON object (UTF-8).
     pub creation: String,
 }
@@ -111,6 +120,21 @@ pub struct MapFile {
     pub damage: Option<MapDamage>,
 }
 
+/// The world's up direction from the cameras that saw it: the normalised mean of their up axes
+/// (−y of each camera, in the world). A handheld or robot-mounted Kinect is held roughly level,
+/// so the mean points up even when single frames roll or pitch; `None` when there is no camera
+/// or they disagree so much that the mean is shorter than a third (no direction to trust).
+/// `prior` adds an up already known (a loaded map's) with the weight of `prior_cameras` cameras.
+pub fn mean_camera_up<'a>(world_from_cameras: impl IntoIterator<Item = &'a Se3>, prior: Option<([f32; 3], usize)>) -> Option<[f32; 3]> {
+    let (mut sum, mut n) = prior.map_or((DVec3::ZERO, 0usize), |(up, count)| (DVec3::from(up.map(f64::from)) * count as f64, count));
+    for pose in world_from_cameras {
+        sum -= pose.rotation * DVec3::Y;
+        n += 1;
+    }
+    let mean = sum / n.max(1) as f64;
+    (n > 0 && mean.length() > 1.0 / 3.0).then(|| mean.normalize().as_vec3().to_array())
+}
+
 fn record_bytes(color: bool) -> usize {
     16 + 4 * BLOCK_VOXELS as usize * if color { 2 } else { 1 } + 4
 }
@@ -146,7 +170,10 @@ pub fn write_map_file(path: &Path, header: &MapFileHeader, blocks: &[MapBlock]) 
     }
     h.extend_from_slice(&u32::from(header.frame == MapFrame::GivenPoses).to_le_bytes());
     h.extend_from_slice(&(meta.len() as u32).to_le_bytes());
-    h.extend_from_slice(&[0u8; 20]);
+    for u in header.up_in_map.unwrap_or([0.0; 3]) {
+        h.extend_from_slice(&u.to_le_bytes());
+    }
+    h.extend_from_slice(&[0u8; 8]);
     let crc = crc32fast::hash(&h);
     h.extend_from_slice(&crc.to_le_bytes());
     debug_assert_eq!(h.len(), HEADER_BYTES, "the header layout in the module doc");
@@ -209,15 +236,27 @@ fn parse_map_file(bytes: &[u8], path: &Path) -> Result<MapFile> {
     let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
     let f32_at = |at: usize| f32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
     let version = u32_at(8);
-    if version != MAP_FILE_VERSION {
-        return Err(bad(format!("version {version}; this webfusion reads version {MAP_FILE_VERSION}")));
+    if !(1..=MAP_FILE_VERSION).contains(&version) {
+        return Err(bad(format!("version {version}; this webfusion reads versions 1 to {MAP_FILE_VERSION}")));
     }
     if crc32fast::hash(&bytes[..92]) != u32_at(92) {
         return Err(bad("the header fails its CRC check".into()));
     }
-    if u32_at(12) as usize != HEADER_BYTES || u32_at(24) != 8 || (72..92).step_by(4).any(|at| u32_at(at) != 0) {
+    // Version 1 reserved the words from 72 on; version 2 keeps the up direction there.
+    let reserved_from = if version == 1 { 72 } else { 84 };
+    if u32_at(12) as usize != HEADER_BYTES || u32_at(24) != 8 || (reserved_from..92).step_by(4).any(|at| u32_at(at) != 0) {
         return Err(bad("the header's sizes or reserved words are not this version's".into()));
     }
+    let up = [f32_at(72), f32_at(76), f32_at(80)];
+    let up_in_map = if version == 1 || up == [0.0; 3] {
+        None
+    } else {
+        let norm = up.iter().map(|u| f64::from(*u).powi(2)).sum::<f64>().sqrt();
+        if !((norm - 1.0).abs() < 1e-3) {
+            return Err(bad(format!("the up direction {up:?} is not a unit vector")));
+        }
+        Some(up)
+    };
     let kind = match u32_at(16) {
         0 => MapKind::Dense,
         1 => MapKind::Sparse,
@@ -254,6 +293,7 @@ fn parse_map_file(bytes: &[u8], path: &Path) -> Result<MapFile> {
         dims_voxels: [u32_at(40), u32_at(44), u32_at(48)],
         origin_in_world: [f32_at(52), f32_at(56), f32_at(60)],
         frame,
+        up_in_map,
         creation,
     };
     let n_box = header.dims_voxels.map(|d| d.div_ceil(8));
@@ -305,7 +345,7 @@ mod tests {
     use super::*;
 
     fn header(color: bool) -> MapFileHeader {
-        MapFileHeader { kind: MapKind::Sparse, color, voxel_size_m: 0.01, truncation_m: 0.04, max_weight: 128, dims_voxels: [16384, 16384, 8184], origin_in_world: [-81.92, -81.92, -40.92], frame: MapFrame::GivenPoses, creation: r#"{"source":"test","frames":3}"#.to_owned() }
+        MapFileHeader { kind: MapKind::Sparse, color, voxel_size_m: 0.01, truncation_m: 0.04, max_weight: 128, dims_voxels: [16384, 16384, 8184], origin_in_world: [-81.92, -81.92, -40.92], frame: MapFrame::GivenPoses, up_in_map: color.then_some([0.0, 0.6, 0.8]), creation: r#"{"source":"test","frames":3}"#.to_owned() }
     }
 
     fn blocks(color: bool) -> Vec<MapBlock> {
@@ -334,6 +374,54 @@ mod tests {
             assert!(file.damage.is_none());
             assert!(!PathBuf::from(format!("{}.partial", path.display())).exists(), "the partial file was renamed");
         }
+    }
+
+    /// The header's bytes with their CRC recomputed (an edit that only the content check sees).
+    fn with_header_crc(mut bytes: Vec<u8>) -> Vec<u8> {
+        let crc = crc32fast::hash(&bytes[..92]);
+        bytes[92..96].copy_from_slice(&crc.to_le_bytes());
+        bytes
+    }
+
+    #[test]
+    fn a_version_1_file_reads_with_no_up_direction_and_keeps_its_reserved_words_checked() {
+        let path = scratch("v1");
+        write_map_file(&path, &header(true), &blocks(true)).expect("write");
+        let mut v1 = std::fs::read(&path).expect("bytes");
+        // What version 1 wrote: the version word 1 and zeros where version 2 keeps the up.
+        v1[8] = 1;
+        v1[72..84].fill(0);
+        let file = parse_map_file(&with_header_crc(v1.clone()), &path).expect("version 1 reads");
+        assert_eq!(file.header, MapFileHeader { up_in_map: None, ..header(true) });
+        assert_eq!(file.blocks.len(), 20);
+        // Version 1's reserved words include 72..84: an up there is not version 1's.
+        let mut v1_up = v1;
+        v1_up[80..84].copy_from_slice(&1.0f32.to_le_bytes());
+        assert!(parse_map_file(&with_header_crc(v1_up), &path).is_err_and(|e| e.to_string().contains("reserved")));
+        // Negative control: the same up in a version 2 header is read.
+        let mut v2 = std::fs::read(&path).expect("bytes");
+        v2[72..84].copy_from_slice(bytemuck::cast_slice(&[0.0f32, 0.0, 1.0]));
+        assert_eq!(parse_map_file(&with_header_crc(v2), &path).expect("version 2").header.up_in_map, Some([0.0, 0.0, 1.0]));
+    }
+
+    #[test]
+    fn the_up_direction_is_the_mean_of_the_cameras_up_axes() {
+        use glam::DQuat;
+        // Cameras of a Z-up world (TUM's mocap, seed 000's robot), level with z forward along
+        // the floor: camera y (down) is world -z; two rolled ±30° average back to up.
+        let level = DQuat::from_rotation_x(-std::f64::consts::FRAC_PI_2);
+        let poses: Vec<Se3> = [-0.5, 0.5, 0.0].iter().map(|r: &f64| Se3 { rotation: level * DQuat::from_rotation_z(*r), translation_m: DVec3::ZERO }).collect();
+        let up = mean_camera_up(&poses, None).expect("an up");
+        assert!((DVec3::from(up.map(f64::from)) - DVec3::Z).length() < 1e-6, "{up:?}");
+        // A camera's own frame (a tracked run's first camera): up is -y.
+        assert_eq!(mean_camera_up([&Se3::IDENTITY], None), Some([0.0, -1.0, 0.0]));
+        // No camera, or cameras that disagree (one upside down): no direction.
+        assert_eq!(mean_camera_up([], None), None);
+        let flipped = Se3 { rotation: DQuat::from_rotation_z(std::f64::consts::PI), translation_m: DVec3::ZERO };
+        assert_eq!(mean_camera_up([&Se3::IDENTITY, &flipped], None), None);
+        // A prior (a loaded map's up) counts as its cameras.
+        let with_prior = mean_camera_up([&flipped], Some(([0.0, -1.0, 0.0], 3))).expect("an up");
+        assert!((DVec3::from(with_prior.map(f64::from)) - DVec3::NEG_Y).length() < 1e-6, "{with_prior:?}");
     }
 
     #[test]
@@ -373,8 +461,12 @@ mod tests {
         assert!(parse_map_file(&bad, &path).is_err_and(|e| e.to_string().contains("CRC")));
         assert!(parse_map_file(b"PLY\nformat binary_little_endian 1.0\n.........................................................................................", &path).is_err_and(|e| e.to_string().contains("magic")));
         let mut newer = bytes.clone();
-        newer[8] = 2;
-        assert!(parse_map_file(&newer, &path).is_err_and(|e| e.to_string().contains("version 2")));
+        newer[8] = 3;
+        assert!(parse_map_file(&with_header_crc(newer), &path).is_err_and(|e| e.to_string().contains("version 3")));
+        // An up direction that is not a unit vector (a foreign writer's, or 0 in one word only).
+        let mut skew = bytes.clone();
+        skew[72..76].copy_from_slice(&2.0f32.to_le_bytes());
+        assert!(parse_map_file(&with_header_crc(skew), &path).is_err_and(|e| e.to_string().contains("not a unit vector")));
         // Negative control: the intact bytes parse without damage.
         assert!(parse_map_file(&bytes, &path).expect("intact").damage.is_none());
     }
