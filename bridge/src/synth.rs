@@ -16,7 +16,7 @@ pub(crate) struct SynthRoomArgs {
     /// The recording to write.
     #[arg(long)]
     out: PathBuf,
-    /// Room size, metres: width (x), height (y), depth (z).
+    /// Room size, metres: width (x), height (y), depth (z), comma-separated (`--size 4,2.5,4`).
     #[arg(long, value_delimiter = ',', default_values_t = [10.0, 3.0, 10.0])]
     size: Vec<f64>,
     /// Frames along the loop.
