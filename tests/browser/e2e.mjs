@@ -242,9 +242,9 @@ try {
   const second = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
   const secondErrors = [];
   second.on('pageerror', (e) => secondErrors.push(String(e)));
-  await second.goto(`http://${bridge.addr}/?map=dense&volume=${volume}&voxel_mm=abc&rate=NaN&centred=1&autoplay=1`);
+  await second.goto(`http://${bridge.addr}/?map=dense&volume=${volume}&voxel_mm=abc&map_mib=0&rate=NaN&centred=1&autoplay=1`);
   const fallback = await waitFor(second, 'frames with fallback settings', (s) => s.frames_done >= 3, FRAME_TIMEOUT_MS * 3);
-  check('bad URL settings fall back with a message', /voxel_mm=abc ignored/.test(fallback.message) && /rate ignored/.test(fallback.message) && fallback.reconnects === 0 && fallback.volume.voxel_size_m > 0,
+  check('bad URL settings fall back with a message', /voxel_mm=abc ignored/.test(fallback.message) && /map_mib=0 ignored \(invalid configuration: map memory 0 MiB/.test(fallback.message) && /rate ignored/.test(fallback.message) && fallback.reconnects === 0 && fallback.volume.voxel_size_m > 0,
     `message "${fallback.message}"; voxel ${(fallback.volume.voxel_size_m * 1000).toFixed(1)} mm; reconnects ${fallback.reconnects}`);
   stage = 'the lost device';
   await evaluateWithin(second, () => window.webfusion.lose_device(), 'losing the device');

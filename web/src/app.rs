@@ -15,7 +15,7 @@ use std::rc::Rc;
 use wasm_bindgen::prelude::*;
 use web_time::Instant;
 use webfusion_core::fusion::FusionConfig;
-use webfusion_core::map::MapKind;
+use webfusion_core::map::{MapKind, pool_blocks_for_budget_mib, pool_budget_mib};
 use webfusion_core::protocol::{Control, Delivery, FrameMessage, Hello, Message, PlaybackState, parse_rate};
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, VolumePlacement};
 use webfusion_core::{Gpu, GpuOptions, RgbdCalibration};
@@ -67,8 +67,12 @@ impl Settings {
         let voxel_m = number("set-voxel-mm", "voxel size")? / 1000.0;
         let truncation_voxels = number("set-trunc-vox", "truncation")?;
         let kind: MapKind = ui::value("set-map").parse().map_err(|e: webfusion_core::Error| e.to_string())?;
+        // The sparse map's GPU memory (its pool of blocks with colour); a big GPU holds fine
+        // voxels of a whole room at 261 MiB, the largest pool.
+        let pool_blocks = pool_blocks_for_budget_mib(f64::from(number("set-map-mib", "map memory")?)).map_err(|e| e.to_string())?;
         let tsdf = TsdfConfig {
             kind,
+            pool_blocks,
             truncation_m: truncation_voxels * voxel_m,
             placement: if ui::value("set-centred").is_empty() { VolumePlacement::InFront } else { VolumePlacement::Centred },
             ..TsdfConfig::cube(dims, voxel_m)
@@ -96,6 +100,7 @@ fn fill_settings_form(query: &std::collections::HashMap<String, String>) -> (Set
         ("set-volume", "volume", t.dims_voxels[0].to_string()),
         ("set-voxel-mm", "voxel_mm", format!("{:.2}", t.voxel_size_m * 1000.0)),
         ("set-trunc-vox", "trunc_vox", DEFAULT_TRUNCATION_VOXELS.to_string()),
+        ("set-map-mib", "map_mib", format!("{:.1}", pool_budget_mib(t.pool_blocks))),
         ("set-centred", "centred", String::new()),
         ("set-icp-iters", "icp", iterations.join(",")),
         ("set-icp-dist-cm", "icp_dist_cm", format!("{}", icp.dist_thresh_m * 100.0)),
@@ -863,7 +868,7 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
     let v = &f.volume;
     let pressure = if v.swap_margin_percent > 0 && v.swap_margin_percent < 100 { format!(", swap margins at {} % (the pool is tight)", v.swap_margin_percent) } else { String::new() };
     let on_host = if v.blocks_on_host > 0 { format!(", {} swapped out to memory ({:.0} MiB){pressure}", v.blocks_on_host, v.host_bytes as f64 / 1048576.0) } else { String::new() };
-    let map = if v.pool_blocks > 0 { format!("sparse map, {} of {} blocks of 8³ on the GPU{on_host}{}", v.blocks_used, v.pool_blocks, if v.full { " (FULL: new surfaces are not fused; raise the voxel size)" } else { "" }) } else { format!("volume {}³", v.dims_voxels[0]) };
+    let map = if v.pool_blocks > 0 { format!("sparse map, {} of {} blocks of 8³ on the GPU{on_host}{}", v.blocks_used, v.pool_blocks, if v.full { " (FULL: new surfaces are not fused; raise the voxel size or the map memory)" } else { "" }) } else { format!("volume {}³", v.dims_voxels[0]) };
     lines.push(format!(
         "{ate} · latency {} · in flight {} · dropped {} · reconnects {} · {map} × {:.1} mm = {:.0} MiB",
         f.latency_ms.map_or_else(|| "-".to_owned(), |ms| format!("{ms:.0} ms")),

@@ -91,6 +91,23 @@ pub fn pool_blocks_for_budget(budget_bytes: u64) -> u32 {
     (budget_bytes / BLOCK_BYTES_WITH_COLOR).clamp(1, u64::from(MAX_POOL_BLOCKS)) as u32
 }
 
+/// The pool a memory budget of `budget_mib` MiB buys (the browser's "map memory" setting): an
+/// error naming it when it is not a finite number of MiB that holds at least one block;
+/// budgets beyond the largest pool get the largest pool, as [`pool_blocks_for_budget`] does.
+pub fn pool_blocks_for_budget_mib(budget_mib: f64) -> Result<u32> {
+    let bytes = budget_mib * 1048576.0;
+    if !(bytes.is_finite() && bytes >= BLOCK_BYTES_WITH_COLOR as f64) {
+        return Err(Error::InvalidConfig(format!("map memory {budget_mib} MiB does not hold a block ({BLOCK_BYTES_WITH_COLOR} bytes)")));
+    }
+    Ok(pool_blocks_for_budget(bytes as u64))
+}
+
+/// The memory, MiB, of a pool of `pool_blocks` blocks with colour (what
+/// [`pool_blocks_for_budget_mib`] turns back into that pool).
+pub fn pool_budget_mib(pool_blocks: u32) -> f64 {
+    (u64::from(pool_blocks) * BLOCK_BYTES_WITH_COLOR) as f64 / 1048576.0
+}
+
 /// Hash slots for a pool: the next power of two at or above eight times its blocks. The table
 /// holds the keys of swapped-out blocks too ([`swap`]), so it has room for four pools' worth of
 /// blocks while staying at most half full (linear probing's expected probes stay below 2.5).
@@ -659,5 +676,25 @@ impl TsdfStore for Map {
     }
     fn memory_bytes(&self) -> u64 {
         self.store().memory_bytes()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_memory_budget_in_mib_buys_its_pool_and_bad_ones_are_named() {
+        // The browser's default and largest pools, through the MiB the form shows (one decimal).
+        for pool in [DEFAULT_POOL_BLOCKS, MAX_POOL_BLOCKS] {
+            let shown: f64 = format!("{:.1}", pool_budget_mib(pool)).parse().expect("a number");
+            assert_eq!(pool_blocks_for_budget_mib(shown).expect("a budget"), pool, "{shown} MiB");
+        }
+        assert_eq!(pool_blocks_for_budget_mib(100_000.0).expect("a budget"), MAX_POOL_BLOCKS, "beyond the largest pool: the largest");
+        assert_eq!(pool_blocks_for_budget_mib(0.01).expect("a budget"), 2, "10 KiB: two blocks");
+        for bad in [0.0, -5.0, 0.001, f64::NAN, f64::INFINITY] {
+            let err = pool_blocks_for_budget_mib(bad).expect_err("not a budget").to_string();
+            assert!(err.contains("map memory") && err.contains("MiB"), "{bad}: {err}");
+        }
     }
 }
