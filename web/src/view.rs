@@ -104,11 +104,13 @@ impl Orbit {
         Self { target_in_world, distance_m, yaw_rad: 0.5, pitch_rad: 0.45, up_in_world }
     }
 
-    /// The horizontal direction of yaw 0: the world axis most nearly horizontal (z first), made
-    /// perpendicular to up.
+    /// The horizontal direction of yaw 0: the world's z made perpendicular to up (a first
+    /// camera's view direction, levelled, so a map in that frame is first seen the way its
+    /// camera saw it, whatever small tilt the up has), or x where z is nearly vertical (a
+    /// mocap or robot frame).
     fn forward_in_world(&self) -> DVec3 {
         let up = self.up_in_world;
-        let axis = [DVec3::Z, DVec3::X, DVec3::Y].into_iter().min_by(|a, b| a.dot(up).abs().total_cmp(&b.dot(up).abs())).unwrap_or(DVec3::Z);
+        let axis = if DVec3::Z.dot(up).abs() < 0.9 { DVec3::Z } else { DVec3::X };
         (axis - axis.dot(up) * up).normalize()
     }
 
@@ -215,9 +217,15 @@ mod tests {
             }
             assert!(orbit.pitch_rad <= 1.5, "pitch clamped short of the pole");
         }
-        // In a first camera's world, yaw 0 looks along +z like that camera.
+        // In a first camera's world, yaw 0 looks along +z like that camera, also when the up
+        // (the mean of the cameras' up axes) tilts a little towards x.
         let level = Orbit { yaw_rad: 0.0, pitch_rad: 0.0, ..Orbit::looking_at(target, 3.0, DVec3::NEG_Y) };
         assert!((level.world_from_viewer().rotation * DVec3::Z - DVec3::Z).length() < 1e-9, "yaw 0 looks along +z");
+        let tilted = Orbit { yaw_rad: 0.0, pitch_rad: 0.0, ..Orbit::looking_at(target, 3.0, DVec3::new(0.058, -0.995, 0.075)) };
+        assert!((tilted.world_from_viewer().rotation * DVec3::Z).dot(DVec3::Z) > 0.99, "yaw 0 still looks along +z");
+        // Negative control: in a z-up world yaw 0 looks along x.
+        let z_up = Orbit { yaw_rad: 0.0, pitch_rad: 0.0, ..Orbit::looking_at(target, 3.0, DVec3::Z) };
+        assert!((z_up.world_from_viewer().rotation * DVec3::Z - DVec3::X).length() < 1e-9, "z up: yaw 0 looks along +x");
         // Not a direction: the first camera's up.
         assert_eq!(Orbit::looking_at(target, 3.0, DVec3::ZERO).up_in_world, DVec3::NEG_Y);
     }
