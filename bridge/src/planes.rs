@@ -31,7 +31,7 @@ use webfusion_core::{ColorImage, Gpu, GpuOptions, Se3, codec::png};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, pose_driven::PoseDrivenMapper};
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::mesh::Mesh;
-use webfusion_core::planes::export::{scene_obj, write_scene_glb};
+use webfusion_core::planes::export::{mesh_remainder, scene_obj, write_scene_glb};
 use webfusion_core::planes::mesh::{PlaneMesh, blend_reach_px, complete_labels};
 use webfusion_core::planes::world::{PlaneView, PlaneWorld, WorldConfig};
 
@@ -149,39 +149,6 @@ fn world_poses(gpu: &Gpu, args: &PlanesArgs, range: std::ops::Range<usize>) -> a
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
     let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(gpu)).context("extracting the mesh")?;
     Ok(WorldPoses { poses, mesh, voxel_m, origin: "tracked", left_out })
-}
-
-/// The fused mesh less the triangles the planar meshes cover: those whose centroid lies within
-/// two voxels of a world plane and over one of its covered texels.
-fn remainder(mesh: &Mesh, planes: &[PlaneMesh], voxel_m: f32) -> Mesh {
-    let tol = 2.0 * voxel_m;
-    let keep: Vec<bool> = mesh
-        .triangles
-        .iter()
-        .map(|t| {
-            let c: [f32; 3] = std::array::from_fn(|k| t.iter().map(|&i| mesh.positions_m[i as usize][k]).sum::<f32>() / 3.0);
-            !planes.iter().any(|p| {
-                let f = &p.grid.frame;
-                let e = f.normal[0] * c[0] + f.normal[1] * c[1] + f.normal[2] * c[2] + f.offset_m();
-                e.abs() <= tol && p.covers(f.to_plane(c))
-            })
-        })
-        .collect();
-    // Keep the vertices the kept triangles use, renumbered.
-    let mut index = vec![u32::MAX; mesh.positions_m.len()];
-    let mut out = Mesh::default();
-    for (t, _) in mesh.triangles.iter().zip(&keep).filter(|(_, k)| **k) {
-        out.triangles.push(t.map(|i| {
-            if index[i as usize] == u32::MAX {
-                index[i as usize] = out.positions_m.len() as u32;
-                out.positions_m.push(mesh.positions_m[i as usize]);
-                out.normals.push(mesh.normals[i as usize]);
-                out.colors_rgb8.push(mesh.colors_rgb8[i as usize]);
-            }
-            index[i as usize]
-        }));
-    }
-    out
 }
 
 /// A plane's colour in the label images (the browser's plane view uses the same).
@@ -370,7 +337,7 @@ fn write_world(args: &PlanesArgs, world: &PlaneWorld, input: &WorldPoses, clippe
     let sw = Stopwatch::start();
     let meshes: Vec<Option<PlaneMesh>> = (0..world.planes.len()).map(|j| world.mesh(j)).collect();
     let planar: Vec<PlaneMesh> = meshes.iter().flatten().cloned().collect();
-    let rest = remainder(&input.mesh, &planar, input.voxel_m);
+    let rest = mesh_remainder(&input.mesh, &planar, input.voxel_m);
     let replaced = input.mesh.triangles.len() - rest.triangles.len();
     let planar_triangles: usize = planar.iter().map(|m| m.triangles.len()).sum();
     let mesh_ms = sw.ms();

@@ -198,6 +198,21 @@ try {
   check('plane view', pv && pv.count >= 2 && pv.frame === final.last_index && pv.planes.every((p) => Math.abs(Math.hypot(...p.normal) - 1) < 1e-3 && p.offset_m > 0 && p.pixels > 0) && planeFraction > 0.1,
     `planes ${JSON.stringify(pv && { frame: pv.frame, count: pv.count, pixels: pv.planes.map((p) => p.pixels), median_ms: pv.median_ms })}; view ${(100 * planeFraction).toFixed(0)} % plane-coloured (saved ${join(out, 'planes_view.png')})`);
 
+  // 6c'. The world model of planes (a frame about once a second joins it, at its tracked pose)
+  // and its scene: one textured mesh per world plane plus the fused mesh less what they cover.
+  stage = 'the scene export';
+  const world = final.world;
+  const [sceneDownload] = await Promise.all([page.waitForEvent('download', { timeout: 300_000 }), page.click('#export-scene')]);
+  const glb = readFileSync(await sceneDownload.path());
+  const jsonLength = glb.readUInt32LE(12);
+  const gltf = JSON.parse(glb.subarray(20, 20 + jsonLength).toString('utf8'));
+  const textured = gltf.meshes.length - 1;
+  const rest = gltf.meshes[gltf.meshes.length - 1].primitives[0];
+  const restTriangles = gltf.accessors[rest.indices].count / 3;
+  check('world planes and the scene .glb', world && world.frames >= 2 && world.planes >= 2 && glb.subarray(0, 4).toString('latin1') === 'glTF' && glb.readUInt32LE(8) === glb.length
+    && textured === world.planes && gltf.images.length === world.planes && rest.attributes.COLOR_0 !== undefined && restTriangles > 0 && restTriangles < faces,
+    `world ${JSON.stringify(world)}; scene.glb ${glb.length} bytes: ${textured} textured plane meshes, ${gltf.images.length} textures, remainder ${restTriangles} of the mesh's ${faces} triangles`);
+
   // 6d. The virtual sensor in the fused map at the last frame's tracked pose, beside that
   // frame's real depth: the model explains the frame it was fused from (bounds from the
   // voxel size: 4 cm voxels blur depth edges; measured coverage 90.2 %, 1.8 % of pixels over

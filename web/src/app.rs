@@ -563,6 +563,12 @@ impl App {
                     self.last_error = Some(format!("mesh export: {message}"));
                 }
             }
+            Ui::ExportScene => {
+                let scene = self.mode.scene_glb(&self.gpu).await;
+                if let Err(message) = scene.and_then(|bytes| ui::download("scene.glb", &bytes, "model/gltf-binary").map_err(|e| js_text(&e))) {
+                    self.last_error = Some(format!("scene export: {message}"));
+                }
+            }
             Ui::ExportTrajectory => {
                 let text = self.mode.trajectory_tum();
                 if let Err(e) = ui::download("trajectory.txt", text.borrow().as_bytes(), "text/plain") {

@@ -16,7 +16,8 @@
 //! With plane segmentation on (the default; `core::planes::gpu`), each frame whose views are
 //! drawn is also segmented on the GPU after its submission, its labels coloured over the frame
 //! in the plane view, and the plane table (a few kilobytes, not the labels) read back for the
-//! status a frame or so later, without waiting.
+//! status a frame or so later, without waiting; about once a second the labels come back too,
+//! for the world model of planes (`planes_world.rs`) that the scene export draws on.
 
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -37,6 +38,7 @@ use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, LabelView, Norma
 use webfusion_core::{Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
 
 use crate::canvas::GpuCanvas;
+use crate::planes_world::{PlaneWorldModel, WorldStatus};
 use crate::sim::{OpenedMap, RealFrame, SensorPanel, SensorStatus};
 use crate::status::{HostPerFrame, STATS_WINDOW, StageMedians, VolumeStatus, Window};
 use crate::ui;
@@ -105,11 +107,12 @@ pub(crate) enum SensorPose {
     Again,
 }
 
-/// Plane segmentation of each frame and its view.
+/// Plane segmentation of each frame, its view and the world model of planes.
 struct PlaneViews {
     segmenter: GpuPlaneSegmenter,
     view: LabelView,
     canvas: GpuCanvas,
+    world: PlaneWorldModel,
 }
 
 /// The pipeline and everything built on its device.
@@ -154,7 +157,8 @@ impl Pipeline {
         let planes = if planes {
             let segmenter = GpuPlaneSegmenter::new(gpu, pre, &PlaneConfig::default()).map_err(|e| format!("cannot build plane segmentation: {e}"))?;
             let view = LabelView::new(gpu, "web.view.planes", &segmenter.labels, &pre.color, size);
-            Some(PlaneViews { segmenter, view, canvas: GpuCanvas::new(gpu, "view-planes", size)? })
+            let world = PlaneWorldModel::new(PlaneConfig::default(), config.preprocess);
+            Some(PlaneViews { segmenter, view, canvas: GpuCanvas::new(gpu, "view-planes", size)?, world })
         } else {
             ui::set_text("planes-caption", "off");
             None
@@ -258,6 +262,8 @@ pub(crate) struct FusionStatus {
     pub(crate) features: Option<FeatureStatus>,
     /// The last frame's planes (absent when segmentation is off or no frame was segmented).
     pub(crate) planes: Option<PlaneStatus>,
+    /// The world model of planes (absent when segmentation is off).
+    pub(crate) world: Option<WorldStatus>,
 }
 
 /// Plane segmentation's part of the status: the last segmented frame's planes.
@@ -393,6 +399,9 @@ impl FusionMode {
             if let Some(assist) = &mut p.assist {
                 assist.reset();
             }
+            if let Some(planes) = &mut p.planes {
+                planes.world.reset();
+            }
         }
         self.in_flight.clear();
         self.planes_sent.clear();
@@ -451,6 +460,19 @@ impl FusionMode {
         self.last_reported
     }
 
+    /// The scene of the world model as glTF binary: its textured planes and the fused mesh
+    /// (every block, a swapping map's host ones too) less what they cover.
+    pub(crate) async fn scene_glb(&mut self, gpu: &Gpu) -> Result<Vec<u8>, String> {
+        let voxel_m = self.config.tsdf.voxel_size_m;
+        let Some(p) = self.pipeline.as_mut() else { return Err("nothing fused yet".to_owned()) };
+        let Some(planes) = &p.planes else { return Err("plane segmentation is off (settings)".to_owned()) };
+        if planes.world.status().planes == 0 {
+            return Err("no world planes yet (the world model takes a frame about once a second)".to_owned());
+        }
+        let mesh = p.fusion.mapper_mut().extract_mesh(gpu).await.map_err(|e| e.to_string())?;
+        planes.world.scene_glb(&mesh, voxel_m).map_err(|e| e.to_string())
+    }
+
     /// The pipeline (for the mesh export), if built; mutably, as a swapping map's mesh gathers
     /// its blocks from the host.
     pub(crate) fn fusion_mut(&mut self) -> Option<&mut KinectFusion> {
@@ -498,9 +520,15 @@ impl FusionMode {
         if draw_views
             && gpu.kernels.deferred_compiled()
             && let Some(planes) = &mut p.planes
-            && segment_planes(gpu, planes, frame.index).map_err(|e| format!("frame {}: planes: {e}", frame.index))?
         {
-            self.planes_sent.push_back((frame.index, Instant::now()));
+            // About once a second the labels come back too, for the world model.
+            let with_labels = planes.world.wants_frame();
+            if segment_planes(gpu, planes, frame.index, with_labels).map_err(|e| format!("frame {}: planes: {e}", frame.index))? {
+                self.planes_sent.push_back((frame.index, Instant::now()));
+                if with_labels {
+                    planes.world.asked(frame.index, &frame.color, &frame.depth.units, calibration);
+                }
+            }
         }
         self.in_flight.push_back(InFlight {
             index: frame.index,
@@ -643,7 +671,8 @@ impl FusionMode {
             if let Some((_, sent)) = self.planes_sent.pop_front() {
                 self.plane_ms.push(sent.elapsed().as_secs_f64() * 1e3);
             }
-            ui::set_text("planes-caption", &format!("{} in frame {frame}", seg.planes.len()));
+            let world = planes.world.status();
+            ui::set_text("planes-caption", &format!("{} in frame {frame} · world: {} planes from {} frames", seg.planes.len(), world.planes, world.frames));
             self.plane_status = Some(PlaneStatus {
                 frame,
                 count: seg.planes.len(),
@@ -652,6 +681,9 @@ impl FusionMode {
                 planes: seg.planes.iter().map(|p| PlaneEntry { normal: p.normal, offset_m: p.offset_m, pixels: p.pixels, area_m2: p.area_m2 }).collect(),
                 median_ms: 0.0,
             });
+            if !seg.labels.is_empty() {
+                planes.world.labels_arrived(frame, seg);
+            }
         }
         Ok(())
     }
@@ -664,6 +696,10 @@ impl FusionMode {
         let Some(meta) = self.in_flight.pop_front() else { return };
         let world_from_camera = self.run_origin * report.world_from_camera;
         self.last_reported = Some(report.index);
+        if let Some(planes) = self.pipeline.as_mut().and_then(|p| p.planes.as_mut()) {
+            // The world of planes is in the pipeline's frame, the fused mesh's.
+            planes.world.pose_reported(report.index, (!report.state.is_lost()).then_some(report.world_from_camera));
+        }
         let pose = TimedPose { timestamp_ns: meta.timestamp_ns, world_from_camera };
         push_tum_line(&mut self.trajectory_tum.borrow_mut(), &pose);
         self.trajectory.push(pose);
@@ -841,6 +877,7 @@ impl FusionMode {
                 s.median_ms = self.plane_ms.median().unwrap_or(0.0);
                 s
             }),
+            world: self.pipeline.as_ref().and_then(|p| p.planes.as_ref()).map(|p| p.world.status()),
         }
     }
 }
@@ -849,7 +886,7 @@ impl FusionMode {
 /// its labels into the plane view and copies the plane table for reading, in one submission;
 /// the table comes back a frame or so later ([`FusionMode::collect_planes`]): nothing waits.
 /// False when both table slots were still in flight (this frame's table is not read).
-fn segment_planes(gpu: &Gpu, planes: &mut PlaneViews, index: u64) -> Result<bool, String> {
+fn segment_planes(gpu: &Gpu, planes: &mut PlaneViews, index: u64, with_labels: bool) -> Result<bool, String> {
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.planes") });
     planes.segmenter.encode(gpu, &mut encoder);
     {
@@ -857,11 +894,11 @@ fn segment_planes(gpu: &Gpu, planes: &mut PlaneViews, index: u64) -> Result<bool
         planes.view.dispatch_in(gpu, &mut pass);
     }
     let texture = planes.canvas.draw(&mut encoder, &planes.view.image)?;
-    let slot = planes.segmenter.encode_table_copy(&mut encoder);
+    let slot = planes.segmenter.encode_table_copy(&mut encoder, with_labels);
     let submission = gpu.submit([encoder.finish()]);
     GpuCanvas::present(gpu, [texture]);
     if let Some(slot) = slot {
-        planes.segmenter.start_table_read(gpu, slot, submission, index);
+        planes.segmenter.start_table_read(gpu, slot, submission, index, with_labels);
     }
     Ok(slot.is_some())
 }

@@ -9,6 +9,7 @@ mod app;
 mod canvas;
 mod fusion_mode;
 mod link;
+mod planes_world;
 mod sim;
 mod status;
 mod ui;

@@ -46,6 +46,8 @@ pub(crate) enum Ui {
     Reset,
     ExportPly,
     ExportGlb,
+    /// The world model's scene (textured planes and the rest of the mesh) as `.glb`.
+    ExportScene,
     ExportTrajectory,
     /// Orbit (dx, dy in pixels), pan (dx, dy) or zoom (factor) of the free view.
     Orbit(f32, f32),

@@ -119,6 +119,7 @@ pub(crate) fn bind_controls(inbox: &Rc<Inbox>) {
         ("reset", Ui::Reset),
         ("export-ply", Ui::ExportPly),
         ("export-glb", Ui::ExportGlb),
+        ("export-scene", Ui::ExportScene),
         ("export-trajectory", Ui::ExportTrajectory),
         ("odometry-step", Ui::OdometryStage),
         ("sim-render", Ui::SimRender),

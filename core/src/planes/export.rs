@@ -27,6 +27,39 @@ const ELEMENT_ARRAY_BUFFER: u32 = 34963;
 const LINEAR: u32 = 9729;
 const CLAMP_TO_EDGE: u32 = 33071;
 
+/// The fused mesh less the triangles the planar meshes cover: those whose centroid lies within
+/// two voxels of a world plane and over one of its covered texels.
+pub fn mesh_remainder(mesh: &Mesh, planes: &[PlaneMesh], voxel_m: f32) -> Mesh {
+    let tol = 2.0 * voxel_m;
+    let keep: Vec<bool> = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let c: [f32; 3] = std::array::from_fn(|k| t.iter().map(|&i| mesh.positions_m[i as usize][k]).sum::<f32>() / 3.0);
+            !planes.iter().any(|p| {
+                let f = &p.grid.frame;
+                let e = f.normal[0] * c[0] + f.normal[1] * c[1] + f.normal[2] * c[2] + f.offset_m();
+                e.abs() <= tol && p.covers(f.to_plane(c))
+            })
+        })
+        .collect();
+    // Keep the vertices the kept triangles use, renumbered.
+    let mut index = vec![u32::MAX; mesh.positions_m.len()];
+    let mut out = Mesh::default();
+    for (t, _) in mesh.triangles.iter().zip(&keep).filter(|(_, k)| **k) {
+        out.triangles.push(t.map(|i| {
+            if index[i as usize] == u32::MAX {
+                index[i as usize] = out.positions_m.len() as u32;
+                out.positions_m.push(mesh.positions_m[i as usize]);
+                out.normals.push(mesh.normals[i as usize]);
+                out.colors_rgb8.push(mesh.colors_rgb8[i as usize]);
+            }
+            index[i as usize]
+        }));
+    }
+    out
+}
+
 /// The BIN chunk and the JSON arrays that describe it, as they are filled.
 #[derive(Default)]
 struct Builder {

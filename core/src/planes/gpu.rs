@@ -80,8 +80,9 @@ pub struct GpuPlaneSegmenter {
     state: wgpu::Buffer,
     extents: wgpu::Buffer,
     dispatch: wgpu::Buffer,
-    /// Plane tables on their way back, tagged with the frame index.
-    tables: ReadbackRing<u64>,
+    /// Plane tables (and, where asked, the labels) on their way back, tagged with the frame
+    /// index and whether the labels came along.
+    tables: ReadbackRing<(u64, bool)>,
     _keep_alive: Vec<wgpu::Buffer>,
 }
 
@@ -287,7 +288,7 @@ impl GpuPlaneSegmenter {
 
         let keep_alive = [normal_hist, peaks, peak_count, realigned, assignment, distance_hist, normal_sums, intervals, interval_count, keys_inner, keys_full, masks_inner, masks_full, partials, moments, fits, planes, renumber, dummy];
         params_buffers.extend(keep_alive);
-        let tables = ReadbackRing::new(gpu, "core.planes.table", TABLE_BYTES, 2);
+        let tables = ReadbackRing::new(gpu, "core.planes.table", TABLE_BYTES + 4 * full.pixel_count() as u64, 2);
         Ok(Self { full, steps, labels, list, state, extents, dispatch, tables, _keep_alive: params_buffers })
     }
 
@@ -379,40 +380,51 @@ impl GpuPlaneSegmenter {
     }
 
     /// Records a copy of the plane table into a free readback slot (after [`Self::encode`], in
-    /// the same encoder); `None` when both slots are still in flight (the table of this frame
+    /// the same encoder), and of the labels after it when `with_labels` (4 bytes a pixel, for
+    /// a frame the world model takes); `None` when both slots are still in flight (this frame
     /// is then not read).
-    pub fn encode_table_copy(&self, encoder: &mut wgpu::CommandEncoder) -> Option<usize> {
+    pub fn encode_table_copy(&self, encoder: &mut wgpu::CommandEncoder, with_labels: bool) -> Option<usize> {
         let (slot, buffer) = self.tables.free_slot()?;
         let mut offset = 0;
-        for (source, bytes) in [(&self.state, 4 * PLANE_LIST_STATE), (&self.list, 16 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 16 * MAX_PLANES)] {
+        let labels = if with_labels { Some((&self.labels, 4 * self.full.pixel_count())) } else { None };
+        for (source, bytes) in [(&self.state, 4 * PLANE_LIST_STATE), (&self.list, 16 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 16 * MAX_PLANES)].into_iter().chain(labels) {
             encoder.copy_buffer_to_buffer(source, 0, buffer, offset, bytes as u64);
             offset += bytes as u64;
         }
         Some(slot)
     }
 
-    /// Maps the slot [`Self::encode_table_copy`] filled once `submission` is done; the table
-    /// comes back through [`Self::collect_tables`] tagged with `frame`.
-    pub fn start_table_read(&mut self, gpu: &Gpu, slot: usize, submission: wgpu::SubmissionIndex, frame: u64) {
-        self.tables.start(gpu, slot, submission, frame);
+    /// Maps the slot [`Self::encode_table_copy`] filled (`with_labels` as it was told) once
+    /// `submission` is done; the table comes back through [`Self::collect_tables`] tagged with
+    /// `frame`.
+    pub fn start_table_read(&mut self, gpu: &Gpu, slot: usize, submission: wgpu::SubmissionIndex, frame: u64, with_labels: bool) {
+        self.tables.start(gpu, slot, submission, (frame, with_labels));
     }
 
     /// The plane tables whose readback completed (oldest first, without waiting): frame, the
-    /// planes (no labels) and the stats.
+    /// planes (with the labels where they were copied, else none) and the stats.
     ///
     /// # Errors
     /// A failed mapping or a lost device.
     pub fn collect_tables(&mut self, gpu: &Gpu) -> Result<Vec<(u64, Segmentation, GpuSegmentationStats)>> {
+        let label_bytes = 4 * self.full.pixel_count();
         Ok(self
             .tables
             .collect(gpu)?
             .into_iter()
             .map(|done| {
-                let words: Vec<u32> = bytemuck::pod_collect_to_vec(&done.bytes[..TABLE_BYTES as usize]);
+                let (frame, with_labels) = done.tag;
+                let bytes = TABLE_BYTES as usize + if with_labels { label_bytes } else { 0 };
+                let words: Vec<u32> = bytemuck::pod_collect_to_vec(&done.bytes[..bytes]);
                 let (seg, stats) = parse_table(&words);
-                (done.tag, seg, stats)
+                (frame, seg, stats)
             })
             .collect())
+    }
+
+    /// Plane tables still on their way back.
+    pub fn tables_in_flight(&self) -> usize {
+        self.tables.in_flight()
     }
 }
 

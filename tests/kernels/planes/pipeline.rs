@@ -103,3 +103,49 @@ fn a_real_frame_segments_like_the_reference() {
     assert_like_reference("real frame 0", &g, &c, 0.5, 3.0, 0.98);
     finish(&gpu);
 }
+
+/// The per-frame readback the browser uses (`encode_table_copy` into a ring slot, collected
+/// without waiting) gives what the blocking `read` does: the table alone, or the table and the
+/// labels for a frame the world model takes.
+#[test]
+fn the_per_frame_table_readback_equals_the_blocking_read() {
+    let gpu = gpu();
+    let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_METRE as f32 };
+    let scene = &PlaneScene::all()[0];
+    let frame = scene.render(&K, Some(3)).frame;
+    let pre = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig::default()).expect("preprocessor");
+    let mut segmenter = GpuPlaneSegmenter::new(&gpu, &pre, &PlaneConfig::default()).expect("segmenter");
+    pre.upload(&gpu, &frame).expect("upload");
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.planes.table") });
+    pre.encode(&gpu, &mut encoder);
+    segmenter.encode(&gpu, &mut encoder);
+    let table_slot = segmenter.encode_table_copy(&mut encoder, false).expect("a free slot");
+    let submission = gpu.submit(Some(encoder.finish()));
+    segmenter.start_table_read(&gpu, table_slot, submission, 7, false);
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.planes.labels") });
+    let labels_slot = segmenter.encode_table_copy(&mut encoder, true).expect("the second slot");
+    let submission = gpu.submit(Some(encoder.finish()));
+    segmenter.start_table_read(&gpu, labels_slot, submission, 8, true);
+    // Both slots in flight: a third frame is not read.
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.planes.full") });
+    assert!(segmenter.encode_table_copy(&mut encoder, false).is_none(), "no free slot while two are in flight");
+    drop(encoder);
+    let mut got = Vec::new();
+    for _ in 0..2000 {
+        got.extend(segmenter.collect_tables(&gpu).expect("collect"));
+        if got.len() == 2 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    assert_eq!(segmenter.tables_in_flight(), 0, "both readbacks completed");
+    let (blocking, _) = pollster::block_on(segmenter.read(&gpu)).expect("readback");
+    assert!(blocking.planes.len() >= 2 && blocking.labels.iter().any(|&l| l != NO_LABEL), "{}: planes and labels", scene.name);
+    let [(f7, table, _), (f8, labelled, _)] = <[_; 2]>::try_from(got).expect("two readbacks");
+    assert_eq!((f7, f8), (7, 8), "tagged with their frames, in order");
+    assert_eq!(table.planes, blocking.planes, "the table alone");
+    assert!(table.labels.is_empty(), "no labels unless asked");
+    assert_eq!(labelled.planes, blocking.planes, "the table with the labels");
+    assert_eq!(labelled.labels, blocking.labels, "the labels");
+    finish(&gpu);
+}
