@@ -144,7 +144,9 @@ pub struct IcpConfig {
     pub max_reseed_correction_rad: f32,
     /// Huber threshold on point-to-plane residuals, metres (0: plain least squares).
     pub huber_delta_m: f32,
-    /// Weight pairs by the Kinect axial noise model (far points count less).
+    /// Weight pairs by the Kinect noise model: geometric rows by the axial noise at their depth
+    /// (far points count less), photometric rows by its incidence term (grazing surfaces and
+    /// silhouettes count less).
     pub noise_weighting: bool,
     /// Weight of the photometric (previous-frame intensity) term; 0 turns it off.
     pub rgb_weight: f32,

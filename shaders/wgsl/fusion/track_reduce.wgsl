@@ -12,7 +12,11 @@
 //!   `keep_previous`) bilinear at the reprojection u' of the vertex into the previous frame,
 //!   kept when the previous depth there agrees within `rgb_max_depth_diff_m` and
 //!   |r| <= `rgb_max_residual`; with the projected intensity gradient gw in world,
-//!   J = [p × gw, gw], scaled by sqrt(`rgb_weight`);
+//!   J = [p × gw, gw], scaled by sqrt(`rgb_weight`). Only where the pixel's surface is well
+//!   measured, as the geometric row needs it: a valid normal (no hole or depth step among its
+//!   neighbours: a pixel there may mix two surfaces, and its warp goes astray), and with the
+//!   noise model on, scaled by σ_z(z) / σ_z(z, θ) (Nguyen et al.'s incidence term: 1 up to
+//!   60°, towards 0 at grazing incidence and at the silhouettes whose normals face sideways);
 //! both into one accumulator (the twist is applied on the left, rotation first). The workgroup
 //! tree-reduces its 128 accumulators (no atomics) and writes 32 floats: [JᵀJ (21), Jᵀr (6),
 //! Σ r² and count of the geometric rows, Σ r² and count of the photometric rows, 0].
@@ -104,7 +108,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation
         }
         // Photometric row.
         let p_prev = (camera_prev_from_world * vec4<f32>(v, 1.0)).xyz;
-        if rgb_scale > 0.0 && p_prev.z > 0.0 {
+        if rgb_scale > 0.0 && p_prev.z > 0.0 && is_valid_f32(n_cam.x) {
             let uf = k.fx_px * p_prev.x / p_prev.z + k.cx_px;
             let wf = k.fy_px * p_prev.y / p_prev.z + k.cy_px;
             // One pixel of margin for the central differences.
@@ -119,7 +123,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation
                         let inv_z = 1.0 / p_prev.z;
                         let gp = vec3<f32>(gx * k.fx_px * inv_z, gy * k.fy_px * inv_z, -(gx * k.fx_px * p_prev.x + gy * k.fy_px * p_prev.y) * inv_z * inv_z);
                         let gw = (state.previous_view * vec4<f32>(gp, 0.0)).xyz;
-                        ne_add_jacobian(&acc, cross(v, gw) * rgb_scale, gw * rgb_scale, r * rgb_scale);
+                        var s = rgb_scale;
+                        if params.noise_weighting != 0u {
+                            let cos_incidence = min(abs(dot(n_cam.xyz, v_cam.xyz)) / length(v_cam.xyz), 1.0);
+                            s *= kinect_sigma_m(v_cam.z) / kinect_sigma_at_angle_m(v_cam.z, acos(cos_incidence));
+                        }
+                        ne_add_jacobian(&acc, cross(v, gw) * s, gw * s, r * s);
                         ne_add_rgb_stats(&acc, r);
                     }
                 }

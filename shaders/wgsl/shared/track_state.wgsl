@@ -102,7 +102,8 @@ struct TrackParams {
     cos_angle_thresh: f32,
     // Residuals beyond this get Huber weight delta / |r| (0: off), metres.
     huber_delta_m: f32,
-    // Non-zero: weight each pair by (σ(1 m) / σ(z))², the Kinect axial noise model.
+    // Non-zero: weight each geometric pair by (σ(1 m) / σ(z))², the Kinect axial noise model,
+    // and each photometric row by (σ(z) / σ(z, θ))², its incidence term.
     noise_weighting: u32,
     // Weight of the photometric rows against the geometric ones (0: depth only).
     rgb_weight: f32,

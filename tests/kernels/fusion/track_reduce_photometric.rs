@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
-//! `track_reduce`, its photometric rows (normals are invalid here, so no point-to-plane row is
-//! added, and the photometric weight is 1, so the rows are the plain DVO rows): one block of
+//! `track_reduce`, its photometric rows (the prediction is invalid here, so no point-to-plane
+//! row is added; every normal faces its ray, so the noise model's incidence weight is 1, and the
+//! photometric weight is 1, so the rows are the plain DVO rows): one block of
 //! `SUM_FLOATS` partial sums per workgroup (JᵀJ upper triangle, Jᵀr, the geometric statistics
 //! (0 here), Σr², count, a zero), against the CPU reference that walks the pixels and reduces
 //! the workgroup in the kernel's exact order. The reference frame's intensity gradient comes
@@ -76,19 +77,34 @@ fn previous(k: &PinholeIntrinsics, prev_intensity: &[f32], prev_depth_m: &[f32])
     out
 }
 
+/// Per vertex the normal facing straight back along its ray (incidence 0; NaN where the vertex
+/// is): photometric rows need a valid normal, and at incidence 0 the noise model leaves them
+/// unweighted.
+fn facing_normals(vertex_in_camera: &[[f32; 4]]) -> Vec<[f32; 4]> {
+    vertex_in_camera
+        .iter()
+        .map(|v| {
+            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if v[2].is_finite() && len > 0.0 { [-v[0] / len, -v[1] / len, -v[2] / len, 0.0] } else { [f32::NAN; 4] }
+        })
+        .collect()
+}
+
 /// The photometric row of every pixel (`[J (6), r]`), `None` where rejected.
 fn rgb_rows(p: &Params, f: &Frames) -> Vec<Option<[f32; 7]>> {
     let no_normals = vec![[f32::NAN; 4]; f.vertex_in_camera.len()];
+    let facing = facing_normals(&f.vertex_in_camera);
     let prev = previous(&f.k, &f.prev_intensity, &f.prev_depth_m);
-    let inputs = TrackInputs { vertex_in_camera: &f.vertex_in_camera, normal_in_camera: &no_normals, predicted_vertex_in_world: &no_normals, predicted_normal_in_world: &no_normals, intensity: &f.intensity, previous: &prev };
+    let inputs = TrackInputs { vertex_in_camera: &f.vertex_in_camera, normal_in_camera: &facing, predicted_vertex_in_world: &no_normals, predicted_normal_in_world: &no_normals, intensity: &f.intensity, previous: &prev };
     (0..f.k.pixel_count()).map(|ix| track_rows(&p.0, &p.1, &inputs, ix).1.map(|(row, _)| row)).collect()
 }
 
 /// GPU and CPU partial sums (`WORKGROUPS` blocks of `SUM_FLOATS`).
 fn run(gpu: &Gpu, p: &Params, f: &Frames) -> (Vec<f32>, Vec<f32>) {
     let no_normals = vec![[f32::NAN; 4]; f.vertex_in_camera.len()];
+    let facing = facing_normals(&f.vertex_in_camera);
     let prev = previous(&f.k, &f.prev_intensity, &f.prev_depth_m);
-    let i = ReduceInputs { vertex: &f.vertex_in_camera, normal: &no_normals, predicted_vertex: &no_normals, predicted_normal: &no_normals, intensity: &f.intensity, previous: &prev };
+    let i = ReduceInputs { vertex: &f.vertex_in_camera, normal: &facing, predicted_vertex: &no_normals, predicted_normal: &no_normals, intensity: &f.intensity, previous: &prev };
     let g = reduce_gpu_with(gpu, &p.0, &p.1, &i);
     let c = reduce_cpu_with(&p.0, &p.1, &i);
     assert!(c.iter().all(|v| *v != SENTINEL_F32), "the CPU twin fills every slot");
@@ -542,4 +558,63 @@ fn visibility_and_residual_thresholds_reject_pairs() {
     assert!(loose > valid * 9 / 10, "nearly every unmasked pixel pairs up at identity with the default threshold: {loose} of {valid}");
     assert!(tight_residual < mid && mid < loose, "tighter residual thresholds keep fewer pairs: {tight_residual} < {mid} < {loose}");
     assert!(tight_residual < loose / 20, "|r| <= 1e-5 keeps almost nothing at the wrong pose: {tight_residual} of {loose}");
+}
+
+/// A photometric row needs its pixel's surface well measured, as the geometric row does: no
+/// row without a valid normal (a hole or depth step beside the pixel); at incidence up to 60°
+/// the row is as is; beyond it scaled by the noise model's σ_z(z) / σ_z(z, θ), which vanishes
+/// towards grazing incidence (silhouettes). Checked on the twin, whose agreement with the
+/// kernel the tests above check, and on the GPU's row count.
+#[test]
+fn photometric_rows_need_a_valid_normal_and_fade_at_grazing_incidence() {
+    use webfusion_core::cpu::fusion::track_reduce::{kinect_sigma_at_angle_m, kinect_sigma_m};
+    let (frames, truth) = synthetic_frames();
+    let p = params(&frames, &truth, &Se3::IDENTITY, DEFAULT_RGB_MAX_DEPTH_DIFF_M, SYNTHETIC_MAX_RESIDUAL);
+    let prev = previous(&frames.k, &frames.prev_intensity, &frames.prev_depth_m);
+    let no_normals = vec![[f32::NAN; 4]; frames.vertex_in_camera.len()];
+    // Each normal tilted away from its ray by θ about an axis across it.
+    let tilted = |theta: f32| -> Vec<[f32; 4]> {
+        facing_normals(&frames.vertex_in_camera)
+            .iter()
+            .map(|n| {
+                let side = DVec3::new(f64::from(n[1]), -f64::from(n[0]), 0.0).normalize_or(DVec3::X);
+                let m = DQuat::from_axis_angle(side, f64::from(theta)) * DVec3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
+                if n[0].is_nan() { [f32::NAN; 4] } else { [m.x as f32, m.y as f32, m.z as f32, 0.0] }
+            })
+            .collect()
+    };
+    let rows = |normals: &[[f32; 4]]| -> Vec<Option<[f32; 7]>> {
+        let inputs = TrackInputs { vertex_in_camera: &frames.vertex_in_camera, normal_in_camera: normals, predicted_vertex_in_world: &no_normals, predicted_normal_in_world: &no_normals, intensity: &frames.intensity, previous: &prev };
+        (0..frames.k.pixel_count()).map(|ix| track_rows(&p.0, &p.1, &inputs, ix).1.map(|(row, _)| row)).collect()
+    };
+    let facing = rows(&facing_normals(&frames.vertex_in_camera));
+    let kept = facing.iter().flatten().count();
+    assert!(kept > 1000, "rows with facing normals: {kept}");
+    assert_eq!(rows(&no_normals).iter().flatten().count(), 0, "no valid normal, no photometric row");
+    for (theta_deg, faded) in [(45.0f32, false), (80.0, true), (89.0, true)] {
+        let theta = theta_deg.to_radians();
+        let tilted_rows = rows(&tilted(theta));
+        let mut checked = 0;
+        for (ix, (a, b)) in facing.iter().zip(&tilted_rows).enumerate() {
+            let (Some(a), Some(b)) = (a, b) else {
+                assert!(a.is_none() && b.is_none(), "{theta_deg}°: the same pixels keep a row (pixel {ix})");
+                continue;
+            };
+            let z = frames.vertex_in_camera[ix][2];
+            let scale = if faded { kinect_sigma_m(z) / kinect_sigma_at_angle_m(z, theta) } else { 1.0 };
+            for c in 0..7 {
+                assert!((b[c] - a[c] * scale).abs() <= 1e-3 * a[c].abs() + 1e-9, "{theta_deg}°, pixel {ix}, slot {c}: {} vs {} x {scale}", b[c], a[c]);
+            }
+            checked += 1;
+        }
+        assert_eq!(checked, kept, "{theta_deg}°: every row compared");
+    }
+    // At 89° a row keeps under 1 % of its scale at 1 m.
+    assert!(kinect_sigma_m(1.0) / kinect_sigma_at_angle_m(1.0, 89f32.to_radians()) < 0.01);
+    // The kernel drops the rows without a normal too.
+    let gpu = gpu();
+    let i = ReduceInputs { vertex: &frames.vertex_in_camera, normal: &no_normals, predicted_vertex: &no_normals, predicted_normal: &no_normals, intensity: &frames.intensity, previous: &prev };
+    let g = reduce_gpu_with(&gpu, &p.0, &p.1, &i);
+    finish(&gpu);
+    assert_eq!(total_count(&g), 0, "the GPU adds no photometric row without normals");
 }

@@ -3,7 +3,7 @@
 //! per-pixel rows and the same tree reduction order (`reduce_normal_equations`), so only fused
 //! multiply-adds separate it from the GPU.
 
-pub use crate::cpu::shared::kinect_sigma_m;
+pub use crate::cpu::shared::{kinect_sigma_at_angle_m, kinect_sigma_m};
 use crate::cpu::shared::{
     NE_SUM_FLOATS, cross3, dot3, is_valid_f32, ne_add_icp_stats, ne_add_jacobian, ne_add_rgb_stats, reduce_normal_equations, rigid_inverse, transform_point, transform_vector,
 };
@@ -84,7 +84,7 @@ pub fn track_rows(params: &TrackParams, state: &TrackState, inputs: &TrackInputs
     }
     let mut rgb = None;
     let p_prev = transform_point(&camera_prev_from_world, v);
-    if rgb_scale > 0.0 && p_prev[2] > 0.0 {
+    if rgb_scale > 0.0 && p_prev[2] > 0.0 && is_valid_f32(n_cam[0]) {
         let uf = k.fx_px * p_prev[0] / p_prev[2] + k.cx_px;
         let wf = k.fy_px * p_prev[1] / p_prev[2] + k.cy_px;
         if uf >= 1.0 && wf >= 1.0 && uf < k.width_px as f32 - 2.0 && wf < k.height_px as f32 - 2.0 {
@@ -98,7 +98,12 @@ pub fn track_rows(params: &TrackParams, state: &TrackState, inputs: &TrackInputs
                     let gp = [gx * k.fx_px * inv_z, gy * k.fy_px * inv_z, -(gx * k.fx_px * p_prev[0] + gy * k.fy_px * p_prev[1]) * inv_z * inv_z];
                     let gw = transform_vector(&state.previous_view, gp);
                     let a = cross3(v, gw);
-                    let s = rgb_scale;
+                    let mut s = rgb_scale;
+                    if params.noise_weighting != 0 {
+                        let vc = [v_cam[0], v_cam[1], v_cam[2]];
+                        let cos_incidence = (dot3([n_cam[0], n_cam[1], n_cam[2]], vc).abs() / dot3(vc, vc).sqrt()).min(1.0);
+                        s *= kinect_sigma_m(v_cam[2]) / kinect_sigma_at_angle_m(v_cam[2], cos_incidence.acos());
+                    }
                     rgb = Some(([a[0] * s, a[1] * s, a[2] * s, gw[0] * s, gw[1] * s, gw[2] * s, r * s], r));
                 }
             }
