@@ -237,7 +237,6 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     if let Some(file) = &loaded {
         apply_map_settings(&mut config, &file.header)?;
     }
-    let loaded_up = loaded.as_ref().and_then(up_of);
     let mut source = crate::open(&args.source, &args.calibration)?;
     let range = crate::frame_range(args.frames.as_deref(), source.frame_count())?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating output directory {}", args.out.display()))?;
@@ -245,6 +244,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     if let (Some(given), false) = (&given, args.refine) {
         return run_pose_driven(&gpu, args, &config, source.as_mut(), range, given, loaded);
     }
+    let loaded_up = loaded.as_ref().and_then(up_of);
     let mut fusion = match loaded {
         Some(file) => {
             let mut fusion = KinectFusion::new_at(&gpu, source.calibration(), config.clone(), file.header.origin_in_world)?;

@@ -126,6 +126,8 @@ pub struct Readback<T> {
 
 struct InFlight<T> {
     slot: usize,
+    /// Bytes mapped from the slot's start.
+    bytes: u64,
     tag: T,
     submission: wgpu::SubmissionIndex,
     mapped: OneshotReceiver<std::result::Result<(), wgpu::BufferAsyncError>>,
@@ -177,12 +179,24 @@ impl<T> ReadbackRing<T> {
     /// # Panics
     /// If `slot` is not free (a bug in the caller).
     pub fn start(&mut self, gpu: &Gpu, slot: usize, submission: wgpu::SubmissionIndex, tag: T) {
+        let bytes = self.buffers[slot].size();
+        self.start_bytes(gpu, slot, submission, tag, bytes);
+    }
+
+    /// As [`Self::start`], mapping (and reading back) only the slot's first `bytes`, a
+    /// multiple of 4: what this submission copied into a slot sized for the largest readback.
+    ///
+    /// # Panics
+    /// If `slot` is not free or `bytes` is not a multiple of 4 within the slot (bugs in the
+    /// caller).
+    pub fn start_bytes(&mut self, gpu: &Gpu, slot: usize, submission: wgpu::SubmissionIndex, tag: T, bytes: u64) {
+        assert!(bytes.is_multiple_of(4) && bytes <= self.buffers[slot].size(), "{}: {bytes} bytes of a {}-byte slot", self.label, self.buffers[slot].size());
         let at = self.free.iter().position(|&s| s == slot).expect("start() takes the slot free_slot() gave");
         self.free.remove(at);
         let (sender, mapped) = oneshot();
-        self.buffers[slot].map_async(wgpu::MapMode::Read, .., move |r| sender.send(r));
-        gpu.counters.count_readback(self.buffers[slot].size());
-        self.in_flight.push_back(InFlight { slot, tag, submission, mapped });
+        self.buffers[slot].map_async(wgpu::MapMode::Read, ..bytes, move |r| sender.send(r));
+        gpu.counters.count_readback(bytes);
+        self.in_flight.push_back(InFlight { slot, bytes, tag, submission, mapped });
     }
 
     /// The readbacks that completed, oldest first, without waiting for the GPU.
@@ -194,7 +208,7 @@ impl<T> ReadbackRing<T> {
         while let Some(front) = self.in_flight.front() {
             let Some(result) = front.mapped.try_take() else { break };
             let done = self.in_flight.pop_front().expect("front exists");
-            out.push(self.finish(done.slot, done.tag, result)?);
+            out.push(self.finish(done.slot, done.bytes, done.tag, result)?);
         }
         Ok(out)
     }
@@ -204,7 +218,7 @@ impl<T> ReadbackRing<T> {
     pub async fn wait_oldest(&mut self, gpu: &Gpu) -> Result<Option<Readback<T>>> {
         let Some(oldest) = self.in_flight.pop_front() else { return Ok(None) };
         gpu.counters.count_wait();
-        let InFlight { slot, tag, submission, mapped } = oldest;
+        let InFlight { slot, bytes, tag, submission, mapped } = oldest;
         #[cfg(not(target_arch = "wasm32"))]
         let result = {
             gpu.device
@@ -230,14 +244,14 @@ impl<T> ReadbackRing<T> {
             mapped.await
         };
         gpu.check_lost()?;
-        self.finish(slot, tag, result).map(Some)
+        self.finish(slot, bytes, tag, result).map(Some)
     }
 
-    fn finish(&mut self, slot: usize, tag: T, result: std::result::Result<(), wgpu::BufferAsyncError>) -> Result<Readback<T>> {
+    fn finish(&mut self, slot: usize, mapped_bytes: u64, tag: T, result: std::result::Result<(), wgpu::BufferAsyncError>) -> Result<Readback<T>> {
         let buffer = &self.buffers[slot];
         let label = format!("{}.readback[{}]", self.label, slot);
         result.map_err(|e| Error::BufferMap { label: label.clone(), message: e.to_string() })?;
-        let bytes = buffer.get_mapped_range(..).map_err(|e| Error::BufferMap { label, message: e.to_string() })?.to_vec();
+        let bytes = buffer.get_mapped_range(..mapped_bytes).map_err(|e| Error::BufferMap { label, message: e.to_string() })?.to_vec();
         buffer.unmap();
         self.free.push(slot);
         Ok(Readback { tag, bytes })

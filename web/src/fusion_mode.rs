@@ -516,6 +516,9 @@ impl FusionMode {
             draw_frame_views(gpu, p, frame)?;
         }
         let views_ms = t_views.elapsed().as_secs_f64() * 1e3;
+        // Kept for the virtual sensor's comparison (and, for a frame the world of planes
+        // takes, its label completion).
+        let depth_units = Rc::new(frame.depth.units.clone());
         // The plane kernels compile once the first frame is fused (they would hold it up).
         if draw_views
             && gpu.kernels.deferred_compiled()
@@ -526,7 +529,7 @@ impl FusionMode {
             if segment_planes(gpu, planes, frame.index, with_labels).map_err(|e| format!("frame {}: planes: {e}", frame.index))? {
                 self.planes_sent.push_back((frame.index, Instant::now()));
                 if with_labels {
-                    planes.world.asked(frame.index, &frame.color, &frame.depth.units, calibration);
+                    planes.world.asked(frame.index, &frame.color, Rc::clone(&depth_units), calibration);
                 }
             }
         }
@@ -537,7 +540,7 @@ impl FusionMode {
             arrived,
             decode_ms,
             views_ms,
-            depth_units: Rc::new(frame.depth.units.clone()),
+            depth_units,
             calibration,
         });
         self.last_submitted = Some(frame.index);

@@ -12,6 +12,7 @@
 //! pipeline starts a new world.
 
 use std::collections::VecDeque;
+use std::rc::Rc;
 
 use web_time::Instant;
 use webfusion_core::cpu::depth_to_metres;
@@ -33,7 +34,8 @@ pub(crate) const WORLD_INTERVAL_MS: f64 = 1000.0;
 struct Waiting {
     index: u64,
     colour: ColorImage,
-    depth_units: Vec<u16>,
+    /// The frame's raw depth, shared with its in-flight record.
+    depth_units: Rc<Vec<u16>>,
     calibration: RgbdCalibration,
     segmentation: Option<Segmentation>,
     /// `Some(None)`: its tracking was lost (it is left out).
@@ -82,9 +84,9 @@ impl PlaneWorldModel {
     }
 
     /// Frame `index`'s labels were asked for: keeps what the world needs of it.
-    pub(crate) fn asked(&mut self, index: u64, colour: &ColorImage, depth_units: &[u16], calibration: RgbdCalibration) {
+    pub(crate) fn asked(&mut self, index: u64, colour: &ColorImage, depth_units: Rc<Vec<u16>>, calibration: RgbdCalibration) {
         self.last_asked = Some(Instant::now());
-        self.waiting.push_back(Waiting { index, colour: colour.clone(), depth_units: depth_units.to_vec(), calibration, segmentation: None, pose: None });
+        self.waiting.push_back(Waiting { index, colour: colour.clone(), depth_units, calibration, segmentation: None, pose: None });
     }
 
     /// A segmentation with labels came back for frame `index`.
@@ -177,12 +179,12 @@ mod tests {
     const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 131.25, fy_px: 131.25, cx_px: 79.5, cy_px: 59.5, width_px: 160, height_px: 120 };
 
     /// A synthetic scene's frame, segmented by the CPU reference, as the page would have it.
-    fn frame(scene: &PlaneScene) -> (Segmentation, ColorImage, Vec<u16>, RgbdCalibration) {
+    fn frame(scene: &PlaneScene) -> (Segmentation, ColorImage, Rc<Vec<u16>>, RgbdCalibration) {
         let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_METRE as f32 };
         let r = scene.render(&K, None);
         let pre = webfusion_core::cpu::preprocess::chain::preprocess(&calibration, &PreprocessConfig::default(), &r.frame);
         let seg = reference::segment(&pre.levels, Some(&pre.depth_unfiltered_m), &PlaneConfig::default());
-        (seg, r.frame.color.clone(), r.frame.depth.units.clone(), calibration)
+        (seg, r.frame.color.clone(), Rc::new(r.frame.depth.units.clone()), calibration)
     }
 
     #[wasm_bindgen_test]
@@ -192,7 +194,7 @@ mod tests {
         assert!(seg.planes.len() >= 2, "{}: planes to add", scene.name);
         let mut model = PlaneWorldModel::new(PlaneConfig::default(), PreprocessConfig::default());
         assert!(model.wants_frame(), "the first frame is wanted");
-        model.asked(3, &colour, &depth, calibration);
+        model.asked(3, &colour, Rc::clone(&depth), calibration);
         assert!(!model.wants_frame(), "one frame at a time");
         // Labels first, pose later (or the other way round): added only with both.
         model.labels_arrived(3, seg.clone());
@@ -203,14 +205,14 @@ mod tests {
         assert_eq!(s.planes, seg.planes.len(), "each frame plane starts a world plane");
         // The same view again from the same pose: the planes are associated, not duplicated.
         model.last_asked = None;
-        model.asked(4, &colour, &depth, calibration);
+        model.asked(4, &colour, Rc::clone(&depth), calibration);
         model.pose_reported(4, Some(Se3::IDENTITY));
         model.labels_arrived(4, seg.clone());
         assert_eq!((model.status().frames, model.status().planes), (2, seg.planes.len()), "associated with the world's planes");
         // A lost frame is left out; a frame overtaken by a complete later one is dropped.
         model.last_asked = None;
-        model.asked(5, &colour, &depth, calibration);
-        model.asked(6, &colour, &depth, calibration);
+        model.asked(5, &colour, Rc::clone(&depth), calibration);
+        model.asked(6, &colour, Rc::clone(&depth), calibration);
         model.pose_reported(5, None);
         model.labels_arrived(5, seg.clone());
         model.labels_arrived(6, seg.clone());
@@ -225,7 +227,7 @@ mod tests {
         model.reset();
         assert_eq!((model.status().frames, model.status().planes), (0, 0), "a new run starts a new world");
         // Negative control: frames never reported stay waiting and add nothing.
-        model.asked(7, &colour, &depth, calibration);
+        model.asked(7, &colour, Rc::clone(&depth), calibration);
         model.labels_arrived(7, seg);
         assert_eq!((model.status().frames, model.status().waiting), (0, 1));
     }

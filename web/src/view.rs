@@ -87,8 +87,8 @@ pub(crate) fn draw_odometry_pair(canvas: &web_sys::HtmlCanvasElement, reference:
 pub(crate) struct Orbit {
     pub(crate) target_in_world: DVec3,
     pub(crate) distance_m: f64,
-    /// Turn about the up axis, radians (0: looking along the horizontal axis `forward_in_world`
-    /// gives, +z of the world where it is horizontal, like a first camera's).
+    /// Turn about the up axis, radians (0: looking along `forward_in_world`, the world's z made
+    /// level, like a first camera's; x where z is nearly vertical).
     pub(crate) yaw_rad: f64,
     /// Elevation, radians (positive: looking down from above).
     pub(crate) pitch_rad: f64,

@@ -81,8 +81,8 @@ pub struct GpuPlaneSegmenter {
     extents: wgpu::Buffer,
     dispatch: wgpu::Buffer,
     /// Plane tables (and, where asked, the labels) on their way back, tagged with the frame
-    /// index and whether the labels came along.
-    tables: ReadbackRing<(u64, bool)>,
+    /// index; slots are sized for both, only what was copied is mapped.
+    tables: ReadbackRing<u64>,
     _keep_alive: Vec<wgpu::Buffer>,
 }
 
@@ -398,7 +398,8 @@ impl GpuPlaneSegmenter {
     /// `submission` is done; the table comes back through [`Self::collect_tables`] tagged with
     /// `frame`.
     pub fn start_table_read(&mut self, gpu: &Gpu, slot: usize, submission: wgpu::SubmissionIndex, frame: u64, with_labels: bool) {
-        self.tables.start(gpu, slot, submission, (frame, with_labels));
+        let bytes = TABLE_BYTES + if with_labels { 4 * self.full.pixel_count() as u64 } else { 0 };
+        self.tables.start_bytes(gpu, slot, submission, frame, bytes);
     }
 
     /// The plane tables whose readback completed (oldest first, without waiting): frame, the
@@ -407,17 +408,15 @@ impl GpuPlaneSegmenter {
     /// # Errors
     /// A failed mapping or a lost device.
     pub fn collect_tables(&mut self, gpu: &Gpu) -> Result<Vec<(u64, Segmentation, GpuSegmentationStats)>> {
-        let label_bytes = 4 * self.full.pixel_count();
         Ok(self
             .tables
             .collect(gpu)?
             .into_iter()
             .map(|done| {
-                let (frame, with_labels) = done.tag;
-                let bytes = TABLE_BYTES as usize + if with_labels { label_bytes } else { 0 };
-                let words: Vec<u32> = bytemuck::pod_collect_to_vec(&done.bytes[..bytes]);
+                // The table, then the labels where they were copied (and mapped).
+                let words: Vec<u32> = bytemuck::pod_collect_to_vec(&done.bytes);
                 let (seg, stats) = parse_table(&words);
-                (frame, seg, stats)
+                (done.tag, seg, stats)
             })
             .collect())
     }

@@ -121,11 +121,18 @@ fn the_per_frame_table_readback_equals_the_blocking_read() {
     segmenter.encode(&gpu, &mut encoder);
     let table_slot = segmenter.encode_table_copy(&mut encoder, false).expect("a free slot");
     let submission = gpu.submit(Some(encoder.finish()));
+    let before = gpu.counters.snapshot();
     segmenter.start_table_read(&gpu, table_slot, submission, 7, false);
+    let table_bytes = gpu.counters.snapshot().readback_bytes - before.readback_bytes;
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.planes.labels") });
     let labels_slot = segmenter.encode_table_copy(&mut encoder, true).expect("the second slot");
     let submission = gpu.submit(Some(encoder.finish()));
+    let before = gpu.counters.snapshot();
     segmenter.start_table_read(&gpu, labels_slot, submission, 8, true);
+    let labelled_bytes = gpu.counters.snapshot().readback_bytes - before.readback_bytes;
+    // Slots have room for the labels; a frame without them maps only its table (a few kB).
+    assert_eq!(labelled_bytes - table_bytes, 4 * K.pixel_count() as u64, "the labels add 4 bytes a pixel");
+    assert!(table_bytes < 64 * 1024, "the table alone is small: {table_bytes} bytes");
     // Both slots in flight: a third frame is not read.
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.planes.full") });
     assert!(segmenter.encode_table_copy(&mut encoder, false).is_none(), "no free slot while two are in flight");
