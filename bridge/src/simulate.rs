@@ -10,6 +10,7 @@ use anyhow::Context as _;
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::io::tum::ImageListWriter;
 use webfusion_core::io::{CALIBRATION_FILE, WrittenCalibration, format_calibration_file, format_timestamp_s};
+use webfusion_core::source::DepthNoise;
 use webfusion_core::map::file::{read_map_file, read_map_file_recovering};
 use webfusion_core::map::occupancy::OccupancyGrid;
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, SimulatedFrame, VirtualSensor};
@@ -262,7 +263,12 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
     }
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "the GPU reported errors: {}", errors.join("; "));
-    let calibration = WrittenCalibration { calibration: RgbdCalibration { intrinsics: k, depth_units_per_metre: args.depth_scale }, radial_depth: args.radial };
+    // The calibration file says which noise the depth has, so `reconstruct` weights it right.
+    let depth_noise = match args.noise {
+        NoiseKind::None => DepthNoise::None,
+        NoiseKind::Kinect => DepthNoise::KinectV1,
+    };
+    let calibration = WrittenCalibration { calibration: RgbdCalibration { intrinsics: k, depth_units_per_metre: args.depth_scale }, radial_depth: args.radial, depth_noise };
     let marked = dir.unknown.as_ref().map(|(_, _, marked)| *marked);
     dir.finish(calibration, &poses)?;
     let elapsed = started.elapsed().as_secs_f64();

@@ -45,6 +45,8 @@ fn a_map_simulated_along_a_known_trajectory_replays_tracks_back_and_compares() {
     let ate_m = stats["ate"]["rmse_m"].as_f64().expect("ATE against the simulation's ground truth");
     eprintln!("exact simulation tracked back: ATE {:.2} mm, {} lost", ate_m * 1e3, stats["lost_frames"]);
     assert!(ate_m < 0.02, "ATE {ate_m} m");
+    // The simulation's calibration file says its depth is exact: residuals unweighted, band μ.
+    assert_eq!((&stats["icp_noise_weighting"], &stats["volume"]["noise_band_sigmas"]), (&serde_json::json!(false), &serde_json::json!(0.0)), "exact depth's settings");
     assert_eq!(stats["lost_frames"].as_array().map(Vec::len), Some(0), "no frame lost");
 
     // The simulation against the room's exact frames: most pixels agree to well under 10 %.
@@ -82,6 +84,8 @@ fn a_map_simulated_along_a_known_trajectory_replays_tracks_back_and_compares() {
     let noisy_ate = noisy_stats["ate"]["rmse_m"].as_f64().expect("ATE");
     eprintln!("Kinect-noise simulation tracked back: ATE {:.2} mm, {} lost", noisy_ate * 1e3, noisy_stats["lost_frames"]);
     assert!(noisy_ate < 0.02, "ATE with Kinect noise {noisy_ate} m");
+    // Negative control: a Kinect's noise keeps the Kinect model's weights and band.
+    assert_eq!((&noisy_stats["icp_noise_weighting"], &noisy_stats["volume"]["noise_band_sigmas"]), (&serde_json::json!(true), &serde_json::json!(3.0)), "Kinect noise's settings");
 
     // Bad input: clean errors.
     fails(&["simulate", "--map", s(&map), "--out", s(&dir.join("x"))], "--poses");

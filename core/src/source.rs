@@ -9,6 +9,36 @@ use crate::io::tum::TumDataset;
 use crate::recording::{RECORDING_MAGIC, RecordingReader};
 use crate::{Error, Result, RgbdCalibration, RgbdFrame};
 
+/// The noise of a source's depth images: what tracking weights its residuals by and how wide
+/// fusion's truncation band grows with depth (the noise model is the sensor's, so a source
+/// that knows its sensor says it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DepthNoise {
+    /// A Kinect v1's (structured light): σ_z(z) = 0.0012 + 0.0019 (z − 0.4)² m (Nguyen, Izadi
+    /// and Lovell 2012). Every source that does not say otherwise: real Kinect logs.
+    #[default]
+    KinectV1,
+    /// Exact depth, up to the images' quantisation (`simulate` without `--noise`): every
+    /// measurement is as good as any other, so residuals are not weighted by depth and the
+    /// band stays μ.
+    None,
+}
+
+impl DepthNoise {
+    /// The name calibration files use: `kinect` or `none`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::KinectV1 => "kinect",
+            Self::None => "none",
+        }
+    }
+
+    /// The model named `name` ([`Self::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Self::KinectV1, Self::None].into_iter().find(|n| n.name() == name)
+    }
+}
+
 /// A finite, random-access sequence of RGB-D frames with one calibration.
 pub trait FrameSource: Send {
     /// Human-readable name (a directory or file name).
@@ -16,6 +46,12 @@ pub trait FrameSource: Send {
 
     /// Calibration of every frame.
     fn calibration(&self) -> RgbdCalibration;
+
+    /// The noise of its depth images: a Kinect v1's unless the source knows better (a
+    /// simulated log's calibration file).
+    fn depth_noise(&self) -> DepthNoise {
+        DepthNoise::KinectV1
+    }
 
     /// Number of frames; valid indices are `0..frame_count()`.
     fn frame_count(&self) -> usize;

@@ -22,6 +22,9 @@ pub const DEFAULT_VOLUME_DIM_VOXELS: u32 = 256;
 pub const DEFAULT_VOLUME_SIZE_M: f32 = 3.0;
 /// Default truncation distance, in voxels (μ = 4 voxels = 4.7 cm at the default size).
 pub const DEFAULT_TRUNCATION_VOXELS: f32 = 4.0;
+/// Default width of a sample's truncation band where the sensor's noise exceeds μ, in standard
+/// deviations of the Kinect noise model (see [`TsdfConfig::noise_band_sigmas`]).
+pub const DEFAULT_NOISE_BAND_SIGMAS: f32 = 3.0;
 /// Default cap of the running-average weight (frames): bounds how slowly old data fades.
 pub const DEFAULT_MAX_WEIGHT: u32 = 128;
 
@@ -44,8 +47,16 @@ pub struct TsdfConfig {
     pub dims_voxels: [u32; 3],
     /// Voxel edge length, metres.
     pub voxel_size_m: f32,
-    /// Truncation distance μ, metres.
+    /// Truncation distance μ, metres: the band a depth sample updates either side of its
+    /// surface, where the sensor's noise is smaller.
     pub truncation_m: f32,
+    /// Where the sensor's noise is larger than μ (a Kinect beyond 2–3 m), each sample's band
+    /// widens to this many standard deviations σ_z(z) of the Kinect model at its depth (up to
+    /// 32 voxels; `shared/tsdf.wgsl::truncation_band_m`); 0 keeps μ at every depth. A band
+    /// narrower than the noise biases the fused surface away from the camera: samples in front
+    /// are clamped to +1 while those behind beyond the band are dropped (at 5 m, σ = 4.1 cm:
+    /// 13 mm for μ = 4.7 cm, 56 mm for μ = 2 cm); at 3σ both tails hold 0.3 % of the samples.
+    pub noise_band_sigmas: f32,
     /// Cap of the integration weight.
     pub max_weight: u32,
     /// Also fuse colour (a second u32 per voxel, RGB8).
@@ -72,10 +83,10 @@ impl Default for TsdfConfig {
 }
 
 impl TsdfConfig {
-    /// A dense cube of `dim` voxels of `voxel_size_m`, with the default truncation (in voxels),
-    /// weight cap and colour on.
+    /// A dense cube of `dim` voxels of `voxel_size_m`, with the default truncation (in voxels,
+    /// widened by the noise model), weight cap and colour on.
     pub fn cube(dim: u32, voxel_size_m: f32) -> Self {
-        Self { dims_voxels: [dim; 3], voxel_size_m, truncation_m: DEFAULT_TRUNCATION_VOXELS * voxel_size_m, max_weight: DEFAULT_MAX_WEIGHT, color: true, placement: VolumePlacement::InFront, kind: MapKind::Dense, pool_blocks: DEFAULT_POOL_BLOCKS, swap: true }
+        Self { dims_voxels: [dim; 3], voxel_size_m, truncation_m: DEFAULT_TRUNCATION_VOXELS * voxel_size_m, noise_band_sigmas: DEFAULT_NOISE_BAND_SIGMAS, max_weight: DEFAULT_MAX_WEIGHT, color: true, placement: VolumePlacement::InFront, kind: MapKind::Dense, pool_blocks: DEFAULT_POOL_BLOCKS, swap: true }
     }
 
     /// A sparse map of `pool_blocks` blocks of 8³ voxels of `voxel_size_m`, with the default
@@ -133,6 +144,9 @@ impl TsdfConfig {
         if !(self.truncation_m >= self.voxel_size_m && self.truncation_m.is_finite()) {
             return bad(format!("truncation {} m must be at least one voxel ({} m)", self.truncation_m, self.voxel_size_m));
         }
+        if !(self.noise_band_sigmas >= 0.0 && self.noise_band_sigmas.is_finite()) {
+            return bad(format!("noise band of {} standard deviations must be finite and at least 0", self.noise_band_sigmas));
+        }
         if !(1..=0xffff).contains(&self.max_weight) {
             return bad(format!("max weight {} must be 1..=65535", self.max_weight));
         }
@@ -163,7 +177,17 @@ impl TsdfConfig {
             origin_z_m: origin_in_world[2],
             voxel_size_m: self.voxel_size_m,
             truncation_m: self.truncation_m,
+            noise_band_sigmas: self.noise_band_sigmas,
+            _pad0: 0,
+            _pad1: 0,
+            _pad2: 0,
         }
+    }
+
+    /// The truncation band of a depth sample measured at `depth_m`, metres (see
+    /// [`Self::noise_band_sigmas`]).
+    pub fn truncation_band_m(&self, depth_m: f32) -> f32 {
+        crate::cpu::shared::truncation_band_m(&self.desc([0.0; 3]), depth_m)
     }
 
     /// The map's origin for the first camera at `world_from_camera`: the corner of voxel
@@ -308,5 +332,31 @@ impl TsdfStore for DenseTsdfVolume {
     }
     fn memory_bytes(&self) -> u64 {
         self.voxels.size() + self.colors.size() + self.surface_bricks.size()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_truncation_band_is_mu_where_the_sensor_is_precise_and_3_sigma_where_it_is_not() {
+        // 11.7 mm voxels, μ = 4.7 cm: 3σ_z(z) of the Kinect model passes μ at 3.1 m.
+        let c = TsdfConfig::default();
+        assert_eq!(c.truncation_band_m(1.0), c.truncation_m);
+        assert_eq!(c.truncation_band_m(3.0), c.truncation_m);
+        let sigma_4m = crate::cpu::shared::kinect_sigma_m(4.0);
+        assert!((c.truncation_band_m(4.0) - 3.0 * sigma_4m).abs() < 1e-7, "{} at 4 m", c.truncation_band_m(4.0));
+        // At most 32 voxels, however noisy.
+        assert_eq!(c.truncation_band_m(20.0), 32.0 * c.voxel_size_m);
+        // 0 σ: μ at every depth (negative control).
+        let fixed = TsdfConfig { noise_band_sigmas: 0.0, ..c };
+        assert_eq!(fixed.truncation_band_m(4.0), c.truncation_m);
+        // A band of no finite or negative width is refused with its name.
+        for bad in [-1.0, f32::NAN, f32::INFINITY] {
+            let err = TsdfConfig { noise_band_sigmas: bad, ..c }.validate(u64::MAX).expect_err("refused");
+            assert!(err.to_string().contains("noise band"), "{bad}: {err}");
+        }
+        assert!(c.validate(u64::MAX).is_ok());
     }
 }

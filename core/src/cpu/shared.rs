@@ -139,6 +139,17 @@ pub const MAP_DENSE: u32 = 0;
 /// Twin of `MAP_SPARSE`.
 pub const MAP_SPARSE: u32 = 1;
 
+/// Twin of `MAX_BAND_VOXELS`: the widest truncation band, voxels.
+pub const MAX_BAND_VOXELS: f32 = 32.0;
+
+/// Twin of `truncation_band_m()` in `shared/tsdf.wgsl`: the truncation band of a sample measured
+/// at `depth_m`, metres: μ, widened to `noise_band_sigmas` σ of the Kinect model where that is
+/// wider, at most [`MAX_BAND_VOXELS`].
+pub fn truncation_band_m(d: &VolumeDesc, depth_m: f32) -> f32 {
+    let noise_m = d.noise_band_sigmas * kinect_sigma_m(depth_m);
+    d.truncation_m.max(noise_m.min(MAX_BAND_VOXELS * d.voxel_size_m))
+}
+
 /// Twin of `voxel_anchor()`: the voxel whose outer corner the origin gives.
 pub fn voxel_anchor(d: &VolumeDesc) -> [u32; 3] {
     if d.kind == MAP_SPARSE {

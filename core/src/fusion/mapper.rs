@@ -162,7 +162,7 @@ impl Mapper {
                     }
                     .bind_group(gpu),
                     swapper: config.swap.then(|| {
-                        let swap = SwapConfig::for_camera(&preprocessor.levels[0].intrinsics, max_depth_m, config.truncation_m);
+                        let swap = SwapConfig::for_camera(&preprocessor.levels[0].intrinsics, max_depth_m, config.truncation_band_m(max_depth_m));
                         Box::new(MapSwapper::new(gpu, sparse, pose, swap))
                     }),
                 };

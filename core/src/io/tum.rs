@@ -18,7 +18,7 @@ use super::format_timestamp_s;
 use super::trajectory::{TimedPose, read_tum_trajectory, write_tum_trajectory};
 use crate::camera::{TUM_DEPTH_UNITS_PER_METRE, TUM_FREIBURG1, TUM_FREIBURG2, TUM_FREIBURG3};
 use crate::codec::png;
-use crate::source::FrameSource;
+use crate::source::{DepthNoise, FrameSource};
 use crate::{Error, Result, RgbdCalibration, RgbdFrame};
 
 /// Default largest time difference between a depth image and the colour image paired with it:
@@ -62,6 +62,8 @@ pub struct TumDataset {
     /// The depth images hold distances along each pixel's ray (converted to depth along z on
     /// reading).
     radial_depth: bool,
+    /// What its calibration file says of the depth's noise (a Kinect's without one).
+    depth_noise: DepthNoise,
     frames: Vec<TumFrameFiles>,
     ground_truth: Option<Vec<TimedPose>>,
 }
@@ -93,6 +95,7 @@ impl TumDataset {
         let file = dir.join(CALIBRATION_FILE);
         let written = if file.is_file() { Some(read_calibration_file(&file)?) } else { None };
         let radial_depth = written.is_some_and(|w| w.radial_depth);
+        let depth_noise = written.map_or(DepthNoise::KinectV1, |w| w.depth_noise);
         let calibration = match (options.calibration_override, written) {
             (Some(calibration), _) => calibration,
             (None, Some(w)) => w.calibration,
@@ -109,7 +112,7 @@ impl TumDataset {
                 .collect();
             let ground_truth_path = dir.join("groundtruth.txt");
             let ground_truth = if ground_truth_path.is_file() { Some(read_tum_trajectory(&ground_truth_path)?) } else { None };
-            return Ok(Self { dir: dir.to_owned(), name, calibration, radial_depth, frames, ground_truth });
+            return Ok(Self { dir: dir.to_owned(), name, calibration, radial_depth, depth_noise, frames, ground_truth });
         }
         let color_list = read_image_list(&rgb_list)?;
         let depth_timestamps: Vec<i64> = depth_list.iter().map(|(t, _)| *t).collect();
@@ -137,7 +140,7 @@ impl TumDataset {
             .collect();
         let ground_truth_path = dir.join("groundtruth.txt");
         let ground_truth = if ground_truth_path.is_file() { Some(read_tum_trajectory(&ground_truth_path)?) } else { None };
-        Ok(Self { dir: dir.to_owned(), name, calibration, radial_depth, frames, ground_truth })
+        Ok(Self { dir: dir.to_owned(), name, calibration, radial_depth, depth_noise, frames, ground_truth })
     }
 
     /// The directory, as given to `open`.
@@ -158,6 +161,10 @@ impl FrameSource for TumDataset {
 
     fn calibration(&self) -> RgbdCalibration {
         self.calibration
+    }
+
+    fn depth_noise(&self) -> DepthNoise {
+        self.depth_noise
     }
 
     fn frame_count(&self) -> usize {
@@ -339,8 +346,10 @@ pub fn associate(depth_ns: &[i64], color_ns: &[i64], max_difference_ns: i64) -> 
 
 /// The calibration file of a directory webfusion wrote: `key value` lines (`#` comments):
 /// `fx_px`, `fy_px`, `cx_px`, `cy_px` (pixels, pixel centres at integer coordinates),
-/// `width_px`, `height_px`, `depth_units_per_metre` and `depth` (`planar`: along the camera's z,
-/// the TUM convention; `radial`: along each pixel's ray).
+/// `width_px`, `height_px`, `depth_units_per_metre`, `depth` (`planar`: along the camera's z,
+/// the TUM convention; `radial`: along each pixel's ray) and, optionally, `depth_noise`
+/// (`kinect`, the default: a Kinect v1's noise; `none`: exact depth, as `simulate` renders
+/// without `--noise`).
 pub const CALIBRATION_FILE: &str = "calibration.txt";
 
 /// What a [`CALIBRATION_FILE`] says.
@@ -350,13 +359,15 @@ pub struct WrittenCalibration {
     pub calibration: RgbdCalibration,
     /// The depth images hold distances along each ray.
     pub radial_depth: bool,
+    /// The noise of the depth images.
+    pub depth_noise: DepthNoise,
 }
 
 /// The text of a [`CALIBRATION_FILE`].
 pub fn format_calibration_file(w: &WrittenCalibration) -> String {
     let k = &w.calibration.intrinsics;
     format!(
-        "# webfusion camera calibration: pinhole, pixel centres at integer coordinates\nfx_px {}\nfy_px {}\ncx_px {}\ncy_px {}\nwidth_px {}\nheight_px {}\ndepth_units_per_metre {}\ndepth {}\n",
+        "# webfusion camera calibration: pinhole, pixel centres at integer coordinates\nfx_px {}\nfy_px {}\ncx_px {}\ncy_px {}\nwidth_px {}\nheight_px {}\ndepth_units_per_metre {}\ndepth {}\ndepth_noise {}\n",
         k.fx_px,
         k.fy_px,
         k.cx_px,
@@ -364,7 +375,8 @@ pub fn format_calibration_file(w: &WrittenCalibration) -> String {
         k.width_px,
         k.height_px,
         w.calibration.depth_units_per_metre,
-        if w.radial_depth { "radial" } else { "planar" }
+        if w.radial_depth { "radial" } else { "planar" },
+        w.depth_noise.name()
     )
 }
 
@@ -376,8 +388,8 @@ pub fn read_calibration_file(path: &Path) -> Result<WrittenCalibration> {
 
 /// Parses the text of a [`CALIBRATION_FILE`] (`path` names it in errors).
 pub fn parse_calibration_file(text: &str, path: &Path) -> Result<WrittenCalibration> {
-    const KEYS: [&str; 8] = ["fx_px", "fy_px", "cx_px", "cy_px", "width_px", "height_px", "depth_units_per_metre", "depth"];
-    let mut values: [Option<&str>; 8] = [None; 8];
+    const KEYS: [&str; 9] = ["fx_px", "fy_px", "cx_px", "cy_px", "width_px", "height_px", "depth_units_per_metre", "depth", "depth_noise"];
+    let mut values: [Option<&str>; 9] = [None; 9];
     for (line_ix, line) in text.lines().enumerate() {
         let Some(fields) = data_fields(line) else { continue };
         let parse_error = |message: String| Error::Parse { path: path.to_owned(), line: line_ix + 1, message };
@@ -404,8 +416,13 @@ pub fn parse_calibration_file(text: &str, path: &Path) -> Result<WrittenCalibrat
         "radial" => true,
         other => return Err(bad(format!("depth {other:?}: expected planar or radial"))),
     };
+    // Optional (files written before it had none: a Kinect's noise, what they were read with).
+    let depth_noise = match values[8] {
+        None => DepthNoise::KinectV1,
+        Some(v) => DepthNoise::from_name(v).ok_or_else(|| bad(format!("depth_noise {v:?}: expected kinect or none")))?,
+    };
     let intrinsics = crate::PinholeIntrinsics { fx_px: positive(0)?, fy_px: positive(1)?, cx_px: positive(2)?, cy_px: positive(3)?, width_px: size(4)?, height_px: size(5)? };
-    Ok(WrittenCalibration { calibration: RgbdCalibration { intrinsics, depth_units_per_metre: positive(6)? }, radial_depth })
+    Ok(WrittenCalibration { calibration: RgbdCalibration { intrinsics, depth_units_per_metre: positive(6)? }, radial_depth, depth_noise })
 }
 
 /// Distances along each pixel's ray to depths along z, in place (raw units, rounded).
@@ -603,7 +620,7 @@ mod tests {
         let dir = scratch.path().join("simulated");
         std::fs::create_dir_all(dir.join("depth")).expect("mkdir");
         let k = PinholeIntrinsics { fx_px: 2.0, fy_px: 2.0, cx_px: 1.5, cy_px: 1.0, width_px: 4, height_px: 3 };
-        let written = WrittenCalibration { calibration: RgbdCalibration { intrinsics: k, depth_units_per_metre: 1000.0 }, radial_depth: true };
+        let written = WrittenCalibration { calibration: RgbdCalibration { intrinsics: k, depth_units_per_metre: 1000.0 }, radial_depth: true, depth_noise: DepthNoise::None };
         std::fs::write(dir.join(CALIBRATION_FILE), format_calibration_file(&written)).expect("calibration");
         assert_eq!(read_calibration_file(&dir.join(CALIBRATION_FILE)).expect("reads back"), written, "round trip");
         // Distances of 2 m along every ray: the corner (0, 0) ray is (-0.75, -0.5, 1).
@@ -612,6 +629,7 @@ mod tests {
         std::fs::write(dir.join("depth.txt"), "# depth\n5.000 depth/a.png\n").expect("list");
         let mut dataset = TumDataset::open(&dir, None).expect("opens with its own calibration, no rgb.txt");
         assert_eq!(dataset.calibration(), written.calibration);
+        assert_eq!(dataset.depth_noise(), DepthNoise::None, "the file's depth noise");
         let frame = dataset.read_frame(0).expect("frame");
         assert_eq!(frame.color_timestamp_ns, frame.depth_timestamp_ns, "depth only: colour at the depth's time");
         assert_eq!(frame.color.rgb8, vec![0; 36], "black colour");
@@ -626,11 +644,15 @@ mod tests {
     #[test]
     fn a_bad_calibration_file_is_a_typed_error_naming_the_problem() {
         let path = Path::new("calibration.txt");
-        let good = format_calibration_file(&WrittenCalibration { calibration: small_calibration(), radial_depth: false });
+        let good = format_calibration_file(&WrittenCalibration { calibration: small_calibration(), radial_depth: false, depth_noise: DepthNoise::KinectV1 });
         assert!(parse_calibration_file(&good, path).is_ok());
+        // A file without `depth_noise` (written before it) is a Kinect's.
+        let old = parse_calibration_file(&good.replace("depth_noise kinect\n", ""), path).expect("no depth_noise line");
+        assert_eq!(old.depth_noise, DepthNoise::KinectV1);
         for (text, needle) in [
             (good.replace("fx_px 4\n", ""), "fx_px is missing"),
             (good.replace("depth planar", "depth spherical"), "planar or radial"),
+            (good.replace("depth_noise kinect", "depth_noise gaussian"), "kinect or none"),
             (good.replace("width_px 4", "width_px -4"), "width_px"),
             (good.replace("fy_px 4", "fy_px NaN"), "fy_px"),
             (format!("{good}fx_px 5\n"), "twice"),

@@ -7,7 +7,7 @@
 //! ```text
 //! header (96 bytes, little-endian)
 //!    0  magic  "WFMAP\r\n\x1a"
-//!    8  version u32 (2; 1 still read)  12  header bytes u32 (96)
+//!    8  version u32 (3; 1, 2 still read)  12  header bytes u32 (96)
 //!   16  kind u32 (0 dense, 1 sparse)   20  flags u32 (bit 0: colour)
 //!   24  block edge, voxels u32 (8)     28  voxel size, m f32     32  truncation, m f32
 //!   36  max weight u32                 40  box dims, voxels [u32; 3]
@@ -15,8 +15,10 @@
 //!   64  frame u32 (0: the first camera of a tracked run, 1: the given poses' frame)
 //!   68  creation-parameters bytes u32 (a JSON object after the header)
 //!   72  up, a unit vector in the map's frame [f32; 3] (version 2; all 0: not known)
-//!   84  reserved [u32; 2] (0)          92  CRC-32 of bytes 0..92
-//! (version 1 had reserved [u32; 5] at 72: read as "up not known")
+//!   84  noise band, σ of the Kinect model f32 (version 3; TsdfConfig::noise_band_sigmas)
+//!   88  reserved u32 (0)               92  CRC-32 of bytes 0..92
+//! (version 1 had reserved [u32; 5] at 72: read as "up not known"; versions 1 and 2 had
+//! reserved words at 84: read as a noise band of 0, μ at every depth, as they were fused)
 //! creation parameters: JSON, then its CRC-32 (u32)
 //! block record, one per block, in key order (z, then y, then x):
 //!    0  magic "WFBK"   4  block coordinates [u32; 3]
@@ -42,8 +44,9 @@ use crate::{Error, Result};
 const MAGIC: &[u8; 8] = b"WFMAP\r\n\x1a";
 const BLOCK_MAGIC: &[u8; 4] = b"WFBK";
 const FOOTER_MAGIC: &[u8; 8] = b"WFMEND\0\0";
-/// The version this code writes (it reads this one and version 1, which had no up direction).
-pub const MAP_FILE_VERSION: u32 = 2;
+/// The version this code writes (it reads this one, version 2, which fused with μ at every
+/// depth, and version 1, which also had no up direction).
+pub const MAP_FILE_VERSION: u32 = 3;
 const HEADER_BYTES: usize = 96;
 const FOOTER_BYTES: usize = 24;
 /// Largest creation-parameters block a reader accepts.
@@ -69,6 +72,10 @@ pub struct MapFileHeader {
     pub voxel_size_m: f32,
     /// Truncation distance μ, metres.
     pub truncation_m: f32,
+    /// Standard deviations of the Kinect model a sample's truncation band spans where wider
+    /// than μ (`TsdfConfig::noise_band_sigmas`; 0: μ at every depth, and every map of
+    /// versions 1 and 2): how the stored TSDF values are scaled, so fusing more keeps it.
+    pub noise_band_sigmas: f32,
     /// Cap of the integration weight.
     pub max_weight: u32,
     /// Voxels along x, y, z of the map's box (a sparse map's addressable range).
@@ -173,7 +180,8 @@ pub fn write_map_file(path: &Path, header: &MapFileHeader, blocks: &[MapBlock]) 
     for u in header.up_in_map.unwrap_or([0.0; 3]) {
         h.extend_from_slice(&u.to_le_bytes());
     }
-    h.extend_from_slice(&[0u8; 8]);
+    h.extend_from_slice(&header.noise_band_sigmas.to_le_bytes());
+    h.extend_from_slice(&[0u8; 4]);
     let crc = crc32fast::hash(&h);
     h.extend_from_slice(&crc.to_le_bytes());
     debug_assert_eq!(h.len(), HEADER_BYTES, "the header layout in the module doc");
@@ -242,8 +250,13 @@ fn parse_map_file(bytes: &[u8], path: &Path) -> Result<MapFile> {
     if crc32fast::hash(&bytes[..92]) != u32_at(92) {
         return Err(bad("the header fails its CRC check".into()));
     }
-    // Version 1 reserved the words from 72 on; version 2 keeps the up direction there.
-    let reserved_from = if version == 1 { 72 } else { 84 };
+    // Version 1 reserved the words from 72 on; version 2 keeps the up direction there, version 3
+    // also the noise band at 84.
+    let reserved_from = match version {
+        1 => 72,
+        2 => 84,
+        _ => 88,
+    };
     if u32_at(12) as usize != HEADER_BYTES || u32_at(24) != 8 || (reserved_from..92).step_by(4).any(|at| u32_at(at) != 0) {
         return Err(bad("the header's sizes or reserved words are not this version's".into()));
     }
@@ -271,6 +284,10 @@ fn parse_map_file(bytes: &[u8], path: &Path) -> Result<MapFile> {
         1 => MapFrame::GivenPoses,
         f => return Err(bad(format!("unknown frame {f}"))),
     };
+    let noise_band_sigmas = if version >= 3 { f32_at(84) } else { 0.0 };
+    if !(noise_band_sigmas >= 0.0 && noise_band_sigmas.is_finite()) {
+        return Err(bad(format!("noise band of {noise_band_sigmas} standard deviations")));
+    }
     let (voxel_size_m, truncation_m) = (f32_at(28), f32_at(32));
     if !(voxel_size_m > 0.0 && voxel_size_m.is_finite() && truncation_m > 0.0 && truncation_m.is_finite()) {
         return Err(bad(format!("voxel size {voxel_size_m} m, truncation {truncation_m} m")));
@@ -289,6 +306,7 @@ fn parse_map_file(bytes: &[u8], path: &Path) -> Result<MapFile> {
         color: flags & 1 != 0,
         voxel_size_m,
         truncation_m,
+        noise_band_sigmas,
         max_weight: u32_at(36),
         dims_voxels: [u32_at(40), u32_at(44), u32_at(48)],
         origin_in_world: [f32_at(52), f32_at(56), f32_at(60)],
@@ -345,7 +363,7 @@ mod tests {
     use super::*;
 
     fn header(color: bool) -> MapFileHeader {
-        MapFileHeader { kind: MapKind::Sparse, color, voxel_size_m: 0.01, truncation_m: 0.04, max_weight: 128, dims_voxels: [16384, 16384, 8184], origin_in_world: [-81.92, -81.92, -40.92], frame: MapFrame::GivenPoses, up_in_map: color.then_some([0.0, 0.6, 0.8]), creation: r#"{"source":"test","frames":3}"#.to_owned() }
+        MapFileHeader { kind: MapKind::Sparse, color, voxel_size_m: 0.01, truncation_m: 0.04, noise_band_sigmas: 3.0, max_weight: 128, dims_voxels: [16384, 16384, 8184], origin_in_world: [-81.92, -81.92, -40.92], frame: MapFrame::GivenPoses, up_in_map: color.then_some([0.0, 0.6, 0.8]), creation: r#"{"source":"test","frames":3}"#.to_owned() }
     }
 
     fn blocks(color: bool) -> Vec<MapBlock> {
@@ -388,11 +406,12 @@ mod tests {
         let path = scratch("v1");
         write_map_file(&path, &header(true), &blocks(true)).expect("write");
         let mut v1 = std::fs::read(&path).expect("bytes");
-        // What version 1 wrote: the version word 1 and zeros where version 2 keeps the up.
+        // What version 1 wrote: the version word 1 and zeros where versions 2 and 3 keep the up
+        // and the noise band.
         v1[8] = 1;
-        v1[72..84].fill(0);
+        v1[72..88].fill(0);
         let file = parse_map_file(&with_header_crc(v1.clone()), &path).expect("version 1 reads");
-        assert_eq!(file.header, MapFileHeader { up_in_map: None, ..header(true) });
+        assert_eq!(file.header, MapFileHeader { up_in_map: None, noise_band_sigmas: 0.0, ..header(true) });
         assert_eq!(file.blocks.len(), 20);
         // Version 1's reserved words include 72..84: an up there is not version 1's.
         let mut v1_up = v1;
@@ -400,8 +419,36 @@ mod tests {
         assert!(parse_map_file(&with_header_crc(v1_up), &path).is_err_and(|e| e.to_string().contains("reserved")));
         // Negative control: the same up in a version 2 header is read.
         let mut v2 = std::fs::read(&path).expect("bytes");
+        v2[8] = 2;
         v2[72..84].copy_from_slice(bytemuck::cast_slice(&[0.0f32, 0.0, 1.0]));
-        assert_eq!(parse_map_file(&with_header_crc(v2), &path).expect("version 2").header.up_in_map, Some([0.0, 0.0, 1.0]));
+        v2[84..88].fill(0);
+        let file = parse_map_file(&with_header_crc(v2.clone()), &path).expect("version 2");
+        assert_eq!((file.header.up_in_map, file.header.noise_band_sigmas), (Some([0.0, 0.0, 1.0]), 0.0));
+    }
+
+    #[test]
+    fn the_noise_band_is_read_from_version_3_and_is_0_before() {
+        let path = scratch("noise");
+        write_map_file(&path, &header(true), &blocks(true)).expect("write");
+        let v3 = std::fs::read(&path).expect("bytes");
+        assert_eq!(parse_map_file(&v3, &path).expect("version 3").header.noise_band_sigmas, 3.0);
+        // Version 2 fused with μ at every depth and reserved the word: a band there is not
+        // version 2's.
+        let mut v2 = v3.clone();
+        v2[8] = 2;
+        assert!(parse_map_file(&with_header_crc(v2.clone()), &path).is_err_and(|e| e.to_string().contains("reserved")));
+        v2[84..88].fill(0);
+        assert_eq!(parse_map_file(&with_header_crc(v2), &path).expect("version 2").header.noise_band_sigmas, 0.0);
+        // A negative or non-finite band is named.
+        for bad in [-1.0f32, f32::NAN, f32::INFINITY] {
+            let mut b = v3.clone();
+            b[84..88].copy_from_slice(&bad.to_le_bytes());
+            assert!(parse_map_file(&with_header_crc(b), &path).is_err_and(|e| e.to_string().contains("noise band")), "{bad}");
+        }
+        // The word after it stays reserved.
+        let mut r = v3;
+        r[88] = 1;
+        assert!(parse_map_file(&with_header_crc(r), &path).is_err_and(|e| e.to_string().contains("reserved")));
     }
 
     #[test]
@@ -461,8 +508,8 @@ mod tests {
         assert!(parse_map_file(&bad, &path).is_err_and(|e| e.to_string().contains("CRC")));
         assert!(parse_map_file(b"PLY\nformat binary_little_endian 1.0\n.........................................................................................", &path).is_err_and(|e| e.to_string().contains("magic")));
         let mut newer = bytes.clone();
-        newer[8] = 3;
-        assert!(parse_map_file(&with_header_crc(newer), &path).is_err_and(|e| e.to_string().contains("version 3")));
+        newer[8] = 4;
+        assert!(parse_map_file(&with_header_crc(newer), &path).is_err_and(|e| e.to_string().contains("version 4")));
         // An up direction that is not a unit vector (a foreign writer's, or 0 in one word only).
         let mut skew = bytes.clone();
         skew[72..76].copy_from_slice(&2.0f32.to_le_bytes());

@@ -527,7 +527,7 @@ pub async fn mesh_of_blocks(gpu: &Gpu, config: &TsdfConfig, origin_in_world: [f3
 /// it was saved. What a virtual sensor renders from. A sparse map larger than one binding is
 /// [`Error::InvalidConfig`] naming the sizes.
 pub fn resident_map(gpu: &Gpu, header: &file::MapFileHeader, blocks: &[MapBlock]) -> Result<Map> {
-    let base = TsdfConfig { voxel_size_m: header.voxel_size_m, truncation_m: header.truncation_m, max_weight: header.max_weight, color: header.color, swap: false, ..TsdfConfig::default() };
+    let base = TsdfConfig { voxel_size_m: header.voxel_size_m, truncation_m: header.truncation_m, noise_band_sigmas: header.noise_band_sigmas, max_weight: header.max_weight, color: header.color, swap: false, ..TsdfConfig::default() };
     match header.kind {
         MapKind::Dense => {
             let config = TsdfConfig { kind: MapKind::Dense, dims_voxels: header.dims_voxels, ..base };

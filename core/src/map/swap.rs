@@ -74,8 +74,8 @@ pub struct RegionMargin {
 
 impl SwapConfig {
     /// Regions for a camera with intrinsics `k` whose depth stops at `max_depth_m`, fusing with
-    /// truncation `truncation_m`. The camera sees a cone of half-angle θ (the image's half
-    /// diagonal) up to `max_depth_m` / cos θ + μ from its centre (depth is measured along the
+    /// truncation band `truncation_m` there. The camera sees a cone of half-angle θ (the image's
+    /// half diagonal) up to `max_depth_m` / cos θ + the band from its centre (depth is measured along the
     /// axis: a corner ray's samples lie farther away). The fetch region widens it by 15° and
     /// 0.5 m and always holds the 1 m around the camera: a hand-held or robot camera at 30 Hz
     /// moves a few cm and turns a few degrees per frame, so blocks come back many frames before

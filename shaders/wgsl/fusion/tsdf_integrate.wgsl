@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: MIT
 //! Each invocation walks one voxel column (x, y) along z (as KinectFusion does: one thread per
 //! column keeps the workgroup count small), only over the stretch of the column inside the
-//! camera's frustum (the half-lines 0 < z_cam <= `max_depth_m` + μ and pixel bounds, solved in
-//! closed form per column, one voxel of margin each side), and updates each voxel with
+//! camera's frustum (the half-lines 0 < z_cam <= `max_depth_m` + b, b the truncation band
+//! there, and pixel bounds, solved in closed form per column, one voxel of margin each side), and updates each voxel with
 //! `integrate_voxel` (shared/tsdf_update.wgsl: projective TSDF running average, colour, and the
 //! brick mark in `surface_bricks` for the raycast's empty-space skipping). The dense map only;
 //! the sparse one integrates with `block_integrate`. Nothing is fused when the pose is inactive
@@ -16,7 +16,7 @@ struct TsdfIntegrateParams {
     intrinsics: Intrinsics,
     // 1 to fuse colour as well.
     color_enabled: u32,
-    // Farthest valid depth, metres: voxels beyond it plus μ cannot be updated.
+    // Farthest valid depth, metres: voxels beyond it plus its truncation band cannot be updated.
     max_depth_m: f32,
     _pad0: u32,
     _pad1: u32,
@@ -73,7 +73,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let c = pose.camera_from_world;
     let a = (c * vec4<f32>(voxel_centre_in_world(d, gid.x, gid.y, 0u), 1.0)).xyz;
     let b = (c * vec4<f32>(0.0, 0.0, d.voxel_size_m, 0.0)).xyz;
-    let range = frustum_interval(a, b, params.max_depth_m + d.truncation_m);
+    let range = frustum_interval(a, b, params.max_depth_m + truncation_band_m(d, params.max_depth_m));
     if !(range.x <= range.y) || range.y < -1.0 || range.x > f32(d.dim_z) {
         return;
     }

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: MIT
 //! Each invocation allocates, in a sparse map, the blocks that one depth pixel's truncation band
 //! passes through (voxel-block hashing's allocation, Nießner et al. 2013 §4.1): the segment of
-//! the pixel's ray between camera depths z - μ and z + μ (z the measured depth; every voxel the
-//! integration can bring below a TSDF of 1 lies on such a segment) is walked block by block
+//! the pixel's ray between camera depths z - b and z + b (z the measured depth, b its truncation
+//! band, truncation_band_m; every voxel the integration can bring below a TSDF of 1 lies on such
+//! a segment) is walked block by block
 //! (a 3D DDA, Amanatides & Woo 1987: every block the segment passes through, in order), and each
 //! block is inserted into the hash table unless it is there already. Insertion claims an empty slot with a compare-exchange on its key (integer atomics
 //! only), probing linearly from the block's hash; `block_assign` then gives new keys their pool
@@ -34,9 +35,10 @@ struct BlockAllocParams {
 // The map's counters (map.wgsl).
 @group(0) @binding(4) var<storage, read_write> map_counters: array<atomic<u32>>;
 
-// Most blocks one pixel's band may visit: a band of 2μ crosses at most 3 (2μ / block + 1)
-// blocks along its path, and μ is at most a block (TsdfConfig::validate).
-const MAP_MAX_BAND_BLOCKS: u32 = 16u;
+// Most blocks one pixel's band may visit: a band of 2b (b at most MAX_BAND_VOXELS, 4 blocks) is
+// L = 8 |ray| blocks long (10 at a Kinect's corners, 16 for a 120° field of view), and a walk
+// along a segment L blocks long visits at most √3 L + 3 blocks: 21, and 31.
+const MAP_MAX_BAND_BLOCKS: u32 = 32u;
 
 // Inserts the key of block `b` unless it is present.
 fn insert_block(d: VolumeDesc, b: vec3<u32>) {
@@ -79,9 +81,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let d = params.volume;
     let ray = back_project(k, f32(gid.x), f32(gid.y), 1.0);
     let origin = vec3<f32>(d.origin_x_m, d.origin_y_m, d.origin_z_m);
-    // The band's ends in voxel units of the box.
-    let near = (pose.world_from_camera * vec4<f32>(ray * max(z - d.truncation_m, 0.0), 1.0)).xyz;
-    let far = (pose.world_from_camera * vec4<f32>(ray * (z + d.truncation_m), 1.0)).xyz;
+    // The band's ends in the world.
+    let band = truncation_band_m(d, z);
+    let near = (pose.world_from_camera * vec4<f32>(ray * max(z - band, 0.0), 1.0)).xyz;
+    let far = (pose.world_from_camera * vec4<f32>(ray * (z + band), 1.0)).xyz;
     // The band's ends in block units relative to the anchor's block (small numbers near the
     // camera: the walk keeps f32's precision), the anchor's block added to each cell visited.
     let block_m = f32(1u << BRICK_SHIFT) * d.voxel_size_m;

@@ -4,8 +4,8 @@
 //! appends it to `visible_blocks` (atomicAdd on MAP_COUNTER_VISIBLE; the list has a slot for
 //! every pool block, so it cannot overflow) when integration may change one of its voxels: the
 //! block's box, bounded by its 8 corners in the camera frame, reaches in front of the camera,
-//! not beyond `max_depth_m` + μ, and its projection (the bounding rectangle of the corners'
-//! projections, widened by half a pixel for the nearest-pixel rounding) meets the image. A box
+//! not beyond `max_depth_m` + the truncation band there, and its projection (the bounding
+//! rectangle of the corners' projections, widened by half a pixel for the nearest-pixel rounding) meets the image. A box
 //! that straddles the camera plane counts as visible. The visible list's order depends on the
 //! order invocations run; its set does not. Nothing is listed when the pose is disabled.
 #import camera
@@ -65,7 +65,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             uv_max = max(uv_max, uv);
         }
     }
-    if z_far <= 0.0 || z_near > params.max_depth_m + d.truncation_m {
+    if z_far <= 0.0 || z_near > params.max_depth_m + truncation_band_m(d, params.max_depth_m) {
         return;
     }
     if z_near > 0.0 {

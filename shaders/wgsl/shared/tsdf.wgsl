@@ -1,10 +1,13 @@
 // SPDX-License-Identifier: MIT
 // TSDF voxels (000-digest §1.3.2) of a box of `dim_x * dim_y * dim_z` voxels, one u32 each
-// packing a signed-normalised 16-bit TSDF in [-1, 1] (units of the truncation distance; low half,
-// two's complement) and a 16-bit integration weight (high half; 0 = never observed). A dense map
-// stores them all, x fastest (voxel_index); a sparse one only its allocated blocks (map.wgsl). Voxel
-// (x, y, z) has its centre at origin + (x + 0.5, y + 0.5, z + 0.5) * voxel_size, in world metres.
+// packing a signed-normalised 16-bit TSDF in [-1, 1] (units of the truncation band of the
+// samples averaged into it, truncation_band_m: μ, wider for noisy far samples, so |tsdf| μ never
+// exceeds the distance to the surface; low half, two's complement) and a 16-bit integration
+// weight (high half; 0 = never observed). A dense map stores them all, x fastest (voxel_index); a
+// sparse one only its allocated blocks (map.wgsl). Voxel (x, y, z) has its centre at
+// origin + (x + 0.5, y + 0.5, z + 0.5) * voxel_size, in world metres.
 // Mirrors `VolumeDesc` in core/src/tsdf.rs and the helpers in core/src/cpu/shared.rs.
+#import kinect
 
 struct VolumeDesc {
     // Voxels along x.
@@ -34,9 +37,30 @@ struct VolumeDesc {
     hash_slots: u32,
     // Sparse: blocks in the voxel pool; dense: 0.
     pool_blocks: u32,
+    // How many standard deviations of the Kinect noise model a sample's truncation band spans
+    // where that is wider than μ (truncation_band_m); 0: μ at every depth.
+    noise_band_sigmas: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 const TSDF_SCALE: f32 = 32767.0;
+
+// Widest truncation band, voxels: 4 sparse blocks, so a pixel's band crosses a bounded number
+// of blocks (block_alloc's MAP_MAX_BAND_BLOCKS). 3σ of the Kinect model reaches it at 6.3 m with
+// 1.17 cm voxels, at 4.3 m with 5 mm voxels.
+const MAX_BAND_VOXELS: f32 = 32.0;
+
+// The truncation band of a depth sample measured at `depth_m` metres: μ, widened where the
+// sensor's noise is larger to `noise_band_sigmas` standard deviations of the Kinect model
+// (kinect.wgsl), at most MAX_BAND_VOXELS. A band narrower than the noise biases the fused
+// surface away from the camera (samples in front are clamped to +1, those behind beyond the
+// band dropped: 13 mm at 5 m for μ = 4.7 cm); at 3σ both tails hold 0.3 % of the samples.
+fn truncation_band_m(d: VolumeDesc, depth_m: f32) -> f32 {
+    let noise_m = d.noise_band_sigmas * kinect_sigma_m(depth_m);
+    return max(d.truncation_m, min(noise_m, MAX_BAND_VOXELS * d.voxel_size_m));
+}
 
 // A voxel whose TSDF is at least this close to +1 (truncation units) is far from any surface:
 // at least μ - ½√3 voxel in front of one.

@@ -12,8 +12,9 @@
 // Updates the voxel centred at `p_world`, stored at `ix` in `tsdf_volume` (and `color_volume`),
 // whose brick word is `brick`: projects the centre into the depth image (nearest pixel), takes
 // the signed distance along the optical axis sdf = depth - z (positive in front of the
-// surface), skips it outside the image, without depth, or more than μ behind the surface, and
-// folds min(1, sdf / μ) into the running weighted average, weight capped at `max_weight`. With
+// surface), skips it outside the image, without depth, or more than the depth's truncation band
+// b (truncation_band_m: μ, or wider where the sensor is noisier) behind the surface, and folds
+// min(1, sdf / b) into the running weighted average, weight capped at `max_weight`. With
 // colour on, voxels within the truncation band also average the pixel's colour with the same
 // weights. A voxel left with a TSDF below FAR_TSDF marks its brick.
 fn integrate_voxel(d: VolumeDesc, p_world: vec3<f32>, ix: u32, brick: u32) {
@@ -33,10 +34,11 @@ fn integrate_voxel(d: VolumeDesc, p_world: vec3<f32>, ix: u32, brick: u32) {
         return;
     }
     let sdf = depth - p_cam.z;
-    if sdf < -d.truncation_m {
+    let band = truncation_band_m(d, depth);
+    if sdf < -band {
         return;
     }
-    let tsdf = min(1.0, sdf / d.truncation_m);
+    let tsdf = min(1.0, sdf / band);
     let word = tsdf_volume[ix];
     let w = voxel_weight(word);
     let updated = (voxel_tsdf(word) * f32(w) + tsdf) / f32(w + 1u);

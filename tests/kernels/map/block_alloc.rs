@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 //! `block_alloc`: on a real Kinect frame at two poses, the GPU inserts exactly the block keys
 //! the CPU twin does (compared as sets: the slots depend on invocation order), each once, every
-//! key findable by the lookup the reading kernels use; every voxel the integration can bring
+//! key findable by the lookup the reading kernels use, also for bands widened by the noise model
+//! up to their 32-voxel cap; every voxel the integration can bring
 //! below a TSDF of 1 lies in an allocated block; a table too small for the frame fills up and
 //! counts the refused insertions without losing or duplicating a key; a disabled pose inserts
 //! nothing.
@@ -77,37 +78,67 @@ fn the_gpu_inserts_the_twins_keys_each_once() {
 }
 
 #[test]
-fn every_voxel_the_band_can_reach_has_a_block() {
-    use webfusion_core::cpu::shared::{BRICK_SHIFT, block_key, is_valid_f32, transform_point, voxel_centre_in_world};
-    let desc = sparse_desc(POOL_BLOCKS);
+fn the_gpu_walks_bands_wider_than_mu_as_the_twin_does() {
+    // 8σ of the Kinect model: bands up to 32 voxels (4 blocks) either side on the far wall.
+    let desc = webfusion_core::tsdf::VolumeDesc { noise_band_sigmas: 8.0, ..sparse_desc(POOL_BLOCKS) };
     let (k, depth) = frame();
-    let (mut table, mut counters) = empty_table(&desc);
-    let pose = camera_pose(&poses()[1]);
-    cpu::block_alloc(&alloc_params(desc, k), &pose, depth, &mut table, &mut counters);
-    let allocated = keys(&table);
-    // Every voxel centre near the middle of a pixel ray's band (|sdf| <= μ / 2 along the ray
-    // through that pixel's centre) must lie in an allocated block: sample each pixel's band
-    // densely and look its blocks up.
-    let mu = desc.truncation_m;
-    let mut checked = 0;
-    for v in (0..k.height_px).step_by(7) {
-        for u in (0..k.width_px).step_by(7) {
-            let z = depth[(v * k.width_px + u) as usize];
-            if !is_valid_f32(z) {
-                continue;
-            }
-            for step in -8..=8 {
-                let zs = z + mu * 0.5 * step as f32 / 8.0;
-                let p_cam = [(u as f32 - k.cx_px) * zs / k.fx_px, (v as f32 - k.cy_px) * zs / k.fy_px, zs];
-                let p = transform_point(&pose.world_from_camera, p_cam);
-                let origin = voxel_centre_in_world(&desc, 0, 0, 0).map(|c| c - 0.5 * desc.voxel_size_m);
-                let g: [u32; 3] = std::array::from_fn(|i| ((p[i] - origin[i]) / desc.voxel_size_m) as u32);
-                assert!(allocated.contains(&block_key(g.map(|c| c >> BRICK_SHIFT))), "pixel ({u}, {v}) at {zs} m: its block was not allocated");
-                checked += 1;
+    let (mut g_table, mut g_counters) = empty_table(&desc);
+    let (mut c_table, mut c_counters) = empty_table(&desc);
+    for (i, pose) in poses().iter().enumerate() {
+        let p = alloc_params(desc, k);
+        (g_table, g_counters) = run(&p, &camera_pose(pose), depth, &g_table, &g_counters);
+        cpu::block_alloc(&p, &camera_pose(pose), depth, &mut c_table, &mut c_counters);
+        let n = same_keys(&g_table, &c_table).unwrap_or_else(|e| panic!("pose {i}: {e}"));
+        let default_n = {
+            let (mut t, mut c) = empty_table(&sparse_desc(POOL_BLOCKS));
+            cpu::block_alloc(&alloc_params(sparse_desc(POOL_BLOCKS), k), &camera_pose(pose), depth, &mut t, &mut c);
+            keys(&t).len()
+        };
+        eprintln!("pose {i}: {n} blocks with the 8σ band, {default_n} with the default");
+        assert!(n > default_n, "the wider band allocates more blocks ({n} vs {default_n})");
+        assert_eq!((g_counters[MAP_COUNTER_HASH_FULL], g_counters[MAP_COUNTER_OUT_OF_RANGE]), (0, 0), "room in the table, the frame in the box");
+    }
+}
+
+#[test]
+fn every_voxel_the_band_can_reach_has_a_block() {
+    use webfusion_core::cpu::shared::{BRICK_SHIFT, block_key, is_valid_f32, transform_point, truncation_band_m, voxel_centre_in_world};
+    // The default band (μ = 8 cm here, widened to 3σ of the Kinect model beyond 4.2 m) and one
+    // of 8σ, wider than μ beyond 2.6 m (this desk frame's far wall).
+    for sigmas in [webfusion_core::tsdf::DEFAULT_NOISE_BAND_SIGMAS, 8.0] {
+        let desc = webfusion_core::tsdf::VolumeDesc { noise_band_sigmas: sigmas, ..sparse_desc(POOL_BLOCKS) };
+        let (k, depth) = frame();
+        let (mut table, mut counters) = empty_table(&desc);
+        let pose = camera_pose(&poses()[1]);
+        cpu::block_alloc(&alloc_params(desc, k), &pose, depth, &mut table, &mut counters);
+        let allocated = keys(&table);
+        // Every voxel centre in a pixel ray's band (|sdf| <= 0.95 b along the ray through that
+        // pixel's centre, b the band at its depth) must lie in an allocated block: sample each
+        // pixel's band densely and look its blocks up.
+        let (mut checked, mut widened) = (0, 0);
+        for v in (0..k.height_px).step_by(7) {
+            for u in (0..k.width_px).step_by(7) {
+                let z = depth[(v * k.width_px + u) as usize];
+                if !is_valid_f32(z) {
+                    continue;
+                }
+                let band_m = truncation_band_m(&desc, z);
+                widened += usize::from(band_m > desc.truncation_m);
+                for step in -16..=16 {
+                    let zs = z + band_m * 0.95 * step as f32 / 16.0;
+                    let p_cam = [(u as f32 - k.cx_px) * zs / k.fx_px, (v as f32 - k.cy_px) * zs / k.fy_px, zs];
+                    let p = transform_point(&pose.world_from_camera, p_cam);
+                    let origin = voxel_centre_in_world(&desc, 0, 0, 0).map(|c| c - 0.5 * desc.voxel_size_m);
+                    let g: [u32; 3] = std::array::from_fn(|i| ((p[i] - origin[i]) / desc.voxel_size_m) as u32);
+                    assert!(allocated.contains(&block_key(g.map(|c| c >> BRICK_SHIFT))), "band of {sigmas} σ: pixel ({u}, {v}) at {zs} m: its block was not allocated");
+                    checked += 1;
+                }
             }
         }
+        eprintln!("band of {sigmas} σ: {} blocks, {checked} band points checked, {widened} pixels with a band wider than μ", allocated.len());
+        assert!(checked > 100_000, "band points checked ({checked})");
+        assert!(sigmas < 8.0 || widened > 20, "the 8σ band is wider than μ at the far wall's pixels ({widened})");
     }
-    assert!(checked > 50_000, "band points checked ({checked})");
 }
 
 #[test]

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/fusion/tsdf_integrate.wgsl`.
 
-use crate::cpu::shared::{FAR_TSDF, brick_index, is_valid_f32, pack_rgb8, pack_voxel, transform_point, transform_vector, unpack_rgb8, voxel_centre_in_world, voxel_index, voxel_tsdf, voxel_weight};
+use crate::cpu::shared::{FAR_TSDF, brick_index, is_valid_f32, pack_rgb8, pack_voxel, transform_point, transform_vector, truncation_band_m, unpack_rgb8, voxel_centre_in_world, voxel_index, voxel_tsdf, voxel_weight};
 use crate::kernels::GpuIntrinsics;
 use crate::kernels::tsdf_integrate::{CameraPose, TsdfIntegrateParams};
 use crate::tsdf::VolumeDesc;
@@ -42,7 +42,7 @@ pub fn tsdf_integrate(params: &TsdfIntegrateParams, pose: &CameraPose, depth_m: 
         for gx in 0..d.dim_x {
             let a = transform_point(&pose.camera_from_world, voxel_centre_in_world(d, gx, gy, 0));
             let b = transform_vector(&pose.camera_from_world, [0.0, 0.0, d.voxel_size_m]);
-            let range = frustum_interval(params, a, b, params.max_depth_m + d.truncation_m);
+            let range = frustum_interval(params, a, b, params.max_depth_m + truncation_band_m(d, params.max_depth_m));
             if !(range[0] <= range[1]) || range[1] < -1.0 || range[0] > d.dim_z as f32 {
                 continue;
             }
@@ -74,10 +74,11 @@ pub fn integrate_voxel(k: &GpuIntrinsics, color_enabled: u32, d: &VolumeDesc, po
         return;
     }
     let sdf = depth - p_cam[2];
-    if sdf < -d.truncation_m {
+    let band = truncation_band_m(d, depth);
+    if sdf < -band {
         return;
     }
-    let tsdf = (sdf / d.truncation_m).min(1.0);
+    let tsdf = (sdf / band).min(1.0);
     let ix = ix as usize;
     let word = tsdf_volume[ix];
     let w = voxel_weight(word);

@@ -2,12 +2,12 @@
 //! CPU reference of `shaders/wgsl/map/block_alloc.wgsl`. Pixels run one after another, so the
 //! table's layout is one of the layouts the GPU may produce; compare tables by key set.
 
-use crate::cpu::shared::{BRICK_SHIFT, MAP_COUNTER_HASH_FULL, MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_SWAPPED_HITS, SWAPPED_BLOCK, back_project, block_key, is_valid_f32, probe_slot, transform_point, voxel_anchor};
+use crate::cpu::shared::{BRICK_SHIFT, MAP_COUNTER_HASH_FULL, MAP_COUNTER_OUT_OF_RANGE, MAP_COUNTER_SWAPPED_HITS, SWAPPED_BLOCK, back_project, block_key, is_valid_f32, probe_slot, transform_point, truncation_band_m, voxel_anchor};
 use crate::kernels::block_alloc::{BlockAllocParams, CameraPose};
 use crate::tsdf::VolumeDesc;
 
 /// Twin of `MAP_MAX_BAND_BLOCKS`.
-pub const MAP_MAX_BAND_BLOCKS: u32 = 16;
+pub const MAP_MAX_BAND_BLOCKS: u32 = 32;
 
 /// WGSL `sign`: -1, 0 or 1.
 fn wgsl_sign(x: f32) -> f32 {
@@ -48,8 +48,9 @@ pub fn block_alloc(params: &BlockAllocParams, pose: &CameraPose, depth_m: &[f32]
             }
             let ray = back_project(k, gx as f32, gy as f32, 1.0);
             let origin = [d.origin_x_m, d.origin_y_m, d.origin_z_m];
-            let near = transform_point(&pose.world_from_camera, ray.map(|c| c * (z - d.truncation_m).max(0.0)));
-            let far = transform_point(&pose.world_from_camera, ray.map(|c| c * (z + d.truncation_m)));
+            let band = truncation_band_m(d, z);
+            let near = transform_point(&pose.world_from_camera, ray.map(|c| c * (z - band).max(0.0)));
+            let far = transform_point(&pose.world_from_camera, ray.map(|c| c * (z + band)));
             let block_m = (1u32 << BRICK_SHIFT) as f32 * d.voxel_size_m;
             let anchor_block = voxel_anchor(d).map(|v| (v >> BRICK_SHIFT) as f32);
             let a: [f32; 3] = std::array::from_fn(|i| (near[i] - origin[i]) / block_m);

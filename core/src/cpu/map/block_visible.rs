@@ -2,7 +2,7 @@
 //! CPU reference of `shaders/wgsl/map/block_visible.wgsl`. Blocks are listed in pool order; the
 //! GPU lists them in any order: compare as sets.
 
-use crate::cpu::shared::{BRICK_SHIFT, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_VISIBLE, block_of_key, transform_point, voxel_anchor};
+use crate::cpu::shared::{BRICK_SHIFT, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_VISIBLE, block_of_key, transform_point, truncation_band_m, voxel_anchor};
 use crate::kernels::block_visible::{BlockVisibleParams, CameraPose};
 
 /// Twin of one invocation: whether pool block `block` (at `key`) may take an update.
@@ -29,7 +29,7 @@ pub fn block_is_visible(params: &BlockVisibleParams, pose: &CameraPose, key: u32
             }
         }
     }
-    if z_far <= 0.0 || z_near > params.max_depth_m + d.truncation_m {
+    if z_far <= 0.0 || z_near > params.max_depth_m + truncation_band_m(d, params.max_depth_m) {
         return false;
     }
     if z_near > 0.0 {
