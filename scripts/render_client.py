@@ -18,7 +18,9 @@ map's colour as an 8-bit PNG with `--color`) and prints one JSON line per view:
 
 A pose is `tx,ty,tz,qx,qy,qz,qw`: the camera's pose in the map's frame (world_from_camera;
 camera x right, y down, z forward), metres, the TUM convention. The wire format is the
-`RenderRequest` / `RenderReply` messages of `core/src/protocol.rs` (protocol version 2).
+`RenderRequest` / `RenderReply` messages of `core/src/protocol.rs` (protocol version 3).
+With `--unknown` (a server started with `--occupancy G.json`) each view also says which
+pixels looked through never-observed space (unknown_NNNNNN.png: 255 marked, 0 not).
 """
 
 import argparse
@@ -34,7 +36,7 @@ import zlib
 from array import array
 from urllib.parse import urlsplit
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 KIND_HELLO, KIND_FRAME, KIND_STATUS, KIND_ERROR, KIND_RENDER_REPLY = 1, 2, 3, 4, 5
 KIND_RENDER_REQUEST = 17
 FAILURES = {1: "no map", 2: "invalid request", 3: "render failed"}
@@ -55,13 +57,15 @@ class ServerClosed(Exception):
 
 
 class View:
-    """A rendered view: depth in raw units (0: no return), optionally the map's colour."""
+    """A rendered view: depth in raw units (0: no return), optionally the map's colour and
+    the unknown mask."""
 
-    def __init__(self, request_id, width, height, units_per_metre, radial, depth_le, rgb):
+    def __init__(self, request_id, width, height, units_per_metre, radial, depth_le, rgb, unknown=None):
         self.request_id, self.width, self.height = request_id, width, height
         self.units_per_metre, self.radial = units_per_metre, radial
         self.depth_le = depth_le  # row-major u16 little-endian, as on the wire
         self.rgb = rgb  # packed RGB8 or None
+        self.unknown = unknown  # a byte per pixel, 255: the ray crossed never-observed space; or None
         self.depth = array("H")
         self.depth.frombytes(depth_le)
         if sys.byteorder == "big":
@@ -90,6 +94,7 @@ class View:
             "max_m": max(valid) * scale if valid else None,
             "mean_m": sum(valid) * scale / len(valid) if valid else None,
             "depth_sha256": hashlib.sha256(self.depth_le).hexdigest(),
+            "unknown_pixels": None if self.unknown is None else sum(1 for m in self.unknown if m),
         }
 
 
@@ -195,8 +200,9 @@ class WebSocket:
         self.sock.close()
 
 
-def encode_request(request_id, pose, intrinsics, size, units_per_metre=5000.0, radial=False, color=False, depth_range_m=None, noise=None):
-    """A RenderRequest message. `noise`: None or (seed, frame_index) for the Kinect model."""
+def encode_request(request_id, pose, intrinsics, size, units_per_metre=5000.0, radial=False, color=False, depth_range_m=None, noise=None, unknown=False):
+    """A RenderRequest message. `noise`: None or (seed, frame_index) for the Kinect model;
+    `unknown`: also ask for the unknown mask."""
     tx, ty, tz, qx, qy, qz, qw = (float(v) for v in pose)
     fx, fy, cx, cy = (float(v) for v in intrinsics)
     width, height = size
@@ -205,6 +211,7 @@ def encode_request(request_id, pose, intrinsics, size, units_per_metre=5000.0, r
     out += bytes([int(radial), int(color), 0])  # depth encoding 0: raw u16 little-endian
     out += b"\x00" if depth_range_m is None else b"\x01" + struct.pack("<2f", *depth_range_m)
     out += b"\x00" if noise is None else b"\x01" + struct.pack("<2I", *noise)
+    out += bytes([int(unknown)])
     return out
 
 
@@ -234,11 +241,18 @@ def decode_reply(message):
     at += depth_len
     if len(depth) != 2 * width * height:
         raise ServerClosed(f"a {width}x{height} view with {len(depth)} bytes of depth")
-    rgb = None
-    if body[at] == 1:
-        (n,) = struct.unpack_from("<I", body, at + 1)
-        rgb = body[at + 5:at + 5 + n]
-    return request_id, View(request_id, width, height, units, bool(radial), depth, rgb)
+    optional = []
+    for what, size in (("colour", 3 * width * height), ("unknown mask", width * height)):
+        if body[at] == 1:
+            (n,) = struct.unpack_from("<I", body, at + 1)
+            if n != size:
+                raise ServerClosed(f"a {width}x{height} view with {n} bytes of {what}")
+            optional.append(body[at + 5:at + 5 + n])
+            at += 5 + n
+        else:
+            optional.append(None)
+            at += 1
+    return request_id, View(request_id, width, height, units, bool(radial), depth, *optional)
 
 
 class Client:
@@ -264,11 +278,13 @@ class Client:
                 return reply[1]
 
 
-def png(width, height, color_type, rows):
-    """A PNG of `rows` (bytes per row, already in PNG sample order), no filtering."""
+def png(width, height, color_type, rows, bit_depth=None):
+    """A PNG of `rows` (bytes per row, already in PNG sample order), no filtering; grey
+    (colour type 0) is 16-bit unless `bit_depth` says otherwise."""
     def chunk(kind, data):
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-    bit_depth = 16 if color_type == 0 else 8
+    if bit_depth is None:
+        bit_depth = 16 if color_type == 0 else 8
     raw = b"".join(b"\x00" + row for row in rows)
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, bit_depth, color_type, 0, 0, 0)) + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
 
@@ -285,6 +301,10 @@ def depth_png(view):
 def rgb_png(view):
     stride = 3 * view.width
     return png(view.width, view.height, 2, [view.rgb[y * stride:(y + 1) * stride] for y in range(view.height)])
+
+
+def gray_png(width, height, mask):
+    return png(width, height, 0, [mask[y * width:(y + 1) * width] for y in range(height)], bit_depth=8)
 
 
 def numbers(text, count, what):
@@ -308,7 +328,8 @@ def main():
     parser.add_argument("--seed", type=int, default=0, help="the noise's seed")
     parser.add_argument("--frame-index", type=int, default=0, help="the first view's noise frame index (the next views count up)")
     parser.add_argument("--color", action="store_true", help="also fetch the map's colour")
-    parser.add_argument("--out", help="directory for depth_NNNNNN.png (and rgb_NNNNNN.png)")
+    parser.add_argument("--unknown", action="store_true", help="also fetch the unknown mask (the server needs --occupancy)")
+    parser.add_argument("--out", help="directory for depth_NNNNNN.png (and rgb_NNNNNN.png, unknown_NNNNNN.png)")
     args = parser.parse_args()
 
     try:
@@ -335,7 +356,7 @@ def main():
             for i, pose in enumerate(poses):
                 noise = (args.seed, args.frame_index + i) if args.noise == "kinect" else None
                 started = time.perf_counter()
-                view = client.render(pose, intrinsics, (width, height), units_per_metre=args.depth_scale, radial=args.radial, color=args.color, depth_range_m=depth_range, noise=noise)
+                view = client.render(pose, intrinsics, (width, height), units_per_metre=args.depth_scale, radial=args.radial, color=args.color, depth_range_m=depth_range, noise=noise, unknown=args.unknown)
                 summary = view.summary()
                 summary["round_trip_ms"] = round(1e3 * (time.perf_counter() - started), 2)
                 if args.out:
@@ -346,6 +367,10 @@ def main():
                         summary["rgb_png"] = os.path.join(args.out, f"rgb_{i:06d}.png")
                         with open(summary["rgb_png"], "wb") as f:
                             f.write(rgb_png(view))
+                    if view.unknown is not None:
+                        summary["unknown_png"] = os.path.join(args.out, f"unknown_{i:06d}.png")
+                        with open(summary["unknown_png"], "wb") as f:
+                            f.write(gray_png(view.width, view.height, view.unknown))
                 print(json.dumps(summary), flush=True)
     except (RenderError, ServerClosed, OSError) as e:
         print(f"render_client: {e}", file=sys.stderr)

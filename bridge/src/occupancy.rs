@@ -165,6 +165,15 @@ pub(crate) fn frame_name(frame: MapFrame) -> &'static str {
     }
 }
 
+/// Reads the grid at `path` (as [`read_grid`]) for the map at `map_path`, whose frame is
+/// `map_frame`: a grid in another frame is an error naming both.
+pub(crate) fn read_grid_for_map(path: &std::path::Path, map_frame: MapFrame, map_path: &std::path::Path) -> anyhow::Result<webfusion_core::map::occupancy::OccupancyGrid> {
+    let (grid, grid_frame) = read_grid(path)?;
+    let map_frame = frame_name(map_frame);
+    anyhow::ensure!(grid_frame == map_frame, "{}: the grid is in the {grid_frame} frame, the map {} in the {map_frame} frame", path.display(), map_path.display());
+    Ok(grid)
+}
+
 /// Reads a grid `export-occupancy` wrote: its description (`G.json`, or the grid's own path
 /// `G.bin` with the description beside it) and the cells it names. A description of another
 /// format, a grid of the wrong size or values outside the three states are errors naming the

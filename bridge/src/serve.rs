@@ -99,6 +99,10 @@ pub(crate) struct ServeArgs {
     /// client may ask what a virtual Kinect sees at a pose (`scripts/render_client.py`).
     #[arg(long)]
     map: Option<PathBuf>,
+    /// The map's occupancy grid (`export-occupancy`'s G.json): render requests may then ask
+    /// which pixels looked through never-observed space (the reply's unknown mask).
+    #[arg(long, requires = "map")]
+    occupancy: Option<PathBuf>,
     #[command(flatten)]
     calibration: CalibrationArgs,
 }
@@ -203,7 +207,7 @@ pub(crate) fn run(options: &GpuOptions, args: ServeArgs) -> anyhow::Result<()> {
     };
     let renderer = match &args.map {
         Some(path) => {
-            let (renderer, summary) = Renderer::start(options.clone(), path, args.skip_corrupt)?;
+            let (renderer, summary) = Renderer::start(options.clone(), path, args.occupancy.as_deref(), args.skip_corrupt)?;
             eprintln!("{summary}");
             Some(renderer)
         }

@@ -232,15 +232,7 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
         return Ok(());
     }
     let out = args.out.as_ref().expect("checked");
-    let grid = match &args.occupancy {
-        Some(path) => {
-            let (grid, grid_frame) = crate::occupancy::read_grid(path)?;
-            let map_frame = crate::occupancy::frame_name(file.header.frame);
-            anyhow::ensure!(grid_frame == map_frame, "{}: the grid is in the {grid_frame} frame, the map {} in the {map_frame} frame", path.display(), args.map.display());
-            Some(grid)
-        }
-        None => None,
-    };
+    let grid = args.occupancy.as_deref().map(|path| crate::occupancy::read_grid_for_map(path, file.header.frame, &args.map)).transpose()?;
     let mut dir = SimDir::create(out, args.color, grid)?;
     let started = std::time::Instant::now();
     let mut returns = 0u64;

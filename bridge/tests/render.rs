@@ -3,8 +3,9 @@
 //! a pose is the very frame `webfusion simulate` writes at that pose (exact and with seeded
 //! Kinect noise, depth and colour), two clients are answered side by side, a bad request gets
 //! a failed reply naming the problem and the session goes on, a server without a map says so,
-//! a damaged map stops the server before it listens, and the stdlib Python client
-//! (`scripts/render_client.py`) gets the same views.
+//! a damaged map stops the server before it listens, the unknown masks of a server given the
+//! map's occupancy grid are the ones `simulate --occupancy` writes, and the stdlib Python client
+//! (`scripts/render_client.py`) gets the same views and masks.
 
 use std::io::BufRead as _;
 use std::path::{Path, PathBuf};
@@ -33,26 +34,33 @@ const SEED: u32 = 3;
 type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
 /// A room fused at its exact poses and saved, with the poses and `simulate`'s frames at the
-/// first three of them (exact, and with Kinect noise of seed [`SEED`]), built once.
+/// first three of them (exact, and with Kinect noise of seed [`SEED`]), the map's occupancy
+/// grid carved from those poses and `simulate --occupancy`'s unknown masks, built once.
 struct Fixture {
     dir: PathBuf,
     map: PathBuf,
     room: PathBuf,
     poses: Vec<TimedPose>,
+    grid: PathBuf,
 }
 
 fn fixture() -> &'static Fixture {
     static FIXTURE: std::sync::OnceLock<Fixture> = std::sync::OnceLock::new();
     FIXTURE.get_or_init(|| {
         let dir = scratch("render");
-        let common::FusedRoom { room, gt, map, .. } = fused_room(&dir, 24, "0.04");
+        let common::FusedRoom { room, gt, map, poses: all_poses, .. } = fused_room(&dir, 24, "0.04");
         let poses: Vec<TimedPose> = [0, 11, 23].iter().map(|&i| gt[i]).collect();
         let views = dir.join("views.txt");
         std::fs::write(&views, format_tum_trajectory(&poses)).expect("view poses");
         let size = format!("{W}x{H}");
         ok(&["simulate", "--map", s(&map), "--poses", s(&views), "--out", s(&dir.join("exact")), "--image-size", &size, "--intrinsics", K_ARG, "--color"]);
         ok(&["simulate", "--map", s(&map), "--poses", s(&views), "--out", s(&dir.join("noisy")), "--image-size", &size, "--intrinsics", K_ARG, "--noise", "kinect", "--seed", &SEED.to_string()]);
-        Fixture { dir, map, room, poses }
+        // The room (x ±2, y -1..1.5, z ±2) and 0.5 m around it in 5 cm cells, carved from the
+        // poses the map was fused at.
+        let grid = dir.join("grid.json");
+        ok(&["export-occupancy", "--map", s(&map), "--out", s(&dir.join("grid.bin")), "--voxel-size", "0.05", "--dims", "100,70,100", "--center", "0,0.25,0", "--poses", s(&all_poses)]);
+        ok(&["simulate", "--map", s(&map), "--poses", s(&views), "--out", s(&dir.join("unknown")), "--image-size", &size, "--intrinsics", K_ARG, "--occupancy", s(&grid)]);
+        Fixture { dir, map, room, poses, grid }
     })
 }
 
@@ -116,8 +124,17 @@ fn request(id: u32, pose: &Se3) -> RenderRequest {
         depth_range_m: None,
         noise: None,
         color: false,
+        unknown: false,
         depth_encoding: WireDepth::Raw,
     }
+}
+
+/// The `i`-th unknown mask `simulate --occupancy` wrote into `sim` (255 marked, 0 not).
+fn simulated_mask(sim: &Path, i: usize) -> Vec<u8> {
+    let text = std::fs::read_to_string(sim.join("unknown.txt")).expect("unknown.txt");
+    let name = text.lines().filter(|l| !l.starts_with('#')).nth(i).and_then(|l| l.split_whitespace().nth(1)).expect("a mask per frame").to_owned();
+    // The 8-bit grey PNG, read through the RGB decoder (grey expands to three equal channels).
+    decode_rgb8(&std::fs::read(sim.join(name)).expect("mask png"), W, H).expect("an 8-bit mask").rgb8.chunks(3).map(|c| c[0]).collect()
 }
 
 /// The reply to request `id`, skipping the session's hello and status.
@@ -235,6 +252,36 @@ async fn render_requests_answer_with_the_views_simulate_writes() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unknown_masks_are_the_ones_simulate_writes() {
+    let fx = fixture();
+    let server = Server::start(&["--source", s(&fx.room), "--map", s(&fx.map), "--occupancy", s(&fx.grid)]);
+    let mut socket = server.connect().await;
+    for (i, pose) in fx.poses.iter().enumerate() {
+        let want = simulated_mask(&fx.dir.join("unknown"), i);
+        let marked = want.iter().filter(|&&m| m == 255).count();
+        // Negative control: the comparison can fail (some pixels marked, not all).
+        assert!(marked > 0 && marked < want.len(), "view {i}: simulate marked {marked} of {} pixels", want.len());
+        let got = view(render(&mut socket, RenderRequest { unknown: true, ..request(80 + i as u32, &pose.world_from_camera) }).await);
+        assert!(got.unknown_mask.as_ref() == Some(&want), "view {i}: the served mask is simulate's ({marked} marked)");
+        assert!(got.depth_image().expect("depth").units == simulated(&fx.dir.join("exact"), i).0, "view {i}: the depth is unchanged by asking for the mask");
+        let plain = view(render(&mut socket, request(90 + i as u32, &pose.world_from_camera)).await);
+        assert!(plain.unknown_mask.is_none(), "no mask unless asked");
+    }
+    // Without a grid a request for the mask is refused by name, and the session goes on.
+    let no_grid = Server::start(&["--source", s(&fx.room), "--map", s(&fx.map)]);
+    let mut socket = no_grid.connect().await;
+    let (code, message) = failure(render(&mut socket, RenderRequest { unknown: true, ..request(1, &fx.poses[0].world_from_camera) }).await);
+    assert!(code == RenderFailure::InvalidRequest && message.contains("--occupancy"), "{code:?} {message}");
+    assert!(view(render(&mut socket, request(2, &fx.poses[0].world_from_camera)).await).unknown_mask.is_none());
+    // A grid without a map, and a missing grid, stop the server before it listens.
+    let o = webfusion(&["serve", "--bind", "127.0.0.1:0", "--source", s(&fx.room), "--occupancy", s(&fx.grid)]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--map"), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = webfusion(&["serve", "--bind", "127.0.0.1:0", "--source", s(&fx.room), "--map", s(&fx.map), "--occupancy", s(&fx.dir.join("missing.json"))]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("missing.json") && !stderr.contains("panicked"), "{stderr}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_server_without_a_map_says_so_and_a_damaged_map_stops_it_before_it_listens() {
     let fx = fixture();
     let server = Server::start(&["--source", s(&fx.room)]);
@@ -254,7 +301,7 @@ async fn a_server_without_a_map_says_so_and_a_damaged_map_stops_it_before_it_lis
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_python_client_gets_the_same_views() {
     let fx = fixture();
-    let server = Server::start(&["--source", s(&fx.room), "--map", s(&fx.map)]);
+    let server = Server::start(&["--source", s(&fx.room), "--map", s(&fx.map), "--occupancy", s(&fx.grid)]);
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/render_client.py");
     let poses = fx.dir.join("views.txt");
     let run = |args: &[&str]| {
@@ -283,6 +330,18 @@ async fn the_python_client_gets_the_same_views() {
     assert!(success, "{stderr}");
     let png = std::fs::read(noisy_out.join("depth_000002.png")).expect("the third noisy view");
     assert!(decode_depth16(&png, W, H).expect("png").units == simulated(&fx.dir.join("noisy"), 2).0, "the client's noisy view");
+    // Unknown masks through the client: the ones simulate wrote.
+    let masks_out = fx.dir.join("python-unknown");
+    let (success, stdout, stderr) = tokio::task::block_in_place(|| run(&["--poses", s(&poses), "--size", &size, "--intrinsics", K_ARG, "--unknown", "--out", s(&masks_out)]));
+    assert!(success, "{stderr}");
+    for (i, line) in stdout.lines().enumerate() {
+        let line: serde_json::Value = serde_json::from_str(line).expect("json");
+        let want = simulated_mask(&fx.dir.join("unknown"), i);
+        let png = std::fs::read(line["unknown_png"].as_str().expect("unknown_png")).expect("the client's mask PNG");
+        let got: Vec<u8> = decode_rgb8(&png, W, H).expect("an 8-bit grey PNG").rgb8.chunks(3).map(|c| c[0]).collect();
+        assert!(got == want, "the Python client's mask {i} is simulate's");
+        assert_eq!(line["unknown_pixels"].as_u64(), Some(want.iter().filter(|&&m| m == 255).count() as u64), "its summary counts the marks");
+    }
     // A bad request: a clear message and a failing exit, no traceback.
     let (success, _, stderr) = tokio::task::block_in_place(|| run(&["--pose", "0,0,0,0,0,0,1", "--size", "5000x10"]));
     assert!(!success && stderr.contains("invalid request") && stderr.contains("5000x10") && !stderr.contains("Traceback"), "{stderr}");

@@ -143,6 +143,7 @@ fn messages() -> Vec<Vec<u8>> {
             depth_range_m: Some((0.4, 4.0)),
             noise: Some(RenderNoise { seed: 1, frame_index: 2 }),
             color: true,
+            unknown: true,
             depth_encoding: WireDepth::Raw,
         })
         .encode(),
@@ -156,6 +157,7 @@ fn messages() -> Vec<Vec<u8>> {
                 depth_encoding: WireDepth::Raw,
                 depth_payload: WireDepth::Raw.encode(&f.depth),
                 color_rgb8: Some(f.color.rgb8.clone()),
+                unknown_mask: Some(vec![0; f.depth.units.len()]),
             }),
         }
         .encode(),

@@ -11,14 +11,15 @@
 //! | 2 `Frame` | server → client | sequence, index, timestamps, optional ground-truth pose, depth (RVL), colour |
 //! | 3 `Status` | server → client | playback state, next index, rate, loop, delivery, sent/dropped/skipped counts |
 //! | 4 `Error` | server → client | code and message; the server closes after it |
-//! | 5 `RenderReply` | server → client | the request's id, then a rendered view (depth, optional colour) or why not |
+//! | 5 `RenderReply` | server → client | the request's id, then a rendered view (depth, optional colour and unknown mask) or why not |
 //! | 16 `Control` | client → server | play, pause, step, seek, rate, loop, delivery |
-//! | 17 `RenderRequest` | client → server | id, `world_from_camera`, intrinsics, depth scale and encoding, range, noise, colour |
+//! | 17 `RenderRequest` | client → server | id, `world_from_camera`, intrinsics, depth scale and encoding, range, noise, colour, unknown mask |
 //!
 //! Render requests (`serve --map`) let any WebSocket client, a planner in any language, query
 //! the virtual depth sensor at a pose; `scripts/render_client.py` is a stdlib-only example. A
 //! request that does not decode is answered with a failed [`RenderReply`] naming the problem
-//! when its id can be read ([`render_request_id`]), and the session stays open.
+//! when its id can be read ([`render_request_id`]), and the session stays open. Version 3 added
+//! the unknown mask (the pixels whose ray crossed never-observed space before its return).
 //!
 //! A message of another version is rejected with [`Error::Protocol`] naming both versions, so
 //! old and new peers fail loudly instead of misreading each other. Decoding never allocates
@@ -33,7 +34,7 @@ use crate::{ColorImage, DepthImage, Error, PinholeIntrinsics, Result, RgbdCalibr
 /// First two bytes of every message.
 pub const PROTOCOL_MAGIC: [u8; 2] = *b"WF";
 /// The protocol version this build speaks.
-pub const PROTOCOL_VERSION: u8 = 2;
+pub const PROTOCOL_VERSION: u8 = 3;
 /// Largest message a client may send; control messages are a few bytes.
 pub const MAX_CLIENT_MESSAGE_BYTES: usize = 1024;
 /// Largest message a server may send (a raw 1280x1024 RGB frame plus depth fits easily).
@@ -171,6 +172,10 @@ pub struct RenderRequest {
     pub noise: Option<RenderNoise>,
     /// Also return the map's colour at each pixel.
     pub color: bool,
+    /// Also return which pixels looked through never-observed space before their return (or
+    /// up to the far range, without one): a planner cannot trust those views' free space. Needs
+    /// the server's occupancy grid (`serve --map M --occupancy G.json`).
+    pub unknown: bool,
     /// How the reply's depth is encoded.
     pub depth_encoding: WireDepth,
 }
@@ -192,6 +197,9 @@ pub struct RenderedView {
     pub depth_payload: Vec<u8>,
     /// The map's colour, packed RGB8 (`3 * width * height` bytes), when asked for.
     pub color_rgb8: Option<Vec<u8>>,
+    /// One byte per pixel, row-major: 255 where the pixel's ray crossed never-observed space
+    /// before its return, else 0 (as `simulate --occupancy`'s unknown/ images), when asked for.
+    pub unknown_mask: Option<Vec<u8>>,
 }
 
 impl RenderedView {
@@ -227,10 +235,11 @@ pub enum RenderOutcome {
     },
 }
 
-/// The largest reply a render request can produce: raw depth, colour and the fixed fields.
-fn render_reply_bytes(width_px: u32, height_px: u32, color: bool) -> usize {
+/// The largest reply a render request can produce: raw depth, colour, the unknown mask and
+/// the fixed fields.
+fn render_reply_bytes(width_px: u32, height_px: u32, color: bool, unknown: bool) -> usize {
     let pixels = width_px as usize * height_px as usize;
-    64 + 2 * pixels + if color { 3 * pixels } else { 0 }
+    64 + 2 * pixels + if color { 3 * pixels } else { 0 } + if unknown { pixels } else { 0 }
 }
 
 /// The id of a render request in `bytes` when at least its header and id can be read, whether
@@ -495,6 +504,7 @@ impl Message {
                         w.u32(noise.frame_index);
                     }
                 }
+                w.u8(u8::from(request.unknown));
             }
             Message::RenderReply { request_id, outcome } => {
                 w.u8(KIND_RENDER_REPLY);
@@ -508,11 +518,13 @@ impl Message {
                         w.u8(u8::from(view.radial));
                         w.u8(view.depth_encoding.id());
                         w.blob(&view.depth_payload);
-                        match &view.color_rgb8 {
-                            None => w.u8(0),
-                            Some(rgb) => {
-                                w.u8(1);
-                                w.blob(rgb);
+                        for optional in [&view.color_rgb8, &view.unknown_mask] {
+                            match optional {
+                                None => w.u8(0),
+                                Some(bytes) => {
+                                    w.u8(1);
+                                    w.blob(bytes);
+                                }
                             }
                         }
                     }
@@ -529,7 +541,7 @@ impl Message {
     fn encoded_len_hint(&self) -> usize {
         match self {
             Message::Frame(f) => 128 + f.depth_payload.len() + f.color_payload.len(),
-            Message::RenderReply { outcome: RenderOutcome::View(v), .. } => 64 + v.depth_payload.len() + v.color_rgb8.as_ref().map_or(0, Vec::len),
+            Message::RenderReply { outcome: RenderOutcome::View(v), .. } => 64 + v.depth_payload.len() + v.color_rgb8.as_ref().map_or(0, Vec::len) + v.unknown_mask.as_ref().map_or(0, Vec::len),
             _ => 64,
         }
     }
@@ -633,7 +645,7 @@ impl Message {
                     0 => {
                         let width_px = r.u32("width")?;
                         let height_px = r.u32("height")?;
-                        check_render_size(width_px, height_px, false).map_err(|e| protocol_error(format!("render reply: {e}")))?;
+                        check_render_size(width_px, height_px, false, false).map_err(|e| protocol_error(format!("render reply: {e}")))?;
                         let depth_units_per_metre = r.f32("depth units per metre")?;
                         if !(depth_units_per_metre.is_finite() && depth_units_per_metre > 0.0) {
                             return Err(protocol_error(format!("render reply: depth units per metre must be finite and positive, not {depth_units_per_metre}")));
@@ -651,7 +663,17 @@ impl Message {
                         } else {
                             None
                         };
-                        RenderOutcome::View(RenderedView { width_px, height_px, depth_units_per_metre, radial, depth_encoding, depth_payload, color_rgb8 })
+                        let unknown_mask = if r.bool("unknown mask flag")? {
+                            let mask = r.blob("unknown mask")?;
+                            let expected = width_px as usize * height_px as usize;
+                            if mask.len() != expected {
+                                return Err(protocol_error(format!("render reply: unknown mask has {} bytes, {width_px}x{height_px} needs {expected}", mask.len())));
+                            }
+                            Some(mask.to_vec())
+                        } else {
+                            None
+                        };
+                        RenderOutcome::View(RenderedView { width_px, height_px, depth_units_per_metre, radial, depth_encoding, depth_payload, color_rgb8, unknown_mask })
                     }
                     status => {
                         let code = match status {
@@ -674,16 +696,18 @@ impl Message {
     }
 }
 
-/// Whether a `width_px` x `height_px` view (with colour: `color`) is one the protocol carries.
-fn check_render_size(width_px: u32, height_px: u32, color: bool) -> std::result::Result<(), String> {
+/// Whether a `width_px` x `height_px` view (with colour: `color`, with the unknown mask:
+/// `unknown`) is one the protocol carries.
+fn check_render_size(width_px: u32, height_px: u32, color: bool, unknown: bool) -> std::result::Result<(), String> {
     if width_px == 0 || height_px == 0 || width_px > MAX_RENDER_SIDE_PX || height_px > MAX_RENDER_SIDE_PX {
         return Err(format!("image size {width_px}x{height_px} is outside 1..={MAX_RENDER_SIDE_PX} per side"));
     }
-    let bytes = render_reply_bytes(width_px, height_px, color);
+    let bytes = render_reply_bytes(width_px, height_px, color, unknown);
     if bytes > MAX_SERVER_MESSAGE_BYTES {
         return Err(format!(
-            "a {width_px}x{height_px} view{} needs a {:.1} MiB reply, more than the {} MiB a server may send",
+            "a {width_px}x{height_px} view{}{} needs a {:.1} MiB reply, more than the {} MiB a server may send",
             if color { " with colour" } else { "" },
+            if unknown { " and its unknown mask" } else { "" },
             bytes as f64 / 1048576.0,
             MAX_SERVER_MESSAGE_BYTES >> 20
         ));
@@ -841,7 +865,6 @@ impl<'a> Reader<'a> {
         }
         let radial = self.bool("radial flag")?;
         let color = self.bool("colour flag")?;
-        check_render_size(width_px, height_px, color).map_err(invalid)?;
         let depth_encoding = self.wire_depth()?;
         let depth_range_m = if self.bool("depth range flag")? {
             let (near_m, far_m) = (self.f32("nearest depth")?, self.f32("farthest depth")?);
@@ -857,8 +880,10 @@ impl<'a> Reader<'a> {
             1 => Some(RenderNoise { seed: self.u32("noise seed")?, frame_index: self.u32("noise frame index")? }),
             other => return Err(invalid(format!("unknown noise model {other} (0 none, 1 kinect)"))),
         };
+        let unknown = self.bool("unknown mask flag")?;
+        check_render_size(width_px, height_px, color, unknown).map_err(invalid)?;
         let intrinsics = PinholeIntrinsics { fx_px, fy_px, cx_px, cy_px, width_px, height_px };
-        Ok(RenderRequest { request_id, world_from_camera, intrinsics, depth_units_per_metre, radial, depth_range_m, noise, color, depth_encoding })
+        Ok(RenderRequest { request_id, world_from_camera, intrinsics, depth_units_per_metre, radial, depth_range_m, noise, color, unknown, depth_encoding })
     }
     fn delivery(&mut self) -> Result<Delivery> {
         match self.u8("delivery mode")? {
@@ -921,6 +946,7 @@ mod tests {
                 noise: None,
                 radial: false,
                 color: false,
+                unknown: false,
                 depth_encoding: WireDepth::Coded(DepthCodec::RvlDeflate),
                 ..render_request()
             }),
@@ -934,6 +960,7 @@ mod tests {
                     depth_encoding: WireDepth::Raw,
                     depth_payload: vec![1, 0, 2, 0],
                     color_rgb8: Some(vec![7; 6]),
+                    unknown_mask: Some(vec![255, 0]),
                 }),
             },
             Message::RenderReply {
@@ -946,6 +973,7 @@ mod tests {
                     depth_encoding: WireDepth::Coded(DepthCodec::Rvl),
                     depth_payload: vec![3; 5],
                     color_rgb8: None,
+                    unknown_mask: None,
                 }),
             },
             Message::RenderReply { request_id: 1, outcome: RenderOutcome::Failed { code: RenderFailure::NoMap, message: "start the server with --map".into() } },
@@ -964,6 +992,7 @@ mod tests {
             depth_range_m: Some((0.3, 6.0)),
             noise: Some(RenderNoise { seed: 5, frame_index: 12 }),
             color: true,
+            unknown: true,
             depth_encoding: WireDepth::Raw,
         }
     }
@@ -978,12 +1007,13 @@ mod tests {
             Message::decode(&bytes).expect_err("a bad request decoded").to_string()
         };
         type Spoil = dyn Fn(&mut RenderRequest);
-        let cases: [(&str, &Spoil); 9] = [
+        let cases: [(&str, &Spoil); 10] = [
             ("not finite", &|r| r.world_from_camera.translation_m.x = f64::NAN),
             ("not unit", &|r| r.world_from_camera.rotation = DQuat::from_xyzw(0.0, 0.0, 0.0, 2.0)),
             ("image size 0x480", &|r| r.intrinsics.width_px = 0),
             ("outside 1..=4096", &|r| r.intrinsics.height_px = 5000),
             ("more than the 16 MiB", &|r| (r.intrinsics.width_px, r.intrinsics.height_px) = (2048, 2048)),
+            ("with colour and its unknown mask needs", &|r| (r.intrinsics.width_px, r.intrinsics.height_px) = (1700, 1700)),
             ("positive focal lengths", &|r| r.intrinsics.fx_px = -1.0),
             ("finite with", &|r| r.intrinsics.cy_px = f32::INFINITY),
             ("depth units per metre", &|r| r.depth_units_per_metre = 0.0),
@@ -998,7 +1028,7 @@ mod tests {
         (big.intrinsics.width_px, big.intrinsics.height_px, big.color) = (2048, 2048, false);
         assert!(Message::decode(&Message::RenderRequest(big).encode()).is_ok(), "2048x2048 depth only");
         let mut noise = Message::RenderRequest(render_request()).encode();
-        let noise_at = noise.len() - 9;
+        let noise_at = noise.len() - 10;
         noise[noise_at] = 2;
         assert!(Message::decode(&noise).expect_err("noise model 2").to_string().contains("noise model 2"));
         assert_eq!(render_request_id(&Message::Control(Control::Play).encode()), None, "not a render request");
@@ -1012,17 +1042,23 @@ mod tests {
     fn rendered_depth_decodes_in_every_encoding_and_wrong_sizes_are_errors() {
         let depth = DepthImage::new(4, 3, (0..12).map(|i| i * 1000).collect()).expect("depth");
         for encoding in [WireDepth::Raw, WireDepth::Coded(DepthCodec::Rvl), WireDepth::Coded(DepthCodec::RvlDeflate)] {
-            let view = RenderedView { width_px: 4, height_px: 3, depth_units_per_metre: 5000.0, radial: false, depth_encoding: encoding, depth_payload: encoding.encode(&depth), color_rgb8: None };
+            let view = RenderedView { width_px: 4, height_px: 3, depth_units_per_metre: 5000.0, radial: false, depth_encoding: encoding, depth_payload: encoding.encode(&depth), color_rgb8: None, unknown_mask: None };
             assert_eq!(view.depth_image().expect("decoding"), depth, "{encoding:?}");
             assert!(encoding.decode(&view.depth_payload, 4, 4).is_err(), "{encoding:?} at the wrong size");
         }
         assert_eq!(WireDepth::Raw.encode(&depth)[2..4], 1000_u16.to_le_bytes(), "raw is u16 little-endian, row-major");
         let mut short_color = Message::RenderReply {
             request_id: 1,
-            outcome: RenderOutcome::View(RenderedView { width_px: 2, height_px: 1, depth_units_per_metre: 5000.0, radial: false, depth_encoding: WireDepth::Raw, depth_payload: vec![0; 4], color_rgb8: Some(vec![0; 5]) }),
+            outcome: RenderOutcome::View(RenderedView { width_px: 2, height_px: 1, depth_units_per_metre: 5000.0, radial: false, depth_encoding: WireDepth::Raw, depth_payload: vec![0; 4], color_rgb8: Some(vec![0; 5]), unknown_mask: None }),
         }
         .encode();
         assert!(Message::decode(&short_color).expect_err("5 bytes of colour for 2 pixels").to_string().contains("needs 6"));
+        let long_mask = Message::RenderReply {
+            request_id: 1,
+            outcome: RenderOutcome::View(RenderedView { width_px: 2, height_px: 1, depth_units_per_metre: 5000.0, radial: false, depth_encoding: WireDepth::Raw, depth_payload: vec![0; 4], color_rgb8: None, unknown_mask: Some(vec![0; 3]) }),
+        }
+        .encode();
+        assert!(Message::decode(&long_mask).expect_err("3 mask bytes for 2 pixels").to_string().contains("unknown mask has 3 bytes"));
         short_color[9..13].copy_from_slice(&0_u32.to_le_bytes());
         assert!(Message::decode(&short_color).is_err(), "a 0-pixel view");
     }
@@ -1052,12 +1088,15 @@ mod tests {
     fn other_versions_are_rejected_by_name() {
         let mut bytes = Message::Control(Control::Play).encode();
         bytes[2] = PROTOCOL_VERSION + 1;
-        let err = Message::decode(&bytes).expect_err("version 3 accepted");
-        assert!(matches!(err, Error::ProtocolVersion { got: 3, supported: 2 }), "{err}");
-        assert!(err.to_string().contains("version 3"), "{err}");
-        // A version-1 peer (no skipped count in its status) is refused by name too.
-        bytes[2] = 1;
-        assert!(matches!(Message::decode(&bytes), Err(Error::ProtocolVersion { got: 1, supported: 2 })), "version 1 accepted");
+        let err = Message::decode(&bytes).expect_err("version 4 accepted");
+        assert!(matches!(err, Error::ProtocolVersion { got: 4, supported: 3 }), "{err}");
+        assert!(err.to_string().contains("version 4"), "{err}");
+        // Older peers are refused by name too: version 1 (no skipped count in its status) and 2
+        // (no unknown mask in render requests and replies).
+        for old in [1, 2] {
+            bytes[2] = old;
+            assert!(matches!(Message::decode(&bytes), Err(Error::ProtocolVersion { got, supported: 3 }) if got == old), "version {old} accepted");
+        }
     }
 
     #[test]

@@ -5,7 +5,9 @@
 //! combination of intrinsics and sensor options recently asked for, so a planner that queries
 //! many poses with one camera allocates once). Sessions hand it requests over a bounded
 //! channel and await the reply; requests from all clients are rendered one at a time, in the
-//! order they arrive.
+//! order they arrive. With the map's occupancy grid (`--occupancy`) a request may also ask
+//! which pixels looked through never-observed space (marked on the CPU from the sensor's hits,
+//! as `simulate --occupancy` does).
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -13,6 +15,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use tokio::sync::{mpsc, oneshot};
 use webfusion_core::map::Map;
+use webfusion_core::map::occupancy::OccupancyGrid;
 use webfusion_core::map::file::{read_map_file, read_map_file_recovering};
 use webfusion_core::protocol::{RenderFailure, RenderOutcome, RenderRequest, RenderedView};
 use webfusion_core::sim::sensor::{SensorOptions, VirtualSensor};
@@ -35,20 +38,21 @@ pub(crate) struct Renderer {
 }
 
 impl Renderer {
-    /// Loads the map at `path` onto the GPU in a new worker thread; a map that cannot be read
-    /// or loaded fails here, before the server listens. Returns the worker and a line
-    /// describing the map.
-    pub(crate) fn start(options: GpuOptions, path: &Path, skip_corrupt: bool) -> anyhow::Result<(Self, String)> {
+    /// Loads the map at `path` onto the GPU (and its occupancy grid at `occupancy`) in a new
+    /// worker thread; a map or grid that cannot be read or loaded fails here, before the server
+    /// listens. Returns the worker and a line describing the map.
+    pub(crate) fn start(options: GpuOptions, path: &Path, occupancy: Option<&Path>, skip_corrupt: bool) -> anyhow::Result<(Self, String)> {
         let (jobs, mut queue) = mpsc::channel::<Job>(QUEUED_REQUESTS);
         let (ready_tx, ready) = std::sync::mpsc::sync_channel::<anyhow::Result<String>>(1);
         let path: PathBuf = path.to_owned();
+        let occupancy: Option<PathBuf> = occupancy.map(Path::to_owned);
         std::thread::Builder::new()
             .name("webfusion-render".to_owned())
             .spawn(move || {
-                let (gpu, map) = match load(&options, &path, skip_corrupt) {
-                    Ok((gpu, map, summary)) => {
+                let (gpu, map, grid) = match load(&options, &path, occupancy.as_deref(), skip_corrupt) {
+                    Ok((gpu, map, grid, summary)) => {
                         let _ = ready_tx.send(Ok(summary));
-                        (gpu, map)
+                        (gpu, map, grid)
                     }
                     Err(e) => {
                         let _ = ready_tx.send(Err(e));
@@ -57,7 +61,7 @@ impl Renderer {
                 };
                 let mut sensors = SensorCache::default();
                 while let Some(job) = queue.blocking_recv() {
-                    let outcome = render(&gpu, &map, &mut sensors, &job.request);
+                    let outcome = render(&gpu, &map, grid.as_ref(), &mut sensors, &job.request);
                     // A client that left before its answer needs none.
                     let _ = job.reply.send(outcome);
                 }
@@ -78,23 +82,26 @@ impl Renderer {
     }
 }
 
-/// The GPU and the map at `path` on it, with a line describing the map.
-fn load(options: &GpuOptions, path: &Path, skip_corrupt: bool) -> anyhow::Result<(Gpu, Map, String)> {
+/// The GPU and the map at `path` on it, the map's occupancy grid at `occupancy`, and a line
+/// describing them.
+fn load(options: &GpuOptions, path: &Path, occupancy: Option<&Path>, skip_corrupt: bool) -> anyhow::Result<(Gpu, Map, Option<OccupancyGrid>, String)> {
     let file = if skip_corrupt { read_map_file_recovering(path) } else { read_map_file(path) }.with_context(|| format!("reading the map {}", path.display()))?;
     if let Some(damage) = &file.damage {
         eprintln!("warning: {}: {damage}; serving the intact blocks", path.display());
     }
+    let grid = occupancy.map(|g| crate::occupancy::read_grid_for_map(g, file.header.frame, path)).transpose()?;
     let gpu = pollster::block_on(Gpu::new(options))?;
     let map = webfusion_core::map::resident_map(&gpu, &file.header, &file.blocks).with_context(|| format!("loading {}", path.display()))?;
     let summary = format!(
-        "map {}: {} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU); render requests are answered",
+        "map {}: {} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU); render requests are answered{}",
         path.display(),
         file.blocks.len(),
         file.header.voxel_size_m * 1e3,
         file.header.kind.name(),
-        map.memory_bytes() as f64 / 1048576.0
+        map.memory_bytes() as f64 / 1048576.0,
+        if grid.is_some() { ", with unknown masks from the occupancy grid" } else { "" }
     );
-    Ok((gpu, map, summary))
+    Ok((gpu, map, grid, summary))
 }
 
 /// The most recently used sensors, newest first.
@@ -117,11 +124,15 @@ impl SensorCache {
 }
 
 /// Renders one request: its view, or why there is none.
-fn render(gpu: &Gpu, map: &Map, sensors: &mut SensorCache, request: &RenderRequest) -> RenderOutcome {
+fn render(gpu: &Gpu, map: &Map, grid: Option<&OccupancyGrid>, sensors: &mut SensorCache, request: &RenderRequest) -> RenderOutcome {
     let failed = |code, message: String| RenderOutcome::Failed { code, message };
     let k = request.intrinsics;
+    if request.unknown && grid.is_none() {
+        return failed(RenderFailure::InvalidRequest, "this server has no occupancy grid to mark unknown pixels from (start it with --map M --occupancy G.json)".to_owned());
+    }
     let options = match crate::simulate::kinect_sensor(request.depth_units_per_metre, request.radial, request.noise.map(|n| n.seed), (request.depth_range_m.map(|r| r.0), request.depth_range_m.map(|r| r.1)), request.color) {
-        Ok(options) => options,
+        // The unknown mask needs each pixel's hit distance.
+        Ok(options) => SensorOptions { hits: request.unknown, ..options },
         Err(e) => return failed(RenderFailure::InvalidRequest, format!("{e:#}")),
     };
     let sensor = match sensors.get(gpu, map, k, options) {
@@ -140,6 +151,18 @@ fn render(gpu: &Gpu, map: &Map, sensors: &mut SensorCache, request: &RenderReque
         Ok(frame) => frame,
         Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
     };
+    let unknown_mask = match (grid, &frame.hit_m) {
+        (Some(grid), Some(hit_m)) if request.unknown => {
+            let threads = std::thread::available_parallelism().map_or(1, usize::from);
+            let range_m = (f64::from(options.depth_range_m.0), f64::from(options.depth_range_m.1));
+            match grid.rays_through_unknown(k, &request.world_from_camera, hit_m, false, range_m, threads) {
+                Ok(marks) => Some(marks.iter().map(|&m| if m { 255 } else { 0 }).collect()),
+                Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
+            }
+        }
+        (_, None) if request.unknown => return failed(RenderFailure::RenderFailed, "the sensor returned no hit distances for the unknown mask".to_owned()),
+        _ => None,
+    };
     let depth = match DepthImage::new(k.width_px, k.height_px, frame.depth_units) {
         Ok(depth) => depth,
         Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
@@ -152,5 +175,6 @@ fn render(gpu: &Gpu, map: &Map, sensors: &mut SensorCache, request: &RenderReque
         depth_encoding: request.depth_encoding,
         depth_payload: request.depth_encoding.encode(&depth),
         color_rgb8: frame.color_rgb8.map(|rgb| rgb.as_flattened().to_vec()),
+        unknown_mask,
     })
 }
