@@ -207,17 +207,13 @@ fn apply_map_settings(config: &mut FusionConfig, header: &MapFileHeader) -> anyh
     Ok(())
 }
 
-/// What the source says of its depth's noise settles what the flags leave open: exact depth (a
-/// simulated log without noise) is tracked with unweighted residuals (every depth measured as
-/// well as any other: weighting by the Kinect model would only throw away the far points'
-/// leverage) and fused with a band of μ, unless `--noise-band-sigmas` is given or a loaded map
-/// brings its own band.
+/// What the source says of its depth's noise settles what the flags leave open
+/// ([`FusionConfig::for_depth_noise`]): exact depth is tracked with unweighted residuals and
+/// fused with a band of μ, unless `--noise-band-sigmas` is given or a loaded map brings its own
+/// band.
 fn apply_depth_noise(config: &mut FusionConfig, args: &ReconstructArgs, noise: DepthNoise, loaded_map: bool) {
+    *config = config.clone().for_depth_noise(noise, args.noise_band_sigmas.is_some() || loaded_map);
     if noise == DepthNoise::None {
-        config.icp.noise_weighting = false;
-        if args.noise_band_sigmas.is_none() && !loaded_map {
-            config.tsdf.noise_band_sigmas = 0.0;
-        }
         println!("depth noise: none (the source's calibration file): residuals not weighted by depth, truncation band {} σ", config.tsdf.noise_band_sigmas);
     }
 }

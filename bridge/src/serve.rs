@@ -37,7 +37,7 @@ use webfusion_core::protocol::{
     Control, Delivery, ErrorCode, FrameMessage, Hello, MAX_CLIENT_MESSAGE_BYTES, Message, PlaybackState, RenderFailure, RenderOutcome, RenderRequest, Status, WireColor, render_request_id,
 };
 use webfusion_core::recording::RecordingReader;
-use webfusion_core::source::{FrameSource, LiveSource, TimedPose, is_recording, open_recording};
+use webfusion_core::source::{DepthNoise, FrameSource, LiveSource, TimedPose, is_recording, open_recording};
 use webfusion_core::{GpuOptions, RgbdCalibration, Se3};
 
 use crate::calib::CalibrationArgs;
@@ -661,6 +661,7 @@ async fn drive_session(stream: &mut futures_util::stream::SplitStream<WebSocket>
             calibration: source.calibration(),
             has_ground_truth: source.source().ground_truth().is_some(),
             delivery: Delivery::Lossless,
+            depth_noise: source.source().depth_noise(),
         })
         .encode()
         .into(),
@@ -796,7 +797,7 @@ async fn drive_live_session(stream: &mut futures_util::stream::SplitStream<WebSo
         return Err((ErrorCode::SourceFailed, reason));
     }
     queue.reply(WsMessage::Binary(
-        Message::Hello(Hello { source_name: hub.name.clone(), frame_count: None, calibration: hub.calibration, has_ground_truth: false, delivery: Delivery::Live }).encode().into(),
+        Message::Hello(Hello { source_name: hub.name.clone(), frame_count: None, calibration: hub.calibration, has_ground_truth: false, delivery: Delivery::Live, depth_noise: DepthNoise::KinectV1 }).encode().into(),
     ));
     let mut playback = Playback { state: PlaybackState::Paused, next_index: 0, rate: 1.0, looping: false, delivery: Delivery::Live, stepping: false, anchor: None, frames_skipped: 0 };
     // A camera's "next index" is the number of frames it has captured.

@@ -127,7 +127,7 @@ fn messages() -> Vec<Vec<u8>> {
         color_payload,
     };
     vec![
-        Message::Hello(Hello { source_name: "fuzz".into(), frame_count: Some(3), calibration: calibration(), has_ground_truth: true, delivery: Delivery::Lossless }).encode(),
+        Message::Hello(Hello { source_name: "fuzz".into(), frame_count: Some(3), calibration: calibration(), has_ground_truth: true, delivery: Delivery::Lossless, depth_noise: webfusion_core::source::DepthNoise::None }).encode(),
         Message::Status(Status { state: PlaybackState::Playing, next_index: 2, rate: 1.0, looping: false, delivery: Delivery::Live, frames_sent: 5, frames_dropped: 1, frames_skipped: 1 }).encode(),
         Message::Control(Control::Seek(3)).encode(),
         Message::Control(Control::Rate(2.5)).encode(),

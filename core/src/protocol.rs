@@ -7,7 +7,7 @@
 //!
 //! | kind | direction | body |
 //! |---|---|---|
-//! | 1 `Hello` | server → client | source name, frame count, calibration, ground truth flag, delivery |
+//! | 1 `Hello` | server → client | source name, frame count, calibration, ground truth flag, delivery, depth noise |
 //! | 2 `Frame` | server → client | sequence, index, timestamps, optional ground-truth pose, depth (RVL), colour |
 //! | 3 `Status` | server → client | playback state, next index, rate, loop, delivery, sent/dropped/skipped counts |
 //! | 4 `Error` | server → client | code and message; the server closes after it |
@@ -19,7 +19,9 @@
 //! the virtual depth sensor at a pose; `scripts/render_client.py` is a stdlib-only example. A
 //! request that does not decode is answered with a failed [`RenderReply`] naming the problem
 //! when its id can be read ([`render_request_id`]), and the session stays open. Version 3 added
-//! the unknown mask (the pixels whose ray crossed never-observed space before its return).
+//! the unknown mask (the pixels whose ray crossed never-observed space before its return) and
+//! the source's depth noise to `Hello` (a simulated log without noise is tracked as native
+//! `reconstruct` tracks it).
 //!
 //! A message of another version is rejected with [`Error::Protocol`] naming both versions, so
 //! old and new peers fail loudly instead of misreading each other. Decoding never allocates
@@ -29,6 +31,7 @@
 use glam::{DQuat, DVec3};
 
 use crate::codec::{ColorCodec, DepthCodec};
+use crate::source::DepthNoise;
 use crate::{ColorImage, DepthImage, Error, PinholeIntrinsics, Result, RgbdCalibration, RgbdFrame, Se3};
 
 /// First two bytes of every message.
@@ -283,6 +286,8 @@ pub struct Hello {
     pub has_ground_truth: bool,
     /// Delivery mode the session starts in.
     pub delivery: Delivery,
+    /// The noise of the source's depth ([`FrameSource::depth_noise`](crate::source::FrameSource::depth_noise)).
+    pub depth_noise: DepthNoise,
 }
 
 /// One RGB-D frame, compressed.
@@ -409,6 +414,10 @@ impl Message {
                 }
                 w.u8(u8::from(hello.has_ground_truth));
                 w.u8(delivery_id(hello.delivery));
+                w.u8(match hello.depth_noise {
+                    DepthNoise::KinectV1 => 0,
+                    DepthNoise::None => 1,
+                });
             }
             Message::Frame(frame) => {
                 w.u8(KIND_FRAME);
@@ -578,7 +587,12 @@ impl Message {
                 let intrinsics = PinholeIntrinsics { fx_px, fy_px, cx_px, cy_px, width_px, height_px };
                 let has_ground_truth = r.bool("ground truth flag")?;
                 let delivery = r.delivery()?;
-                Message::Hello(Hello { source_name, frame_count, calibration: RgbdCalibration { intrinsics, depth_units_per_metre }, has_ground_truth, delivery })
+                let depth_noise = match r.u8("depth noise")? {
+                    0 => DepthNoise::KinectV1,
+                    1 => DepthNoise::None,
+                    other => return Err(protocol_error(format!("hello: unknown depth noise {other} (0 kinect, 1 none)"))),
+                };
+                Message::Hello(Hello { source_name, frame_count, calibration: RgbdCalibration { intrinsics, depth_units_per_metre }, has_ground_truth, delivery, depth_noise })
             }
             KIND_FRAME => {
                 let sequence = r.u64("sequence")?;
@@ -905,8 +919,8 @@ mod tests {
 
     fn samples() -> Vec<Message> {
         vec![
-            Message::Hello(Hello { source_name: "fr1_rpy ü".into(), frame_count: Some(100), calibration: calibration(), has_ground_truth: true, delivery: Delivery::Lossless }),
-            Message::Hello(Hello { source_name: String::new(), frame_count: None, calibration: calibration(), has_ground_truth: false, delivery: Delivery::Live }),
+            Message::Hello(Hello { source_name: "fr1_rpy ü".into(), frame_count: Some(100), calibration: calibration(), has_ground_truth: true, delivery: Delivery::Lossless, depth_noise: DepthNoise::KinectV1 }),
+            Message::Hello(Hello { source_name: String::new(), frame_count: None, calibration: calibration(), has_ground_truth: false, delivery: Delivery::Live, depth_noise: DepthNoise::None }),
             Message::Frame(FrameMessage {
                 sequence: 7,
                 index: 3,
@@ -1101,6 +1115,11 @@ mod tests {
 
     #[test]
     fn invalid_fields_are_rejected() {
+        let mut hello = Message::Hello(Hello { source_name: "sim".into(), frame_count: Some(3), calibration: calibration(), has_ground_truth: true, delivery: Delivery::Lossless, depth_noise: DepthNoise::None }).encode();
+        let last = hello.len() - 1;
+        assert_eq!(hello[last], 1, "the depth noise is the hello's last byte");
+        hello[last] = 2;
+        assert!(Message::decode(&hello).expect_err("depth noise 2").to_string().contains("unknown depth noise 2"));
         let mut rate = Message::Control(Control::Rate(1.0)).encode();
         rate[5..9].copy_from_slice(&(-1.0_f32).to_le_bytes());
         assert!(Message::decode(&rate).is_err(), "negative rate");

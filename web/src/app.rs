@@ -18,6 +18,7 @@ use webfusion_core::fusion::FusionConfig;
 use webfusion_core::map::{MapKind, pool_blocks_for_budget_mib, pool_budget_mib};
 use webfusion_core::protocol::{Control, Delivery, FrameMessage, Hello, Message, PlaybackState, parse_rate};
 use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, VolumePlacement};
+use webfusion_core::source::DepthNoise;
 use webfusion_core::{Gpu, GpuOptions, RgbdCalibration};
 
 use crate::fusion_mode::{FREE_VIEW, FusionMode, Received, SensorPose};
@@ -136,6 +137,7 @@ struct SourceInfo {
     frame_count: Option<u64>,
     calibration: RgbdCalibration,
     has_ground_truth: bool,
+    depth_noise: DepthNoise,
 }
 
 /// The state of the link to the bridge.
@@ -425,7 +427,7 @@ impl App {
     fn on_hello(&mut self, hello: Hello) {
         self.backoff_ms = BACKOFF_FIRST_MS;
         self.last_error = None;
-        let info = SourceInfo { name: hello.source_name, frame_count: hello.frame_count, calibration: hello.calibration, has_ground_truth: hello.has_ground_truth };
+        let info = SourceInfo { name: hello.source_name, frame_count: hello.frame_count, calibration: hello.calibration, has_ground_truth: hello.has_ground_truth, depth_noise: hello.depth_noise };
         if self.source.as_ref() != Some(&info) {
             self.source = Some(info);
             self.mode.drop_pipeline(false);
@@ -697,7 +699,7 @@ impl App {
         // freezes; the frames submitted meanwhile are fused, their views skipped.
         let draw_views = self.gpu_ready.load(std::sync::atomic::Ordering::Relaxed);
         let received = Received { ground_truth: message.ground_truth, arrived, decode_ms };
-        self.mode.submit(&self.gpu, source.calibration, &frame, received, draw_views).await?;
+        self.mode.submit(&self.gpu, source.calibration, source.depth_noise, &frame, received, draw_views).await?;
         self.milestone("submitted");
         if self.playing && self.every_frame && !self.is_live() {
             self.request_next();

@@ -30,6 +30,7 @@ use webfusion_core::eval::{Alignment, RunningAte};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, RaycastTarget, TrackingState};
 use webfusion_core::io::{TUM_TRAJECTORY_HEADER, push_tum_line};
 use webfusion_core::odometry::assist::{AssistStats, FeatureAssist, PAIR_STAGES, PairView};
+use webfusion_core::source::DepthNoise;
 use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::source::TimedPose;
 use webfusion_core::planes::PlaneConfig;
@@ -481,7 +482,10 @@ impl FusionMode {
 
     /// Submits one decoded frame and, with `draw_views`, draws its views, without waiting for
     /// the GPU (unless two frames are in flight already: then for the oldest's report).
-    pub(crate) async fn submit(&mut self, gpu: &Gpu, calibration: RgbdCalibration, frame: &RgbdFrame, received: Received, draw_views: bool) -> Result<(), String> {
+    /// A source whose depth is exact (`depth_noise`, from the bridge's hello: a simulated log
+    /// without noise) is tracked and fused as native `reconstruct` does it
+    /// ([`FusionConfig::for_depth_noise`]).
+    pub(crate) async fn submit(&mut self, gpu: &Gpu, calibration: RgbdCalibration, depth_noise: DepthNoise, frame: &RgbdFrame, received: Received, draw_views: bool) -> Result<(), String> {
         let Received { ground_truth, arrived, decode_ms } = received;
         if let Some((opened, _)) = &self.opened {
             // A saved map is open: the frame is compared with it, not fused.
@@ -494,7 +498,8 @@ impl FusionMode {
             return Ok(());
         }
         if self.pipeline.is_none() {
-            self.pipeline = Some(Pipeline::new(gpu, calibration, &self.config, self.features, self.planes)?);
+            let config = self.config.clone().for_depth_noise(depth_noise, false);
+            self.pipeline = Some(Pipeline::new(gpu, calibration, &config, self.features, self.planes)?);
         }
         let Some(p) = self.pipeline.as_mut() else { return Ok(()) };
         let failed = |e: webfusion_core::Error| format!("frame {}: {e}", frame.index);

@@ -212,6 +212,22 @@ impl Default for FusionConfig {
 }
 
 impl FusionConfig {
+    /// These settings for a source whose depth has `noise` (what the source says of its
+    /// sensor): exact depth (a simulated log without noise) is tracked without the Kinect
+    /// model's weights, every depth being measured as well as any other (weighting would only
+    /// throw away the far points' leverage), and fused with a truncation band of μ at every
+    /// depth unless `keep_band` (a band the user or a loaded map chose). A Kinect's depth
+    /// keeps them as they are.
+    pub fn for_depth_noise(mut self, noise: crate::source::DepthNoise, keep_band: bool) -> Self {
+        if noise == crate::source::DepthNoise::None {
+            self.icp.noise_weighting = false;
+            if !keep_band {
+                self.tsdf.noise_band_sigmas = 0.0;
+            }
+        }
+        self
+    }
+
     /// Rejects settings the pipeline cannot honour, naming the offending one.
     pub fn validate(&self) -> Result<()> {
         self.preprocess.validate()?;
@@ -697,4 +713,22 @@ pub fn report_from_state(state: &TrackState, config: &FusionConfig, pixels: usiz
 
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::source::DepthNoise;
+
+    #[test]
+    fn exact_depth_is_tracked_unweighted_and_fused_with_mu_and_a_kinects_keeps_the_model() {
+        let kinect = FusionConfig::default();
+        assert!(kinect.icp.noise_weighting && kinect.tsdf.noise_band_sigmas == crate::tsdf::DEFAULT_NOISE_BAND_SIGMAS, "the defaults are a Kinect's");
+        assert_eq!(kinect.clone().for_depth_noise(DepthNoise::KinectV1, false), kinect, "a Kinect's depth changes nothing");
+        let exact = kinect.clone().for_depth_noise(DepthNoise::None, false);
+        assert!(!exact.icp.noise_weighting && exact.tsdf.noise_band_sigmas == 0.0, "exact depth: unweighted, band μ");
+        let kept = kinect.clone().for_depth_noise(DepthNoise::None, true);
+        assert!(!kept.icp.noise_weighting && kept.tsdf.noise_band_sigmas == kinect.tsdf.noise_band_sigmas, "a chosen band stays");
+        assert!(exact.validate().is_ok());
+    }
 }
