@@ -39,17 +39,28 @@ fn same_keys(gpu: &[u32], cpu: &[u32]) -> Result<usize, String> {
     Ok(set.len())
 }
 
-#[test]
-fn the_gpu_inserts_the_twins_keys_each_once() {
-    let desc = sparse_desc(POOL_BLOCKS);
+/// The real frame allocated at each of the poses in turn into one table, on the GPU and by the
+/// twin: per pose, the GPU's (table, counters), the twin's table and the number of keys (the
+/// GPU's keys checked to be the twin's, each once).
+fn allocate_at_the_poses(desc: &webfusion_core::tsdf::VolumeDesc) -> Vec<(Vec<u32>, Vec<u32>, Vec<u32>, usize)> {
     let (k, depth) = frame();
-    let (mut g_table, mut g_counters) = empty_table(&desc);
-    let (mut c_table, mut c_counters) = empty_table(&desc);
+    let (mut g_table, mut g_counters) = empty_table(desc);
+    let (mut c_table, mut c_counters) = empty_table(desc);
+    let mut out = Vec::new();
     for (i, pose) in poses().iter().enumerate() {
-        let p = alloc_params(desc, k);
+        let p = alloc_params(*desc, k);
         (g_table, g_counters) = run(&p, &camera_pose(pose), depth, &g_table, &g_counters);
         cpu::block_alloc(&p, &camera_pose(pose), depth, &mut c_table, &mut c_counters);
         let n = same_keys(&g_table, &c_table).unwrap_or_else(|e| panic!("pose {i}: {e}"));
+        out.push((g_table.clone(), g_counters.clone(), c_table.clone(), n));
+    }
+    out
+}
+
+#[test]
+fn the_gpu_inserts_the_twins_keys_each_once() {
+    let desc = sparse_desc(POOL_BLOCKS);
+    for (i, (g_table, g_counters, c_table, n)) in allocate_at_the_poses(&desc).into_iter().enumerate() {
         eprintln!("pose {i}: {n} blocks allocated");
         assert!(n > 200 && n < POOL_BLOCKS as usize / 4, "a frame allocates a few hundred 16 cm blocks ({n})");
         assert_eq!(g_counters[MAP_COUNTER_HASH_FULL], 0, "the table has room");
@@ -82,18 +93,10 @@ fn the_gpu_walks_bands_wider_than_mu_as_the_twin_does() {
     // 8σ of the Kinect model: bands up to 32 voxels (4 blocks) either side on the far wall.
     let desc = webfusion_core::tsdf::VolumeDesc { noise_band_sigmas: 8.0, ..sparse_desc(POOL_BLOCKS) };
     let (k, depth) = frame();
-    let (mut g_table, mut g_counters) = empty_table(&desc);
-    let (mut c_table, mut c_counters) = empty_table(&desc);
-    for (i, pose) in poses().iter().enumerate() {
-        let p = alloc_params(desc, k);
-        (g_table, g_counters) = run(&p, &camera_pose(pose), depth, &g_table, &g_counters);
-        cpu::block_alloc(&p, &camera_pose(pose), depth, &mut c_table, &mut c_counters);
-        let n = same_keys(&g_table, &c_table).unwrap_or_else(|e| panic!("pose {i}: {e}"));
-        let default_n = {
-            let (mut t, mut c) = empty_table(&sparse_desc(POOL_BLOCKS));
-            cpu::block_alloc(&alloc_params(sparse_desc(POOL_BLOCKS), k), &camera_pose(pose), depth, &mut t, &mut c);
-            keys(&t).len()
-        };
+    let (mut default_table, mut default_counters) = empty_table(&sparse_desc(POOL_BLOCKS));
+    for (i, ((_, g_counters, _, n), pose)) in allocate_at_the_poses(&desc).into_iter().zip(poses()).enumerate() {
+        cpu::block_alloc(&alloc_params(sparse_desc(POOL_BLOCKS), k), &camera_pose(&pose), depth, &mut default_table, &mut default_counters);
+        let default_n = keys(&default_table).len();
         eprintln!("pose {i}: {n} blocks with the 8σ band, {default_n} with the default");
         assert!(n > default_n, "the wider band allocates more blocks ({n} vs {default_n})");
         assert_eq!((g_counters[MAP_COUNTER_HASH_FULL], g_counters[MAP_COUNTER_OUT_OF_RANGE]), (0, 0), "room in the table, the frame in the box");
