@@ -59,7 +59,7 @@ pub(crate) struct ReconstructArgs {
     #[arg(long)]
     truncation: Option<f32>,
     /// Where the Kinect noise model's σ_z(z) says a depth sample is noisier than μ, widen its
-    /// truncation band to this many σ (at most 32 voxels); without it the fused surface drifts
+    /// truncation band to this many σ (at most 16 voxels); without it the fused surface drifts
     /// behind far measurements (13 mm at 5 m with μ = 4.7 cm). 0: μ at every depth (a sensor far
     /// less noisy than a Kinect v1, or maps as fused before). Default 3, or 0 for a source that
     /// says its depth is exact (a simulated log without noise).

@@ -52,7 +52,7 @@ pub struct TsdfConfig {
     pub truncation_m: f32,
     /// Where the sensor's noise is larger than μ (a Kinect beyond 2–3 m), each sample's band
     /// widens to this many standard deviations σ_z(z) of the Kinect model at its depth (up to
-    /// 32 voxels; `shared/tsdf.wgsl::truncation_band_m`); 0 keeps μ at every depth. A band
+    /// 16 voxels; `shared/tsdf.wgsl::truncation_band_m`); 0 keeps μ at every depth. A band
     /// narrower than the noise biases the fused surface away from the camera: samples in front
     /// are clamped to +1 while those behind beyond the band are dropped (at 5 m, σ = 4.1 cm:
     /// 13 mm for μ = 4.7 cm, 56 mm for μ = 2 cm); at 3σ both tails hold 0.3 % of the samples.
@@ -347,8 +347,8 @@ mod tests {
         assert_eq!(c.truncation_band_m(3.0), c.truncation_m);
         let sigma_4m = crate::cpu::shared::kinect_sigma_m(4.0);
         assert!((c.truncation_band_m(4.0) - 3.0 * sigma_4m).abs() < 1e-7, "{} at 4 m", c.truncation_band_m(4.0));
-        // At most 32 voxels, however noisy.
-        assert_eq!(c.truncation_band_m(20.0), 32.0 * c.voxel_size_m);
+        // At most 16 voxels, however noisy.
+        assert_eq!(c.truncation_band_m(20.0), 16.0 * c.voxel_size_m);
         // 0 σ: μ at every depth (negative control).
         let fixed = TsdfConfig { noise_band_sigmas: 0.0, ..c };
         assert_eq!(fixed.truncation_band_m(4.0), c.truncation_m);

@@ -140,7 +140,7 @@ pub const MAP_DENSE: u32 = 0;
 pub const MAP_SPARSE: u32 = 1;
 
 /// Twin of `MAX_BAND_VOXELS`: the widest truncation band, voxels.
-pub const MAX_BAND_VOXELS: f32 = 32.0;
+pub const MAX_BAND_VOXELS: f32 = 16.0;
 
 /// Twin of `truncation_band_m()` in `shared/tsdf.wgsl`: the truncation band of a sample measured
 /// at `depth_m`, metres: μ, widened to `noise_band_sigmas` σ of the Kinect model where that is

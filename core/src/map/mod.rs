@@ -541,7 +541,7 @@ pub fn resident_map(gpu: &Gpu, header: &file::MapFileHeader, blocks: &[MapBlock]
             let config = TsdfConfig { kind: MapKind::Sparse, pool_blocks: n, ..base };
             if n > MAX_POOL_BLOCKS || config.validate(gpu.limits.max_storage_buffer_binding_size).is_err() {
                 return Err(Error::InvalidConfig(format!(
-                    "the map's {} blocks do not fit one GPU binding ({} blocks of {} KiB at most): rendering it needs it all on the GPU",
+                    "the map's {} blocks do not fit one GPU binding ({} blocks of {} KiB at most): rendering it needs it all on the GPU (fuse it with larger voxels, a shorter --max-depth, or --noise-band-sigmas 0, whose narrower band at far range takes fewer blocks)",
                     blocks.len(),
                     MAX_POOL_BLOCKS.min((gpu.limits.max_storage_buffer_binding_size / (4 * u64::from(crate::cpu::shared::BLOCK_VOXELS))) as u32),
                     4 * crate::cpu::shared::BLOCK_VOXELS / 1024

@@ -35,9 +35,10 @@ struct BlockAllocParams {
 // The map's counters (map.wgsl).
 @group(0) @binding(4) var<storage, read_write> map_counters: array<atomic<u32>>;
 
-// Most blocks one pixel's band may visit: a band of 2b (b at most MAX_BAND_VOXELS, 4 blocks) is
-// L = 8 |ray| blocks long (10 at a Kinect's corners, 16 for a 120° field of view), and a walk
-// along a segment L blocks long visits at most √3 L + 3 blocks: 21, and 31.
+// Most blocks one pixel's band may visit: a band of 2b (b at most MAX_BAND_VOXELS, 2 blocks) is
+// L = 4 |ray| blocks long (5 at a Kinect's corners, 8 for a 120° field of view), and a walk
+// along a segment L blocks long visits at most √3 L + 3 blocks: 12, and 17; twice that leaves
+// room for wider cameras.
 const MAP_MAX_BAND_BLOCKS: u32 = 32u;
 
 // Inserts the key of block `b` unless it is present.

@@ -47,10 +47,12 @@ struct VolumeDesc {
 
 const TSDF_SCALE: f32 = 32767.0;
 
-// Widest truncation band, voxels: 4 sparse blocks, so a pixel's band crosses a bounded number
-// of blocks (block_alloc's MAP_MAX_BAND_BLOCKS). 3σ of the Kinect model reaches it at 6.3 m with
-// 1.17 cm voxels, at 4.3 m with 5 mm voxels.
-const MAX_BAND_VOXELS: f32 = 32.0;
+// Widest truncation band, voxels: 2 sparse blocks, so a pixel's band crosses a bounded number
+// of blocks (block_alloc's MAP_MAX_BAND_BLOCKS) and a map fused to a Kinect's full 8 m range
+// stays within one pool (fr3_teddy: 72,853 blocks with a 32-voxel cap, more than a pool holds).
+// 3σ of the Kinect model reaches it at 6.1 m with 11.7 mm voxels (never within the default 5 m
+// range), at 4.1 m with 5 mm voxels.
+const MAX_BAND_VOXELS: f32 = 16.0;
 
 // The truncation band of a depth sample measured at `depth_m` metres: μ, widened where the
 // sensor's noise is larger to `noise_band_sigmas` standard deviations of the Kinect model

@@ -2,7 +2,7 @@
 //! `block_alloc`: on a real Kinect frame at two poses, the GPU inserts exactly the block keys
 //! the CPU twin does (compared as sets: the slots depend on invocation order), each once, every
 //! key findable by the lookup the reading kernels use, also for bands widened by the noise model
-//! up to their 32-voxel cap; every voxel the integration can bring
+//! up to their 16-voxel cap; every voxel the integration can bring
 //! below a TSDF of 1 lies in an allocated block; a table too small for the frame fills up and
 //! counts the refused insertions without losing or duplicating a key; a disabled pose inserts
 //! nothing.
@@ -90,7 +90,7 @@ fn the_gpu_inserts_the_twins_keys_each_once() {
 
 #[test]
 fn the_gpu_walks_bands_wider_than_mu_as_the_twin_does() {
-    // 8σ of the Kinect model: bands up to 32 voxels (4 blocks) either side on the far wall.
+    // 8σ of the Kinect model: bands up to 16 voxels (2 blocks) either side on the far wall.
     let desc = webfusion_core::tsdf::VolumeDesc { noise_band_sigmas: 8.0, ..sparse_desc(POOL_BLOCKS) };
     let (k, depth) = frame();
     let (mut default_table, mut default_counters) = empty_table(&sparse_desc(POOL_BLOCKS));
