@@ -165,6 +165,16 @@ pub(crate) fn frame_name(frame: MapFrame) -> &'static str {
     }
 }
 
+/// The unknown mask of a view (`simulate --occupancy`'s unknown/ images, a render reply's
+/// mask): a byte per pixel, 255 where the ray of camera `k` at `world_from_camera` crossed
+/// space `grid` does not know before its hit `hit_m` (planar depths, 0 or NaN: none) within the
+/// sensor's range `range_m`, else 0 ([`OccupancyGrid::rays_through_unknown`] on every core).
+pub(crate) fn unknown_mask(grid: &webfusion_core::map::occupancy::OccupancyGrid, k: webfusion_core::PinholeIntrinsics, world_from_camera: &webfusion_core::Se3, hit_m: &[f32], range_m: (f32, f32)) -> webfusion_core::Result<Vec<u8>> {
+    let threads = std::thread::available_parallelism().map_or(1, usize::from);
+    let marks = grid.rays_through_unknown(k, world_from_camera, hit_m, false, (f64::from(range_m.0), f64::from(range_m.1)), threads)?;
+    Ok(marks.iter().map(|&m| if m { 255 } else { 0 }).collect())
+}
+
 /// Reads the grid at `path` (as [`read_grid`]) for the map at `map_path`, whose frame is
 /// `map_frame`: a grid in another frame is an error naming both.
 pub(crate) fn read_grid_for_map(path: &std::path::Path, map_frame: MapFrame, map_path: &std::path::Path) -> anyhow::Result<webfusion_core::map::occupancy::OccupancyGrid> {

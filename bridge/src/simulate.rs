@@ -171,10 +171,8 @@ impl SimDir {
             self.assoc.push_str(&format!("{t} {rgb_name} {t} {name}\n"));
         }
         if let (Some((grid, list, marked)), Some(hit_m)) = (&mut self.unknown, &frame.hit_m) {
-            let threads = std::thread::available_parallelism().map_or(1, usize::from);
-            let marks = grid.rays_through_unknown(*k, &pose.world_from_camera, hit_m, false, (f64::from(range_m.0), f64::from(range_m.1)), threads)?;
-            *marked += marks.iter().filter(|&&m| m).count() as u64;
-            let mask: Vec<u8> = marks.iter().map(|&m| if m { 255 } else { 0 }).collect();
+            let mask = crate::occupancy::unknown_mask(grid, *k, &pose.world_from_camera, hit_m, range_m)?;
+            *marked += mask.iter().filter(|&&m| m == 255).count() as u64;
             list.write(index, t_ns, &webfusion_core::codec::png::encode_gray8(k.width_px, k.height_px, &mask)?)?;
         }
         Ok(())

@@ -667,26 +667,8 @@ impl Message {
                         let radial = r.bool("radial flag")?;
                         let depth_encoding = r.wire_depth()?;
                         let depth_payload = r.blob("depth payload")?.to_vec();
-                        let color_rgb8 = if r.bool("colour flag")? {
-                            let rgb = r.blob("colour payload")?;
-                            let expected = 3 * width_px as usize * height_px as usize;
-                            if rgb.len() != expected {
-                                return Err(protocol_error(format!("render reply: colour payload has {} bytes, {width_px}x{height_px} RGB needs {expected}", rgb.len())));
-                            }
-                            Some(rgb.to_vec())
-                        } else {
-                            None
-                        };
-                        let unknown_mask = if r.bool("unknown mask flag")? {
-                            let mask = r.blob("unknown mask")?;
-                            let expected = width_px as usize * height_px as usize;
-                            if mask.len() != expected {
-                                return Err(protocol_error(format!("render reply: unknown mask has {} bytes, {width_px}x{height_px} needs {expected}", mask.len())));
-                            }
-                            Some(mask.to_vec())
-                        } else {
-                            None
-                        };
+                        let color_rgb8 = r.optional_image("colour payload", "RGB", 3, width_px, height_px)?;
+                        let unknown_mask = r.optional_image("unknown mask", "mask", 1, width_px, height_px)?;
                         RenderOutcome::View(RenderedView { width_px, height_px, depth_units_per_metre, radial, depth_encoding, depth_payload, color_rgb8, unknown_mask })
                     }
                     status => {
@@ -845,6 +827,19 @@ impl<'a> Reader<'a> {
     fn blob(&mut self, what: &str) -> Result<&'a [u8]> {
         let len = self.u32(what)? as usize;
         self.take(len, what)
+    }
+    /// A render reply's optional per-pixel image (colour, the unknown mask): a flag, then a
+    /// blob of exactly `bytes_per_pixel` bytes for each of the `width_px` x `height_px` pixels.
+    fn optional_image(&mut self, what: &str, kind: &str, bytes_per_pixel: usize, width_px: u32, height_px: u32) -> Result<Option<Vec<u8>>> {
+        if !self.bool(&format!("{what} flag"))? {
+            return Ok(None);
+        }
+        let bytes = self.blob(what)?;
+        let expected = bytes_per_pixel * width_px as usize * height_px as usize;
+        if bytes.len() != expected {
+            return Err(protocol_error(format!("render reply: {what} has {} bytes, {width_px}x{height_px} {kind} needs {expected}", bytes.len())));
+        }
+        Ok(Some(bytes.to_vec()))
     }
     /// A pose as [`Writer::pose`] writes it: finite, with a unit quaternion (to 1e-3, then
     /// normalised).

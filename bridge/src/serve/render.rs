@@ -152,14 +152,10 @@ fn render(gpu: &Gpu, map: &Map, grid: Option<&OccupancyGrid>, sensors: &mut Sens
         Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
     };
     let unknown_mask = match (grid, &frame.hit_m) {
-        (Some(grid), Some(hit_m)) if request.unknown => {
-            let threads = std::thread::available_parallelism().map_or(1, usize::from);
-            let range_m = (f64::from(options.depth_range_m.0), f64::from(options.depth_range_m.1));
-            match grid.rays_through_unknown(k, &request.world_from_camera, hit_m, false, range_m, threads) {
-                Ok(marks) => Some(marks.iter().map(|&m| if m { 255 } else { 0 }).collect()),
-                Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
-            }
-        }
+        (Some(grid), Some(hit_m)) if request.unknown => match crate::occupancy::unknown_mask(grid, k, &request.world_from_camera, hit_m, options.depth_range_m) {
+            Ok(mask) => Some(mask),
+            Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
+        },
         (_, None) if request.unknown => return failed(RenderFailure::RenderFailed, "the sensor returned no hit distances for the unknown mask".to_owned()),
         _ => None,
     };
