@@ -3,7 +3,9 @@
 # issue names, OpenCV ORB (1000 features) + BFMatcher + ratio test + solvePnPRansac
 # (scripts/peers/opencv_orb_odometry.py), on the same TUM frames in the same run: per-stage
 # median ms per frame with keypoint counts, the ratio of the totals, seed 002's 151.7 ms, and
-# both trajectories' ATE and RPE (webfusion eval, as evo computes them) against the ground truth.
+# the trajectories' ATE and RPE (webfusion eval, as evo computes them) against the ground truth.
+# webfusion runs twice: its default (each frame against a keyframe and the previous frame,
+# fused by their covariances) and `--frame-to-frame` (seed 002's method, as the peer does).
 #
 #   scripts/bench_odometry.sh [--data DIR] [--frames A..B] [--every N] [--drop A..B] [--out DIR]
 #                             [-- EXTRA webfusion odometry OPTIONS]
@@ -44,35 +46,43 @@ WF="${WEBFUSION_BIN:-$ROOT/target/release/webfusion}"
 scripts/peers/setup_venv.sh >&2
 PY="$ROOT/.venv-peers/bin/python"
 sel=(${frames:+--frames "$frames"} --every "$every" ${drop:+--drop "$drop"})
-rm -rf "$out/webfusion"
+rm -rf "$out/webfusion" "$out/webfusion-f2f"
 "$WF" odometry "$data" --out "$out/webfusion" "${sel[@]}" "${extra[@]}" >&2
+"$WF" odometry "$data" --out "$out/webfusion-f2f" --frame-to-frame "${sel[@]}" "${extra[@]}" >&2
 "$PY" scripts/peers/opencv_orb_odometry.py "$data" --out-trajectory "$out/opencv.txt" --out-json "$out/opencv.json" "${sel[@]}" >&2
-for who in webfusion opencv; do
-  est="$out/opencv.txt"; [ "$who" = webfusion ] && est="$out/webfusion/trajectory.txt"
+for who in webfusion webfusion-f2f opencv; do
+  est="$out/opencv.txt"; [ "$who" != opencv ] && est="$out/$who/trajectory.txt"
   "$WF" eval --gt "$data/groundtruth.txt" --est "$est" --json "$out/$who-eval.json" >/dev/null
 done
 "$PY" - "$out" <<'PYEOF'
 import json, sys
 out = sys.argv[1]
-wf = json.load(open(f"{out}/webfusion/stats.json"))
+runs = {"webfusion": "webfusion (keyframes)", "webfusion-f2f": "webfusion (frame to frame)"}
+wfs = {w: json.load(open(f"{out}/{w}/stats.json")) for w in runs}
 cv = json.load(open(f"{out}/opencv.json"))
-ev = {w: json.load(open(f"{out}/{w}-eval.json")) for w in ("webfusion", "opencv")}
+ev = {w: json.load(open(f"{out}/{w}-eval.json")) for w in (*runs, "opencv")}
 def ate_cm(e):
     return 100 * e["ate"]["stats"]["rmse_m"]
 def rpe(e):
     return 1000 * e["rpe"]["translation"]["rmse_m"], e["rpe"]["rotation"]["rmse_deg"]
-s = wf["stages_ms"]
-m = lambda k: s[k]["median"] if k in s else float("nan")
-print(f"{wf['frames']} frames (every {wf['every']}); per-frame median ms")
-print(f"{'':26}{'update':>8}{'detect':>8}{'describe':>9}{'match':>8}{'estimate':>9}{'total':>8}  keypoints/matches/inliers  rejected")
-print(f"{'webfusion (GPU)':26}{m('update'):8.1f}{m('detection'):8.1f}{m('description'):9.1f}{m('matching'):8.1f}{m('estimation'):9.1f}{m('total'):8.1f}"
-      f"  {wf['median_keypoints']:.0f}/{wf['median_matches']:.0f}/{wf['median_inliers']:.0f}  {wf['rejected']} ({wf['reanchored']} restarts)")
+wf = wfs["webfusion"]
+print(f"{wf['frames']} frames (every {wf['every']}); per-frame median ms (rematch: the keyframe runs' second match, against the previous frame)")
+print(f"{'':28}{'update':>8}{'detect':>8}{'describe':>9}{'match':>8}{'estimate':>9}{'rematch':>8}{'total':>8}  keypoints/matches/inliers  rejected")
+for w, label in runs.items():
+    f = wfs[w]; s = f["stages_ms"]
+    m = lambda k: s[k]["median"] if k in s else float("nan")
+    print(f"{label:28}{m('update'):8.1f}{m('detection'):8.1f}{m('description'):9.1f}{m('matching'):8.1f}{m('estimation'):9.1f}{m('rematch previous (wall)'):8.1f}{m('total'):8.1f}"
+          f"  {f['median_keypoints']:.0f}/{f['median_matches']:.0f}/{f['median_inliers']:.0f}  {f['rejected']} ({f['reanchored']} restarts)")
 c = cv["stages_ms"]; n = cv["median_counts"]
-print(f"{'OpenCV ORB + PnP (CPU)':26}{'':8}{c['detect']['median']:8.1f}{'':9}{c['match']['median']:8.1f}{c['estimate']['median']:9.1f}{c['frame']['median']:8.1f}"
+print(f"{'OpenCV ORB + PnP (CPU)':28}{'':8}{c['detect']['median']:8.1f}{'':9}{c['match']['median']:8.1f}{c['estimate']['median']:9.1f}{'':8}{c['frame']['median']:8.1f}"
       f"  {n['keypoints']:.0f}/{n['matches']:.0f}/{n['inliers']:.0f}  {cv['rejected']}")
-print(f"speed: webfusion / OpenCV total {m('total') / c['frame']['median']:.2f}; webfusion / seed 002 (151.7 ms) {m('total') / 151.7:.2f} (below 1: webfusion faster)")
-for w in ("webfusion", "opencv"):
+for w, label in runs.items():
+    total = wfs[w]["stages_ms"]["total"]["median"]
+    print(f"speed {label}: / OpenCV total {total / c['frame']['median']:.2f}; / seed 002 (151.7 ms) {total / 151.7:.2f} (below 1: webfusion faster)")
+print(f"keyframes: {wf['fused']} frames fused from both paths, {wf['disagreed']} disagreed (new keyframe), {wf['tracked_against_previous']} through the previous frame alone")
+for w in (*runs, "opencv"):
     t, r = rpe(ev[w])
-    print(f"{w:10} ATE {ate_cm(ev[w]):6.2f} cm   RPE {t:5.2f} mm/frame {r:5.3f} deg/frame")
-print(f"ATE ratio webfusion / OpenCV: {ate_cm(ev['webfusion']) / ate_cm(ev['opencv']):.2f} (target <= 0.7)")
+    print(f"{w:14} ATE {ate_cm(ev[w]):6.2f} cm   RPE {t:5.2f} mm/frame {r:5.3f} deg/frame")
+for w, label in runs.items():
+    print(f"ATE ratio {label} / OpenCV: {ate_cm(ev[w]) / ate_cm(ev['opencv']):.2f} (target <= 0.7)")
 PYEOF

@@ -1,12 +1,18 @@
 // SPDX-License-Identifier: MIT
-//! `webfusion odometry`: seed 002's feature-based visual odometry, frame to frame
-//! (`core::odometry`): keypoints, descriptors, matching, RANSAC and the rigid fit on the GPU
-//! in one submission per frame; the host reads the estimate back and chains the poses.
+//! `webfusion odometry`: seed 002's feature-based visual odometry (`core::odometry`):
+//! keypoints, descriptors, matching, RANSAC and the rigid fit on the GPU in one submission per
+//! frame; the host reads the estimate back and chains the poses.
+//!
+//! Each frame is matched against a keyframe and against the previous tracked frame (a second
+//! matching and estimate on the GPU), and the two paths to the keyframe are fused by their
+//! covariances (`core::odometry::keyframe`); when they disagree the path through the previous
+//! frame is kept and the frame becomes the next keyframe, as it does when the keyframe's match
+//! fails. `--frame-to-frame` is 002's method: each frame against the previous one only.
 //!
 //! - `DIR/trajectory.txt`: the camera-to-world pose of every frame at its depth timestamp (TUM
 //!   format; the world is the first frame's camera). A frame whose motion is rejected keeps
-//!   the last tracked pose and the next frame is matched against the last tracked one; after
-//!   two rejected in a row, the second becomes the reference at that pose (a restart: the
+//!   the last tracked pose and the next frame is matched against the same references; after
+//!   two rejected in a row, the second becomes the keyframe at that pose (a restart: the
 //!   motion missed is lost, counted as `reanchored`).
 //! - `DIR/stats.json`: per-stage times (002's: update, detection, description, matching,
 //!   estimation, total; median and p95) and per frame the keypoint, match and inlier counts.
@@ -18,6 +24,7 @@ use webfusion_core::GpuOptions;
 use webfusion_core::Se3;
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::odometry::gpu::{FeatureExtractor, STAGES};
+use webfusion_core::odometry::keyframe::{Disagreement, UncertainPose, fuse};
 use webfusion_core::odometry::matching::MatchConfig;
 use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::odometry::FeatureConfig;
@@ -61,9 +68,13 @@ pub(crate) struct OdometryArgs {
     /// Seed 002's keep-best fraction of the matches (002: 0.2).
     #[arg(long)]
     keep_best: Option<f32>,
-    /// Match against a keyframe while it keeps at least this fraction of the inliers its
-    /// first tracked frame had; below it the frame becomes the next keyframe. 0: frame to
-    /// frame (each tracked frame is the next one's reference).
+    /// Match each frame against the previous tracked frame only (seed 002's odometry) instead
+    /// of against a keyframe and the previous frame, fused.
+    #[arg(long)]
+    frame_to_frame: bool,
+    /// Also start a new keyframe when the keyframe's inliers fall below this fraction of those
+    /// its first tracked frame had; 0: only when its estimate fails or disagrees with the
+    /// path through the previous frame.
     #[arg(long, default_value_t = 0.0)]
     keyframe_overlap: f64,
     /// Skip damaged frames of a recording (counted) instead of stopping at the first.
@@ -104,16 +115,17 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     // maps: only the image stages run (`images_only`).
     let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig { gradient_smoothing: None, ..PreprocessConfig::default() })?;
     let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config)?.images_only();
-    // The keyframe's and the previous tracked frame's camera-to-world poses (their features
-    // stay on the GPU); and the inliers of the keyframe's first tracked frame.
-    let mut keyframe: Option<Se3> = None;
-    let mut previous: Option<Se3> = None;
+    // The keyframe's camera-to-world pose and the previous tracked frame relative to it, with
+    // that relative pose's covariance (their features stay on the GPU); and the inliers of the
+    // keyframe's first tracked frame.
+    let mut world_from_kf: Option<Se3> = None;
+    let mut kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
     let mut first_inliers: Option<usize> = None;
     let mut trajectory = Vec::new();
     let mut times = StageTimes::default();
     let mut frames_json = Vec::new();
     let mut skipped = Vec::new();
-    let (mut tracked, mut lost, mut via_previous, mut reanchored) = (0usize, 0usize, 0usize, 0usize);
+    let (mut tracked, mut lost, mut via_previous, mut reanchored, mut fused, mut disagreed) = (0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
     let mut consecutive_rejected = 0usize;
     let (mut keypoint_counts, mut match_counts, mut inlier_counts) = (Vec::new(), Vec::new(), Vec::new());
     for index in frames {
@@ -123,52 +135,85 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
         let result = pollster::block_on(extractor.process(&gpu, &preprocessor, &frame, seed)).with_context(|| format!("features of frame {index}"))?;
         let keypoints = result.features.keypoint_count();
         let mut entry = serde_json::json!({ "index": index, "keypoints": keypoints });
-        let pose = match (&keyframe, &previous) {
-            (Some(world_from_kf), Some(world_from_prev)) => {
-                let mut e = result.motion.clone().context("the extractor holds a reference, so it estimated a motion")?;
-                let mut base = (*world_from_kf, "keyframe");
-                if e.rigid.is_none()
-                    && let Some(again) = pollster::block_on(extractor.rematch_previous(&gpu, keypoints, seed))?
-                {
-                    // The keyframe failed: the previous tracked frame, nearer in time, may not.
-                    if again.rigid.is_some() {
-                        (e, base) = (again, (*world_from_prev, "previous"));
-                        via_previous += 1;
-                    }
+        let pose = match world_from_kf {
+            Some(world_from_keyframe) => {
+                let direct = result.motion.clone().context("the extractor holds a reference, so it estimated a motion")?;
+                // With keyframes, the path through the previous tracked frame too (none while
+                // the keyframe is the previous frame); frame to frame only when the keyframe
+                // failed.
+                let mut through_previous = None;
+                if !args.frame_to_frame || direct.rigid.is_none() {
+                    let rematch = Stopwatch::start();
+                    through_previous = pollster::block_on(extractor.rematch_previous(&gpu, keypoints, seed))?.filter(|e| e.rigid.is_some());
+                    times.record("rematch previous (wall)", rematch.ms());
                 }
-                entry["matches"] = e.matches.into();
-                entry["inliers"] = e.inliers().into();
-                entry["rmse_mm"] = e.rigid.as_ref().map(|r| r.rmse_m * 1e3).into();
-                entry["noise_scale"] = e.rigid.as_ref().map(|r| r.noise_scale).into();
-                entry["tracked"] = e.rigid.is_some().into();
-                entry["against"] = base.1.into();
-                match_counts.push(e.matches as f64);
-                inlier_counts.push(e.inliers() as f64);
-                match e.reference_from_current() {
-                    Some(ref_from_cur) => {
+                let reported = if direct.rigid.is_some() { &direct } else { through_previous.as_ref().unwrap_or(&direct) };
+                entry["matches"] = reported.matches.into();
+                entry["inliers"] = reported.inliers().into();
+                entry["rmse_mm"] = reported.rigid.as_ref().map(|r| r.rmse_m * 1e3).into();
+                entry["noise_scale"] = reported.rigid.as_ref().map(|r| r.noise_scale).into();
+                entry["tracked"] = reported.rigid.is_some().into();
+                match_counts.push(reported.matches as f64);
+                inlier_counts.push(reported.inliers() as f64);
+                // The current camera relative to the keyframe: directly, and through the
+                // previous frame (its covariance grown by the chain's).
+                let kf_direct = direct.rigid.as_ref().map(|r| (r.dst_from_src, r.covariance));
+                let kf_chained = through_previous.as_ref().and_then(|e| e.rigid.as_ref()).map(|r| {
+                    entry["inliers_previous"] = r.inliers.len().into();
+                    let step = UncertainPose { pose: r.dst_from_src, covariance: r.covariance.unwrap_or_default() };
+                    (kf_from_prev.then(&step), r.covariance.is_some())
+                });
+                // (keyframe_from_current, what it came from, whether the current frame becomes
+                // the next keyframe).
+                let outcome = match (kf_direct, kf_chained) {
+                    (Some((pose, Some(covariance))), Some((chained, true))) => match fuse(&UncertainPose { pose, covariance }, &chained) {
+                        Ok(f) => {
+                            fused += 1;
+                            Some((f, "fused", false))
+                        }
+                        Err(Disagreement { chi2 }) => {
+                            // One of them is wrong: the shorter baseline is kept.
+                            disagreed += 1;
+                            entry["chi2"] = chi2.into();
+                            Some((chained, "previous (disagreed)", true))
+                        }
+                    },
+                    (Some((pose, covariance)), _) => Some((UncertainPose { pose, covariance: covariance.unwrap_or_default() }, "keyframe", covariance.is_none())),
+                    (None, Some((chained, _))) => {
+                        via_previous += 1;
+                        Some((chained, "previous", true))
+                    }
+                    (None, None) => None,
+                };
+                match outcome {
+                    Some((kf_from_cur, against, mut new_keyframe)) => {
                         tracked += 1;
                         consecutive_rejected = 0;
-                        let pose = base.0.compose(&ref_from_cur);
-                        let first = *first_inliers.get_or_insert(e.inliers());
-                        let new_keyframe = base.1 == "previous" || args.keyframe_overlap == 0.0 || (e.inliers() as f64) < args.keyframe_overlap * first as f64;
+                        entry["against"] = against.into();
+                        let first = *first_inliers.get_or_insert(direct.inliers());
+                        new_keyframe |= args.frame_to_frame || (direct.inliers() as f64) < args.keyframe_overlap * first as f64;
                         extractor.accept(new_keyframe);
-                        previous = Some(pose);
+                        let pose = world_from_keyframe.compose(&kf_from_cur.pose);
                         if new_keyframe {
-                            keyframe = Some(pose);
+                            world_from_kf = Some(pose);
+                            kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
                             first_inliers = None;
+                        } else {
+                            kf_from_prev = kf_from_cur;
                         }
                         pose
                     }
                     None => {
+                        entry["tracked"] = false.into();
                         lost += 1;
                         consecutive_rejected += 1;
-                        let pose = *world_from_prev;
+                        let pose = world_from_keyframe.compose(&kf_from_prev.pose);
                         if consecutive_rejected >= REANCHOR_AFTER {
                             // The stream has moved on from the reference (a gap, a cut): restart
                             // from this frame at the last pose; the motion missed is lost.
                             extractor.accept(true);
-                            keyframe = Some(pose);
-                            previous = keyframe;
+                            world_from_kf = Some(pose);
+                            kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
                             first_inliers = None;
                             consecutive_rejected = 0;
                             reanchored += 1;
@@ -178,10 +223,9 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                     }
                 }
             }
-            _ => {
+            None => {
                 extractor.accept(true);
-                keyframe = Some(Se3::IDENTITY);
-                previous = keyframe;
+                world_from_kf = Some(Se3::IDENTITY);
                 Se3::IDENTITY
             }
         };
@@ -207,6 +251,9 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
         "rejected": lost,
         "tracked_against_previous": via_previous,
         "reanchored": reanchored,
+        "fused": fused,
+        "disagreed": disagreed,
+        "frame_to_frame": args.frame_to_frame,
         "keyframe_overlap": args.keyframe_overlap,
         "every": args.every,
         "gpu_timestamps": gpu.has_timestamps,

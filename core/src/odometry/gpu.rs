@@ -434,7 +434,7 @@ impl FeatureExtractor {
         let estimate: RigidEstimate = bytemuck::pod_read_unaligned(&bytes[..e]);
         let pairs: Vec<FeaturePair> = bytemuck::pod_collect_to_vec(&bytes[e..e + PAIR_BYTES as usize * n]);
         let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[e + PAIR_BYTES as usize * n..e + (PAIR_BYTES as usize + 4) * n]);
-        motion_from_estimate(keypoints, &estimate, &pairs, &flags)
+        motion_from_estimate(keypoints, &estimate, &pairs, &flags, self.f_px)
     }
 
     /// Matches the last processed frame (of `keypoints` keypoints) against the previous tracked

@@ -19,6 +19,7 @@
 
 pub mod assist;
 pub mod gpu;
+pub mod keyframe;
 pub mod matching;
 pub mod reference;
 pub mod rigid;

@@ -3,7 +3,7 @@
 //! one tracked), from the matched keypoints' 3D points.
 
 use super::matching::{Match, MatchConfig};
-use super::rigid::{RansacConfig, RigidEstimate};
+use super::rigid::{RansacConfig, RigidEstimate, correspondences, motion_covariance};
 use super::{FeatureConfig, Features};
 use crate::cpu;
 use crate::cpu::odometry::estimate::RANSAC_MAX_HYPOTHESES;
@@ -61,15 +61,17 @@ pub fn focal_px(k0: &PinholeIntrinsics) -> f32 {
 }
 
 /// A frame's outcome from what the GPU estimate (or its twins) wrote: the estimate, the first
-/// `estimate.pairs` pairs and their inlier flags; `keypoints` of the current frame.
-pub fn motion_from_estimate(keypoints: usize, estimate: &GpuEstimate, pairs: &[FeaturePair], inlier_flags: &[u32]) -> MotionEstimate {
+/// `estimate.pairs` pairs and their inlier flags; `keypoints` of the current frame; the
+/// motion's covariance from the inliers in f64 (`motion_covariance`) for focal length `f_px`.
+pub fn motion_from_estimate(keypoints: usize, estimate: &GpuEstimate, pairs: &[FeaturePair], inlier_flags: &[u32], f_px: f32) -> MotionEstimate {
     let n = (estimate.pairs as usize).min(pairs.len()).min(inlier_flags.len());
     let matched: Vec<Match> = pairs[..n].iter().map(|p| Match { query: p.slots[0], train: p.slots[1], distance_bits: p.slots[2] }).collect();
-    let rigid = (estimate.accepted == 1).then(|| RigidEstimate {
-        dst_from_src: Se3::from_cols_f32(&estimate.dst_from_src),
-        inliers: (0..n).filter(|&i| inlier_flags[i] == 1).collect(),
-        rmse_m: f64::from(estimate.rmse_m),
-        noise_scale: f64::from(estimate.noise_scale),
+    let rigid = (estimate.accepted == 1).then(|| {
+        let dst_from_src = Se3::from_cols_f32(&estimate.dst_from_src);
+        let inliers: Vec<usize> = (0..n).filter(|&i| inlier_flags[i] == 1).collect();
+        let noise_scale = f64::from(estimate.noise_scale);
+        let covariance = motion_covariance(&correspondences(&pairs[..n], f64::from(f_px)), &inliers, &dst_from_src, noise_scale);
+        RigidEstimate { dst_from_src, inliers, rmse_m: f64::from(estimate.rmse_m), noise_scale, covariance }
     });
     MotionEstimate { keypoints, matches: n, matched, rigid }
 }
@@ -89,7 +91,7 @@ pub fn estimate_motion(config: &OdometryConfig, k0: &PinholeIntrinsics, current:
     cpu::ransac_hypotheses(&params, &pairs, &estimate, &mut hypotheses, &mut costs);
     let (mut residuals, mut flags) = (vec![0.0f32; slots], vec![0u32; slots]);
     cpu::ransac_refine(&params, &hypotheses, &costs, &pairs, &mut estimate, &mut residuals, &mut flags);
-    motion_from_estimate(current.keypoint_count(), &estimate, &pairs, &flags)
+    motion_from_estimate(current.keypoint_count(), &estimate, &pairs, &flags, focal_px(k0))
 }
 
 #[cfg(test)]
