@@ -122,7 +122,7 @@ pub(crate) fn run(args: &RecordArgs) -> anyhow::Result<()> {
         DepthCodecArg::Rvl => DepthCodec::Rvl,
         DepthCodecArg::RvlDeflate => DepthCodec::RvlDeflate,
     };
-    let options = RecordingOptions { depth_codec, color_codec, jpeg_quality: args.jpeg_quality };
+    let options = RecordingOptions { depth_codec, color_codec, jpeg_quality: args.jpeg_quality, depth_noise: source.depth_noise() };
     let partial = partial_path(&args.out)?;
     let stop = stop_on_signals()?;
     let sync_interval = std::time::Duration::from_millis(args.sync_interval_ms);
@@ -427,7 +427,7 @@ pub(crate) fn repair(args: &RepairArgs) -> anyhow::Result<()> {
         Some(report) => eprintln!("{}: {report}", args.input.display()),
         None => eprintln!("{}: intact ({} frames); writing a copy", args.input.display(), reader.frame_count()),
     }
-    let options = RecordingOptions { depth_codec: reader.depth_codec(), color_codec: reader.color_codec(), ..RecordingOptions::default() };
+    let options = RecordingOptions { depth_codec: reader.depth_codec(), color_codec: reader.color_codec(), depth_noise: reader.depth_noise(), ..RecordingOptions::default() };
     let partial = partial_path(&args.out)?;
     let written = (|| -> anyhow::Result<RecordingSummary> {
         let mut writer = RecordingWriter::create(&partial, reader.calibration(), options)?;

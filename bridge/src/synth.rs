@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
 //! `webfusion synth-room`: renders the synthetic furnished room (`core::sim::room`) along its
-//! loop into a `.wfr` recording with exact ground truth, for room-sized runs of the map (and any
+//! loop into a `.wfr` recording with exact ground truth and exact depth (said in its header), for room-sized runs of the map (and any
 //! command that reads a recording: `reconstruct`, `serve`, `eval`).
 
 use std::path::PathBuf;
@@ -9,6 +9,7 @@ use anyhow::Context as _;
 use webfusion_core::io::trajectory::TimedPose;
 use webfusion_core::recording::{RecordingOptions, RecordingWriter};
 use webfusion_core::sim::room::SyntheticRoom;
+use webfusion_core::source::DepthNoise;
 use webfusion_core::{PinholeIntrinsics, RgbdCalibration};
 
 #[derive(clap::Args)]
@@ -39,7 +40,9 @@ pub(crate) fn run(args: &SynthRoomArgs) -> anyhow::Result<()> {
     let k = PinholeIntrinsics::nominal_kinect(args.width, args.height);
     let path = room.path(args.frames);
     let calibration = RgbdCalibration { intrinsics: k, depth_units_per_metre: 5000.0 };
-    let mut writer = RecordingWriter::create(&args.out, calibration, RecordingOptions::default()).with_context(|| format!("creating {}", args.out.display()))?;
+    // The room's depth is exact (quantised to the TUM scale): a replay tracks and fuses it so.
+    let options = RecordingOptions { depth_noise: DepthNoise::None, ..RecordingOptions::default() };
+    let mut writer = RecordingWriter::create(&args.out, calibration, options).with_context(|| format!("creating {}", args.out.display()))?;
     let poses: Vec<TimedPose> = path.iter().enumerate().map(|(i, p)| TimedPose { timestamp_ns: i as i64 * 33_333_333, world_from_camera: *p }).collect();
     writer.set_ground_truth(&poses)?;
     let started = std::time::Instant::now();

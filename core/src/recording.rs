@@ -11,7 +11,7 @@
 //! and keeps every complete record whose CRC matches, resynchronising on the record magic past
 //! a damaged one (`webfusion repair` writes a finished copy).
 //!
-//! # Byte layout, version 2
+//! # Byte layout, version 3
 //!
 //! Integers are little-endian, floats IEEE 754 little-endian, CRCs CRC-32/ISO-HDLC (the
 //! zlib/PNG CRC). Reserved bytes are written as zero and rejected if not zero.
@@ -21,7 +21,7 @@
 //!
 //! header, 64 bytes at offset 0
 //!    0   8  magic                 89 57 46 52 0D 0A 1A 0A  ("\x89WFR\r\n\x1a\n")
-//!    8   2  version u16           2 (files of version 1 still read)
+//!    8   2  version u16           3 (files of versions 1 and 2 still read)
 //!   10   2  reserved
 //!   12   4  width_px u32          1..=8192
 //!   16   4  height_px u32         1..=8192
@@ -29,7 +29,9 @@
 //!   36   4  depth_units_per_metre f32
 //!   40   1  depth codec u8        1 = RVL, 2 = RVL + DEFLATE
 //!   41   1  colour codec u8       1 = JPEG, 2 = PNG
-//!   42   2  reserved
+//!   42   1  depth noise u8        0 = a Kinect v1's (a real sensor), 1 = exact (synthetic);
+//!                                 reserved (0) before version 3
+//!   43   1  reserved
 //!   44   4  frame count n u32     (written as 0 until the writer finishes)
 //!   48  12  reserved
 //!   60   4  CRC of bytes 0..60
@@ -87,14 +89,14 @@ use glam::{DQuat, DVec3};
 
 use crate::codec::{ColorCodec, DEFAULT_JPEG_QUALITY, DepthCodec};
 use crate::io::trajectory::TimedPose;
-use crate::source::FrameSource;
+use crate::source::{DepthNoise, FrameSource};
 use crate::{ColorImage, DepthImage, Error, PinholeIntrinsics, Result, RgbdCalibration, RgbdFrame, Se3};
 
 /// First 8 bytes of every recording. The high first byte and CR LF / EOF bytes detect text-mode
 /// and 7-bit transfers, as in PNG.
 pub const RECORDING_MAGIC: [u8; 8] = *b"\x89WFR\r\n\x1a\n";
 /// Format version this build writes and the newest it reads.
-pub const RECORDING_VERSION: u16 = 2;
+pub const RECORDING_VERSION: u16 = 3;
 /// File name extension of recordings (without the dot).
 pub const RECORDING_EXTENSION: &str = "wfr";
 /// Largest image width or height a recording may declare, in pixels. It bounds what decoding
@@ -126,11 +128,13 @@ pub struct RecordingOptions {
     pub color_codec: ColorCodec,
     /// JPEG quality 1..=100 when `color_codec` is JPEG.
     pub jpeg_quality: u8,
+    /// The noise of the depth written (a replay tracks and fuses by it).
+    pub depth_noise: DepthNoise,
 }
 
 impl Default for RecordingOptions {
     fn default() -> Self {
-        Self { depth_codec: DepthCodec::RvlDeflate, color_codec: ColorCodec::Jpeg, jpeg_quality: DEFAULT_JPEG_QUALITY }
+        Self { depth_codec: DepthCodec::RvlDeflate, color_codec: ColorCodec::Jpeg, jpeg_quality: DEFAULT_JPEG_QUALITY, depth_noise: DepthNoise::KinectV1 }
     }
 }
 
@@ -280,7 +284,7 @@ impl<W: Write + Seek> RecordingWriter<W> {
             committed: 0,
             failed: false,
         };
-        let header = encode_header(&calibration, options.depth_codec, options.color_codec, 0);
+        let header = encode_header(&calibration, options.depth_codec, options.color_codec, options.depth_noise, 0);
         writer.write_all(&header)?;
         writer.committed = writer.position;
         Ok(writer)
@@ -437,7 +441,7 @@ impl<W: Write + Seek> RecordingWriter<W> {
         self.write_all(&footer)?;
 
         // Complete the header now that the frame count is known.
-        let header = encode_header(&self.calibration, self.options.depth_codec, self.options.color_codec, frame_count);
+        let header = encode_header(&self.calibration, self.options.depth_codec, self.options.color_codec, self.options.depth_noise, frame_count);
         let io_error = |path: &Path, source| Error::Io { path: path.to_owned(), source };
         self.sink.seek(SeekFrom::Start(self.base)).map_err(|e| io_error(&self.path, e))?;
         self.sink.write_all(&header).map_err(|e| io_error(&self.path, e))?;
@@ -524,7 +528,7 @@ fn validate_calibration(calibration: &RgbdCalibration) -> std::result::Result<()
     Ok(())
 }
 
-fn encode_header(calibration: &RgbdCalibration, depth_codec: DepthCodec, color_codec: ColorCodec, frame_count: u32) -> [u8; HEADER_LEN] {
+fn encode_header(calibration: &RgbdCalibration, depth_codec: DepthCodec, color_codec: ColorCodec, depth_noise: DepthNoise, frame_count: u32) -> [u8; HEADER_LEN] {
     let k = &calibration.intrinsics;
     let mut header = [0_u8; HEADER_LEN];
     header[0..8].copy_from_slice(&RECORDING_MAGIC);
@@ -536,10 +540,27 @@ fn encode_header(calibration: &RgbdCalibration, depth_codec: DepthCodec, color_c
     }
     header[40] = depth_codec.id();
     header[41] = color_codec.id();
+    header[42] = depth_noise_id(depth_noise);
     header[44..48].copy_from_slice(&frame_count.to_le_bytes());
     let crc = crc32fast::hash(&header[..60]);
     header[60..64].copy_from_slice(&crc.to_le_bytes());
     header
+}
+
+/// The header's depth-noise byte (version 3).
+fn depth_noise_id(noise: DepthNoise) -> u8 {
+    match noise {
+        DepthNoise::KinectV1 => 0,
+        DepthNoise::None => 1,
+    }
+}
+
+fn depth_noise_of_id(id: u8) -> Option<DepthNoise> {
+    match id {
+        0 => Some(DepthNoise::KinectV1),
+        1 => Some(DepthNoise::None),
+        _ => None,
+    }
 }
 
 fn u16_at(bytes: &[u8], offset: usize) -> u16 {
@@ -623,6 +644,7 @@ pub struct RecordingReader {
     calibration: RgbdCalibration,
     depth_codec: DepthCodec,
     color_codec: ColorCodec,
+    depth_noise: DepthNoise,
     records: Vec<RecordSpan>,
     ground_truth: Option<Vec<TimedPose>>,
     take: Option<TakeStats>,
@@ -733,9 +755,10 @@ impl RecordingReader {
             return Err(error("invalid recording version 0".to_owned()));
         }
         check_crc(&header, 60, "header").map_err(&error)?;
-        if header[10..12] != [0; 2] || header[42..44] != [0; 2] || header[48..60] != [0; 12] {
+        if header[10..12] != [0; 2] || header[43] != 0 || (version < 3 && header[42] != 0) || header[48..60] != [0; 12] {
             return Err(error("reserved header bytes are not zero".to_owned()));
         }
+        let depth_noise = depth_noise_of_id(header[42]).ok_or_else(|| error(format!("unknown depth noise id {}", header[42])))?;
         let calibration = RgbdCalibration {
             intrinsics: PinholeIntrinsics {
                 fx_px: f32_at(&header, 20),
@@ -770,7 +793,7 @@ impl RecordingReader {
             }
             Err(e) => return Err(e),
         };
-        Ok(Self { storage, path, calibration, depth_codec, color_codec, records, ground_truth, take, recovery })
+        Ok(Self { storage, path, calibration, depth_codec, color_codec, depth_noise, records, ground_truth, take, recovery })
     }
 
     /// How the take went, from the footer of a finished version-2 file with a timed take;
@@ -1093,6 +1116,11 @@ impl FrameSource for RecordingReader {
         self.calibration
     }
 
+    /// What the header says (version 3; older files: a Kinect v1's).
+    fn depth_noise(&self) -> DepthNoise {
+        self.depth_noise
+    }
+
     fn frame_count(&self) -> usize {
         self.records.len()
     }
@@ -1212,7 +1240,7 @@ mod tests {
     }
 
     fn png_options() -> RecordingOptions {
-        RecordingOptions { depth_codec: DepthCodec::Rvl, color_codec: ColorCodec::Png, jpeg_quality: DEFAULT_JPEG_QUALITY }
+        RecordingOptions { depth_codec: DepthCodec::Rvl, color_codec: ColorCodec::Png, ..RecordingOptions::default() }
     }
 
     /// Three PNG frames with ground truth.
@@ -1376,11 +1404,11 @@ mod tests {
         let bytes = small_recording();
 
         let mut newer = bytes.clone();
-        newer[8..10].copy_from_slice(&3_u16.to_le_bytes());
+        newer[8..10].copy_from_slice(&4_u16.to_le_bytes());
         let message = recording_error(RecordingReader::from_bytes(newer.clone()));
-        assert_eq!(message, "recording version 3 is newer than this build supports (2)", "without a fixed CRC");
+        assert_eq!(message, "recording version 4 is newer than this build supports (3)", "without a fixed CRC");
         let message = recording_error(RecordingReader::from_bytes(with_header_crc(newer)));
-        assert_eq!(message, "recording version 3 is newer than this build supports (2)", "with a fixed CRC");
+        assert_eq!(message, "recording version 4 is newer than this build supports (3)", "with a fixed CRC");
 
         let mut reserved = bytes.clone();
         reserved[50] = 1;
@@ -1577,6 +1605,30 @@ mod tests {
         let reader = RecordingReader::from_bytes(cursor.into_inner()).expect("strict open");
         assert_eq!((reader.frame_count(), reader.ground_truth().map(<[_]>::len)), (0, Some(poses.len())), "empty take");
         assert!(reader.take_stats().is_none(), "an untimed file");
+    }
+
+    /// Version 3's header byte 42 says the depth's noise; a version-2 file (that byte reserved,
+    /// so 0) reads as a Kinect's, and an unknown id, or a non-zero byte in a version-2 header,
+    /// is named.
+    #[test]
+    fn the_depth_noise_round_trips_and_older_files_read_as_a_kinects() {
+        let frames: Vec<RgbdFrame> = (0..2).map(synthetic_frame).collect();
+        for noise in [DepthNoise::KinectV1, DepthNoise::None] {
+            let bytes = record_to_bytes(RecordingOptions { depth_noise: noise, ..png_options() }, &frames, None);
+            assert_eq!(u16_at(&bytes, 8), 3);
+            let reader = RecordingReader::from_bytes(bytes).expect("opening");
+            assert_eq!(reader.depth_noise(), noise);
+        }
+        let exact = record_to_bytes(RecordingOptions { depth_noise: DepthNoise::None, ..png_options() }, &frames, None);
+        let mut v2 = record_to_bytes(png_options(), &frames, None);
+        v2[8..10].copy_from_slice(&2_u16.to_le_bytes());
+        let reader = RecordingReader::from_bytes(with_header_crc(v2.clone())).expect("a version-2 file");
+        assert_eq!(reader.depth_noise(), DepthNoise::KinectV1);
+        v2[42] = 1;
+        assert!(recording_error(RecordingReader::from_bytes(with_header_crc(v2))).contains("reserved header bytes"), "byte 42 of a version-2 header");
+        let mut unknown = exact;
+        unknown[42] = 7;
+        assert_eq!(recording_error(RecordingReader::from_bytes(with_header_crc(unknown))), "unknown depth noise id 7");
     }
 
     #[test]

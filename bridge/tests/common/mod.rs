@@ -60,7 +60,10 @@ pub(crate) struct FusedRoom {
 pub(crate) fn fused_room(dir: &Path, frames: usize, voxel: &str) -> FusedRoom {
     let room = dir.join("room.wfr");
     ok(&["synth-room", "--out", s(&room), "--size", "4,2.5,4", "--frames", &frames.to_string(), "--width", "160", "--height", "120"]);
-    let gt = RecordingReader::open(&room).expect("the room").ground_truth().expect("exact poses").to_vec();
+    let reader = RecordingReader::open(&room).expect("the room");
+    // The room's header says its depth is exact, so it is fused with the band μ alone.
+    assert_eq!(reader.depth_noise(), webfusion_core::source::DepthNoise::None, "synth-room's depth is exact");
+    let gt = reader.ground_truth().expect("exact poses").to_vec();
     let poses = dir.join("gt.txt");
     std::fs::write(&poses, format_tum_trajectory(&gt)).expect("poses");
     let map = dir.join("room.wfm");
@@ -69,5 +72,7 @@ pub(crate) fn fused_room(dir: &Path, frames: usize, voxel: &str) -> FusedRoom {
     // The recording's ground truth comes out beside the trajectory, as it was recorded.
     let written = std::fs::read_to_string(fused.join("groundtruth.txt")).expect("groundtruth.txt");
     assert_eq!(written, format_tum_trajectory(&gt), "reconstruct writes the source's ground truth");
+    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(fused.join("stats.json")).expect("stats.json")).expect("json");
+    assert_eq!(stats["volume"]["noise_band_sigmas"], serde_json::json!(0.0), "exact depth fuses with the band μ");
     FusedRoom { room, gt, poses, map, fused }
 }
