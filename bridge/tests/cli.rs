@@ -182,7 +182,7 @@ fn an_unfinished_take_is_read_with_a_warning_and_repaired() {
 fn damaged_frames_stop_a_command_or_are_skipped_and_counted() {
     use webfusion_core::recording::RecordingReader;
     use webfusion_core::source::FrameSource as _;
-    let dir = scratch("corrupt");
+    let dir = scratch("damaged-frames");
     let take = record_sample_take(&dir, 12);
     let mut bytes = std::fs::read(&take).expect("read the take");
     let mut reader = RecordingReader::open(&take).expect("finished");
