@@ -79,6 +79,15 @@ pub(crate) fn run(args: &CompareArgs) -> anyhow::Result<()> {
     let mut sim = crate::open_with(&args.sim, None)?;
     let (rk, sk) = (real.calibration().intrinsics, sim.calibration().intrinsics);
     anyhow::ensure!((rk.width_px, rk.height_px) == (sk.width_px, sk.height_px), "the real frames are {}x{} but the simulated ones {}x{}: simulate at the real camera's size", rk.width_px, rk.height_px, sk.width_px, sk.height_px);
+    // Pixels compared must look along the same rays: half a pixel of misalignment anywhere in
+    // the image (a focal length off by Δf moves a pixel r px from the centre by r Δf / f).
+    let radius_px = f64::from(rk.width_px.max(rk.height_px));
+    let misalignment_px = (f64::from((rk.fx_px - sk.fx_px).abs()) * radius_px / f64::from(rk.fx_px)).max(f64::from((rk.fy_px - sk.fy_px).abs()) * radius_px / f64::from(rk.fy_px)) + f64::from((rk.cx_px - sk.cx_px).abs().max((rk.cy_px - sk.cy_px).abs()));
+    anyhow::ensure!(
+        misalignment_px <= 0.5,
+        "the real camera's intrinsics ({}, {}, {}, {}) are not the simulation's ({}, {}, {}, {}): pixels would be compared up to {misalignment_px:.1} px apart; simulate with --intrinsics {},{},{},{}",
+        rk.fx_px, rk.fy_px, rk.cx_px, rk.cy_px, sk.fx_px, sk.fy_px, sk.cx_px, sk.cy_px, rk.fx_px, rk.fy_px, rk.cx_px, rk.cy_px
+    );
     let real_units = f64::from(real.calibration().depth_units_per_metre);
     let sim_units = f64::from(sim.calibration().depth_units_per_metre);
     // Depth timestamps: read each frame once (a recording's index knows them only by reading).

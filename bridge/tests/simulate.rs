@@ -97,4 +97,8 @@ fn a_map_simulated_along_a_known_trajectory_replays_tracks_back_and_compares() {
     let small = dir.join("small");
     ok(&["simulate", "--map", s(&map), "--poses", s(&used), "--out", s(&small), "--image-size", "80x60"]);
     fails(&["compare", "--real", s(&room), "--sim", s(&small)], "80x60");
+    // The room's camera at 160x120 has f = 131.25 px; 3 px more moves the corner pixels by 3.7 px.
+    let wider = dir.join("wider");
+    ok(&["simulate", "--map", s(&map), "--poses", s(&used), "--out", s(&wider), "--intrinsics", "134.25,134.25,79.5,59.5,160,120"]);
+    fails(&["compare", "--real", s(&room), "--sim", s(&wider)], "simulate with --intrinsics 131.25,131.25");
 }
