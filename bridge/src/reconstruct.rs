@@ -220,14 +220,18 @@ fn apply_depth_noise(config: &mut FusionConfig, args: &ReconstructArgs, noise: D
 
 /// `--save-map`: every block of the mapper's map, with its settings and how it was made.
 /// `loaded_up`: a loaded map's up direction and how many frames it was made from.
-fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfig, args: &ReconstructArgs, source_name: &str, trajectory: &[TimedPose], loaded_up: Option<([f32; 3], usize)>) -> anyhow::Result<()> {
+fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfig, args: &ReconstructArgs, source: &dyn webfusion_core::source::FrameSource, trajectory: &[TimedPose], loaded_up: Option<([f32; 3], usize)>) -> anyhow::Result<()> {
     let Some(path) = &args.save_map else { return Ok(()) };
     let fused_frames = trajectory.len();
     let blocks = pollster::block_on(mapper.download_blocks(gpu)).context("downloading the map")?;
     let t = &config.tsdf;
+    let c = source.calibration();
+    let k = &c.intrinsics;
     let creation = serde_json::json!({
         "webfusion": env!("CARGO_PKG_VERSION"),
-        "source": source_name,
+        "source": source.name(),
+        // The camera it was fused from: `simulate` renders with it unless told otherwise.
+        "camera": { "fx_px": k.fx_px, "fy_px": k.fy_px, "cx_px": k.cx_px, "cy_px": k.cy_px, "width_px": k.width_px, "height_px": k.height_px, "depth_units_per_metre": c.depth_units_per_metre },
         "fused_frames": fused_frames,
         "poses": args.pose_file().map(|p| p.display().to_string()),
         "refine": args.refine,
@@ -397,7 +401,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     write_ground_truth(args, &*source)?;
     let given_json = given.as_ref().map(|_| given_report(args, &without_pose, Some(&refined))).transpose()?;
-    save_map(&gpu, fusion.mapper_mut(), &config, args, &source.name(), &trajectory, loaded_up)?;
+    save_map(&gpu, fusion.mapper_mut(), &config, args, &*source, &trajectory, loaded_up)?;
     if !args.no_mesh {
         let sw = crate::timing::Stopwatch::start();
         let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(&gpu)).context("extracting the mesh")?;
@@ -614,7 +618,7 @@ fn run_pose_driven(gpu: &webfusion_core::Gpu, args: &ReconstructArgs, config: &F
     write_tum_trajectory(&trajectory_path, &trajectory).with_context(|| format!("writing {}", trajectory_path.display()))?;
     write_ground_truth(args, &*source)?;
     let given_json = given_report(args, &without_pose, None)?;
-    save_map(gpu, mapper.mapper_mut(), config, args, &source.name(), &trajectory, loaded_up)?;
+    save_map(gpu, mapper.mapper_mut(), config, args, &*source, &trajectory, loaded_up)?;
     if !args.no_mesh {
         let sw = crate::timing::Stopwatch::start();
         let mesh = pollster::block_on(mapper.extract_mesh(gpu)).context("extracting the mesh")?;

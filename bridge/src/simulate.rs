@@ -11,7 +11,7 @@ use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::io::tum::ImageListWriter;
 use webfusion_core::io::{CALIBRATION_FILE, WrittenCalibration, format_calibration_file, format_timestamp_s};
 use webfusion_core::source::DepthNoise;
-use webfusion_core::map::file::{read_map_file, read_map_file_recovering};
+use webfusion_core::map::file::{MapFileHeader, read_map_file, read_map_file_recovering};
 use webfusion_core::map::occupancy::OccupancyGrid;
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, SimulatedFrame, VirtualSensor};
 use webfusion_core::tsdf::TsdfStore as _;
@@ -32,8 +32,9 @@ pub(crate) struct SimulateArgs {
     /// The output directory (TUM layout; must not hold a simulation already).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Intrinsics `fx,fy,cx,cy` in pixels (optionally `,W,H`); default the Kinect's nominal
-    /// 525 px at 640x480, scaled to --image-size.
+    /// Intrinsics `fx,fy,cx,cy` in pixels (optionally `,W,H`). Default: the camera the map was
+    /// fused from (`reconstruct --save-map` records it), else (or with --image-size alone) the
+    /// Kinect's nominal 525 px at 640x480, scaled to --image-size.
     #[arg(long, value_name = "FX,FY,CX,CY[,W,H]")]
     intrinsics: Option<String>,
     /// Image size `WxH` (default 640x480).
@@ -83,10 +84,19 @@ pub(crate) enum NoiseKind {
     Kinect,
 }
 
-/// The intrinsics of `--intrinsics` / `--image-size`.
-fn intrinsics(args: &SimulateArgs) -> anyhow::Result<PinholeIntrinsics> {
-    camera(args.intrinsics.as_deref(), args.image_size.as_deref(), (640, 480))
+/// The intrinsics of `--intrinsics` / `--image-size`; with neither, the camera the map was
+/// fused from (its creation parameters' `camera`, written by `reconstruct --save-map`), else the
+/// nominal Kinect at 640x480.
+fn intrinsics(args: &SimulateArgs, map: &MapFileHeader) -> anyhow::Result<(PinholeIntrinsics, &'static str)> {
+    if args.intrinsics.is_none() && args.image_size.is_none()
+        && let Some(k) = map.fused_camera()
+    {
+        return Ok((k, "the camera the map was fused from"));
+    }
+    let what = if args.intrinsics.is_some() { "--intrinsics" } else { "the nominal Kinect" };
+    Ok((camera(args.intrinsics.as_deref(), args.image_size.as_deref(), (640, 480))?, what))
 }
+
 
 /// A virtual camera from `--intrinsics fx,fy,cx,cy[,W,H]` and `--image-size WxH`: without
 /// intrinsics, the Kinect's nominal 525 px at 640x480 scaled to the size (`default_size` when
@@ -201,7 +211,6 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 }
 
 pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<()> {
-    let k = intrinsics(args)?;
     let poses = poses(args)?;
     let sensor_options = SensorOptions { hits: args.occupancy.is_some(), ..sensor_options(args)? };
     anyhow::ensure!(args.bench || args.out.is_some(), "--out DIR is needed (or --bench)");
@@ -209,6 +218,8 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
     if let Some(damage) = &file.damage {
         eprintln!("warning: {}: {damage}; rendering the intact blocks", args.map.display());
     }
+    let (k, camera_from) = intrinsics(args, &file.header)?;
+    println!("camera: {camera_from}, {}x{}, f = ({}, {}) px, c = ({}, {}) px", k.width_px, k.height_px, k.fx_px, k.fy_px, k.cx_px, k.cy_px);
     let gpu = pollster::block_on(Gpu::new(options))?;
     let map = webfusion_core::map::resident_map(&gpu, &file.header, &file.blocks).with_context(|| format!("loading {}", args.map.display()))?;
     println!("map {}: {} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU); {} poses, {}x{}, noise {:?}", args.map.display(), file.blocks.len(), file.header.voxel_size_m * 1e3, file.header.kind.name(), map.memory_bytes() as f64 / 1048576.0, poses.len(), k.width_px, k.height_px, args.noise);

@@ -101,4 +101,12 @@ fn a_map_simulated_along_a_known_trajectory_replays_tracks_back_and_compares() {
     let wider = dir.join("wider");
     ok(&["simulate", "--map", s(&map), "--poses", s(&used), "--out", s(&wider), "--intrinsics", "134.25,134.25,79.5,59.5,160,120"]);
     fails(&["compare", "--real", s(&room), "--sim", s(&wider)], "simulate with --intrinsics 131.25,131.25");
+    // Without --intrinsics or --image-size: the camera the map was fused from (the room's
+    // 160x120, recorded in the map's creation parameters), so it compares with the room as is.
+    let creation: serde_json::Value = serde_json::from_str(&webfusion_core::map::file::read_map_file(&map).expect("the map").header.creation).expect("creation JSON");
+    assert_eq!((&creation["camera"]["fx_px"], &creation["camera"]["width_px"]), (&serde_json::json!(131.25), &serde_json::json!(160)), "{creation}");
+    let own = dir.join("own-camera");
+    let out = ok(&["simulate", "--map", s(&map), "--poses", s(&used), "--out", s(&own)]);
+    assert!(out.contains("camera: the camera the map was fused from, 160x120"), "{out}");
+    ok(&["compare", "--real", s(&room), "--sim", s(&own)]);
 }

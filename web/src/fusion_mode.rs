@@ -603,9 +603,11 @@ impl FusionMode {
     /// Renders the virtual sensor in the opened map, or else in the fused one.
     pub(crate) fn render_sensor(&mut self, gpu: &Gpu, at: SensorPose) -> Result<(), String> {
         let map_from_world = self.map_from_world();
-        let store = match (&self.opened, &self.pipeline) {
-            (Some((o, _)), _) => &o.map,
-            (None, Some(p)) => p.fusion.volume(),
+        // Without a real frame at the pose, the sensor is the camera the map was made with: an
+        // opened map's (as `webfusion simulate` renders it), the stream's for the live map.
+        let (store, camera) = match (&self.opened, &self.pipeline) {
+            (Some((o, _)), _) => (&o.map, o.header.fused_camera()),
+            (None, Some(p)) => (p.fusion.volume(), Some(p.fusion.preprocessor().calibration().intrinsics)),
             (None, None) => return Err("virtual sensor: no map yet (fuse a frame, or open a saved map)".to_owned()),
         };
         let real = self.sensor.real().cloned();
@@ -631,7 +633,7 @@ impl FusionMode {
                 None => return Ok(()),
             },
         };
-        self.sensor.render(gpu, store, pose, real)?;
+        self.sensor.render(gpu, store, pose, real, camera)?;
         self.free_dirty = true;
         Ok(())
     }

@@ -200,12 +200,13 @@ impl SensorPanel {
         !self.pending.is_empty()
     }
 
-    /// Renders `store` at `map_from_camera`, beside `real` when the pose is that frame's; the
-    /// result comes back through [`Self::poll`]. With two renders in flight the request is
-    /// skipped (counted) rather than waited for.
-    pub(crate) fn render(&mut self, gpu: &Gpu, store: &dyn TsdfStore, map_from_camera: Se3, real: Option<RealFrame>) -> Result<(), String> {
+    /// Renders `store` at `map_from_camera`, beside `real` when the pose is that frame's (with
+    /// its camera; else with `camera`, the map's own, or the nominal Kinect); the result comes
+    /// back through [`Self::poll`]. With two renders in flight the request is skipped (counted)
+    /// rather than waited for.
+    pub(crate) fn render(&mut self, gpu: &Gpu, store: &dyn TsdfStore, map_from_camera: Se3, real: Option<RealFrame>, camera: Option<PinholeIntrinsics>) -> Result<(), String> {
         let key = SensorKey {
-            intrinsics: real.as_ref().map_or_else(|| PinholeIntrinsics::nominal_kinect(640, 480), |r| r.intrinsics),
+            intrinsics: real.as_ref().map_or_else(|| camera.unwrap_or_else(|| PinholeIntrinsics::nominal_kinect(640, 480)), |r| r.intrinsics),
             units_per_metre: real.as_ref().map_or(TUM_DEPTH_UNITS_PER_METRE, |r| r.units_per_metre),
             noise_seed: self.noise_seed,
         };

@@ -39,7 +39,7 @@ use glam::DVec3;
 use crate::Se3;
 use crate::cpu::shared::{BLOCK_VOXELS, block_key};
 use crate::map::{MapBlock, MapKind};
-use crate::{Error, Result};
+use crate::{Error, PinholeIntrinsics, Result};
 
 const MAGIC: &[u8; 8] = b"WFMAP\r\n\x1a";
 const BLOCK_MAGIC: &[u8; 4] = b"WFBK";
@@ -90,6 +90,21 @@ pub struct MapFileHeader {
     pub up_in_map: Option<[f32; 3]>,
     /// How it was made (source, frames, settings): the text of a JSON object (UTF-8).
     pub creation: String,
+}
+
+impl MapFileHeader {
+    /// The camera the map was fused from, as its creation parameters name it (`camera`:
+    /// fx_px, fy_px, cx_px, cy_px, width_px, height_px; written by `reconstruct --save-map`),
+    /// when it is there and valid: a virtual sensor renders what that camera would see unless
+    /// told otherwise. Maps saved before it was recorded have none.
+    pub fn fused_camera(&self) -> Option<PinholeIntrinsics> {
+        let creation: serde_json::Value = serde_json::from_str(&self.creation).ok()?;
+        let c = &creation["camera"];
+        let f = |key: &str| c[key].as_f64().map(|v| v as f32).filter(|v| v.is_finite());
+        let size = |key: &str| c[key].as_u64().and_then(|v| u32::try_from(v).ok()).filter(|v| (1..=8192).contains(v));
+        let k = PinholeIntrinsics { fx_px: f("fx_px")?, fy_px: f("fy_px")?, cx_px: f("cx_px")?, cy_px: f("cy_px")?, width_px: size("width_px")?, height_px: size("height_px")? };
+        (k.fx_px > 0.0 && k.fy_px > 0.0).then_some(k)
+    }
 }
 
 /// What a recovering read found wrong.
@@ -364,6 +379,24 @@ mod tests {
 
     fn header(color: bool) -> MapFileHeader {
         MapFileHeader { kind: MapKind::Sparse, color, voxel_size_m: 0.01, truncation_m: 0.04, noise_band_sigmas: 3.0, max_weight: 128, dims_voxels: [16384, 16384, 8184], origin_in_world: [-81.92, -81.92, -40.92], frame: MapFrame::GivenPoses, up_in_map: color.then_some([0.0, 0.6, 0.8]), creation: r#"{"source":"test","frames":3}"#.to_owned() }
+    }
+
+    /// The fusing camera comes back from the creation parameters; a map without one, or with
+    /// a camera that could not be (zero size, negative focal length, text), has none.
+    #[test]
+    fn the_fused_camera_is_read_from_the_creation_parameters() {
+        let with = |creation: &str| MapFileHeader { creation: creation.to_owned(), ..header(false) }.fused_camera();
+        let k = with(r#"{"camera":{"fx_px":517.3,"fy_px":516.5,"cx_px":318.6,"cy_px":255.3,"width_px":640,"height_px":480,"depth_units_per_metre":5000}}"#);
+        assert_eq!(k, Some(PinholeIntrinsics { fx_px: 517.3, fy_px: 516.5, cx_px: 318.6, cy_px: 255.3, width_px: 640, height_px: 480 }));
+        assert_eq!(header(false).fused_camera(), None, "no camera recorded");
+        for bad in [
+            r#"{"camera":{"fx_px":-517.3,"fy_px":516.5,"cx_px":318.6,"cy_px":255.3,"width_px":640,"height_px":480}}"#,
+            r#"{"camera":{"fx_px":517.3,"fy_px":516.5,"cx_px":318.6,"cy_px":255.3,"width_px":0,"height_px":480}}"#,
+            r#"{"camera":{"fx_px":"517","fy_px":516.5,"cx_px":318.6,"cy_px":255.3,"width_px":640,"height_px":480}}"#,
+            "not json",
+        ] {
+            assert_eq!(with(bad), None, "{bad}");
+        }
     }
 
     fn blocks(color: bool) -> Vec<MapBlock> {
