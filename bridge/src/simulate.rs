@@ -97,7 +97,6 @@ fn intrinsics(args: &SimulateArgs, map: &MapFileHeader) -> anyhow::Result<(Pinho
     Ok((camera(args.intrinsics.as_deref(), args.image_size.as_deref(), (640, 480))?, what))
 }
 
-
 /// A virtual camera from `--intrinsics fx,fy,cx,cy[,W,H]` and `--image-size WxH`: without
 /// intrinsics, the Kinect's nominal 525 px at 640x480 scaled to the size (`default_size` when
 /// none is given).
