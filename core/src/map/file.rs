@@ -101,7 +101,7 @@ impl MapFileHeader {
         let creation: serde_json::Value = serde_json::from_str(&self.creation).ok()?;
         let c = &creation["camera"];
         let f = |key: &str| c[key].as_f64().map(|v| v as f32).filter(|v| v.is_finite());
-        let size = |key: &str| c[key].as_u64().and_then(|v| u32::try_from(v).ok()).filter(|v| (1..=8192).contains(v));
+        let size = |key: &str| c[key].as_u64().and_then(|v| u32::try_from(v).ok()).filter(|v| (1..=crate::recording::MAX_IMAGE_SIDE_PX).contains(v));
         let k = PinholeIntrinsics { fx_px: f("fx_px")?, fy_px: f("fy_px")?, cx_px: f("cx_px")?, cy_px: f("cy_px")?, width_px: size("width_px")?, height_px: size("height_px")? };
         (k.fx_px > 0.0 && k.fy_px > 0.0).then_some(k)
     }

@@ -19,9 +19,10 @@
 //! applies it ([`crate::pose::twist_exp`]), in the keyframe's camera frame.
 
 use glam::{DMat3, DVec3};
-use nalgebra::{Matrix3, Matrix6, Vector6};
+use nalgebra::{Matrix6, Vector6};
 
 use crate::Se3;
+use super::rigid::{na_mat3, skew};
 use crate::pose::twist_exp;
 
 /// χ²(6 degrees of freedom) at 99 %: two estimates of one pose further apart than this in
@@ -53,9 +54,8 @@ impl UncertainPose {
 /// The adjoint of `t` for left perturbations ξ = (ω, v): exp(Ad ξ) t = t exp(ξ), to first
 /// order; Ad = [[R, 0], [[t]× R, R]].
 pub fn adjoint(t: &Se3) -> Matrix6<f64> {
-    let r = mat3(&DMat3::from_quat(t.rotation));
-    let p = t.translation_m;
-    let px = Matrix3::new(0.0, -p.z, p.y, p.z, 0.0, -p.x, -p.y, p.x, 0.0);
+    let r = na_mat3(&DMat3::from_quat(t.rotation));
+    let px = skew(t.translation_m);
     let mut ad = Matrix6::zeros();
     ad.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
     ad.fixed_view_mut::<3, 3>(3, 3).copy_from(&r);
@@ -69,11 +69,6 @@ pub fn twist_log(delta: &Se3) -> Vector6<f64> {
     let w = delta.rotation.to_scaled_axis();
     let t = delta.translation_m;
     Vector6::new(w.x, w.y, w.z, t.x, t.y, t.z)
-}
-
-fn mat3(m: &DMat3) -> Matrix3<f64> {
-    let c = m.to_cols_array_2d();
-    Matrix3::from_fn(|row, col| c[col][row])
 }
 
 /// Two estimates of one pose that [`fuse`] refused: their squared Mahalanobis distance exceeds

@@ -69,6 +69,17 @@ pub fn point_covariance(p: DVec3, level: u32, f_px: f64) -> DMat3 {
     DMat3::from_diagonal(DVec3::splat(lateral * lateral)) + (axial * axial - lateral * lateral) * outer(ray, ray)
 }
 
+/// `m` as nalgebra's matrix (for the factorisations glam lacks).
+pub(crate) fn na_mat3(m: &DMat3) -> Matrix3<f64> {
+    let c = m.to_cols_array_2d();
+    Matrix3::from_fn(|row, col| c[col][row])
+}
+
+/// The cross-product matrix [v]×: [v]× u = v × u.
+pub(crate) fn skew(v: DVec3) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
 fn outer(a: DVec3, b: DVec3) -> DMat3 {
     DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
@@ -222,15 +233,9 @@ fn pair_normal_equations(t: &Se3, c: &Correspondence) -> (Matrix6<f64>, Vector6<
     let r = c.dst - q;
     let omega = information(t, c);
     let mut j = nalgebra::Matrix3x6::<f64>::zeros();
-    let qx = [[0.0, -q.z, q.y], [q.z, 0.0, -q.x], [-q.y, q.x, 0.0]];
-    for a in 0..3 {
-        for b in 0..3 {
-            j[(a, b)] = qx[a][b];
-        }
-        j[(a, 3 + a)] = -1.0;
-    }
-    let o = omega.to_cols_array_2d();
-    let om = Matrix3::<f64>::from_fn(|a, b| o[b][a]);
+    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&skew(q));
+    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-Matrix3::<f64>::identity()));
+    let om = na_mat3(&omega);
     let rv = nalgebra::Vector3::new(r.x, r.y, r.z);
     (j.transpose() * om * j, j.transpose() * om * rv, r.dot(omega * r).sqrt())
 }
@@ -377,8 +382,7 @@ mod tests {
         let trials = 400;
         for _ in 0..trials {
             let mut draw = |cov: &DMat3| {
-                let c = cov.to_cols_array_2d();
-                let l = Matrix3::<f64>::from_fn(|r, k| c[k][r]).cholesky().expect("a covariance").l();
+                let l = na_mat3(cov).cholesky().expect("a covariance").l();
                 let v = l * nalgebra::Vector3::new(gaussian(), gaussian(), gaussian());
                 DVec3::new(v.x, v.y, v.z)
             };
