@@ -10,20 +10,24 @@
 //! fails. `--frame-to-frame` is 002's method: each frame against the previous one only.
 //!
 //! - `DIR/trajectory.txt`: the camera-to-world pose of every frame at its depth timestamp (TUM
-//!   format; the world is the first frame's camera). A frame whose motion is rejected keeps
+//!   format; the world is the first frame's camera). A frame whose motion against both
+//!   references is rejected is matched against the tracked frames before them (the newest
+//!   four others, [`RecentFrames`]; the accepted estimate with the most inliers relocalises it
+//!   and it becomes the keyframe, counted as `relocalised`). A frame that fails that too keeps
 //!   the last tracked pose and the next frame is matched against the same references; after
 //!   two rejected in a row, the second becomes the keyframe at that pose (a restart: the
 //!   motion missed is lost, counted as `reanchored`).
 //! - `DIR/stats.json`: per-stage times (002's: update, detection, description, matching,
 //!   estimation, total; median and p95) and per frame the keypoint, match and inlier counts.
 
+use std::collections::VecDeque;
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use webfusion_core::GpuOptions;
+use webfusion_core::{Gpu, GpuOptions};
 use webfusion_core::Se3;
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
-use webfusion_core::odometry::gpu::{FeatureExtractor, STAGES};
+use webfusion_core::odometry::gpu::{FeatureExtractor, RELOCALISATION_CANDIDATES, STAGES};
 use webfusion_core::odometry::keyframe::{Disagreement, UncertainPose, fuse};
 use webfusion_core::odometry::matching::MatchConfig;
 use webfusion_core::odometry::tracker::OdometryConfig;
@@ -82,10 +86,57 @@ pub(crate) struct OdometryArgs {
     skip_corrupt: bool,
 }
 
-/// Consecutive rejected frames after which the last one becomes the reference, at the last
-/// tracked pose: one bad frame (blur) is skipped and the next is matched to the same reference;
-/// two in a row mean the stream has moved on.
+/// Consecutive rejected frames (relocalisation included) after which the last one becomes the
+/// reference, at the last tracked pose: one bad frame (blur) is skipped and the next is matched
+/// to the same references; two in a row mean the stream has moved on.
 const REANCHOR_AFTER: usize = 2;
+
+/// Tracked frames whose features are kept for relocalisation: the candidates of one
+/// submission ([`RELOCALISATION_CANDIDATES`]) besides the keyframe and the previous frame,
+/// which the rejected estimates already tried.
+const RECENT_FRAMES: usize = RELOCALISATION_CANDIDATES + 2;
+
+/// The newest tracked frames, each in its own keyframe slot of the extractor
+/// ([`FeatureExtractor::store_keyframe`]), for relocalising a frame that neither the keyframe
+/// nor the previous frame could be matched to: a reference that is itself poor (motion blur,
+/// few keypoints) is the usual cause, and the frames tracked just before it saw the same view.
+#[derive(Default)]
+struct RecentFrames {
+    /// (keyframe slot, source frame index, camera-to-world pose), oldest first.
+    frames: VecDeque<(usize, usize, Se3)>,
+}
+
+impl RecentFrames {
+    /// The source index of the newest frame kept (the previous tracked frame).
+    fn newest(&self) -> Option<usize> {
+        self.frames.back().map(|f| f.1)
+    }
+
+    /// Keeps the last processed frame (source `index`, at `world_from_camera`), in place of the
+    /// oldest once full.
+    fn remember(&mut self, gpu: &Gpu, extractor: &mut FeatureExtractor, index: usize, world_from_camera: Se3) -> anyhow::Result<()> {
+        let slot = match self.frames.len() {
+            n if n < RECENT_FRAMES => n,
+            _ => self.frames.pop_front().map(|f| f.0).context("a full store has an oldest frame")?,
+        };
+        extractor.store_keyframe(gpu, slot)?;
+        self.frames.push_back((slot, index, world_from_camera));
+        Ok(())
+    }
+
+    /// Matches the last processed frame (of `keypoints` keypoints) against the newest kept
+    /// frames other than `tried`, in one submission, and returns the accepted estimate with the
+    /// most RANSAC inliers: (camera-to-world pose, the frame it came from, inliers).
+    async fn relocalise(&self, gpu: &Gpu, extractor: &mut FeatureExtractor, tried: &[Option<usize>], keypoints: usize, seed: u32) -> anyhow::Result<Option<(Se3, usize, usize)>> {
+        let candidates: Vec<(usize, usize, Se3)> = self.frames.iter().rev().filter(|f| !tried.contains(&Some(f.1))).take(RELOCALISATION_CANDIDATES).copied().collect();
+        if candidates.is_empty() {
+            return Ok(None);
+        }
+        let slots: Vec<usize> = candidates.iter().map(|f| f.0).collect();
+        let estimates = extractor.match_keyframes(gpu, &slots, keypoints, seed).await?;
+        Ok(candidates.iter().zip(estimates).filter_map(|(&(_, frame, world_from_ref), e)| Some((world_from_ref.compose(&e.reference_from_current()?), frame, e.inliers()))).max_by_key(|c| c.2))
+    }
+}
 
 /// `A..B` as a range (end exclusive).
 pub(crate) fn parse_range(spec: &str, what: &str) -> anyhow::Result<std::ops::Range<usize>> {
@@ -121,11 +172,13 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     let mut world_from_kf: Option<Se3> = None;
     let mut kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
     let mut first_inliers: Option<usize> = None;
+    let mut keyframe_index: Option<usize> = None;
+    let mut recent = RecentFrames::default();
     let mut trajectory = Vec::new();
     let mut times = StageTimes::default();
     let mut frames_json = Vec::new();
     let mut skipped = Vec::new();
-    let (mut tracked, mut lost, mut via_previous, mut reanchored, mut fused, mut disagreed) = (0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
+    let (mut tracked, mut lost, mut via_previous, mut reanchored, mut fused, mut disagreed, mut relocalisations) = (0usize, 0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
     let mut consecutive_rejected = 0usize;
     let (mut keypoint_counts, mut match_counts, mut inlier_counts) = (Vec::new(), Vec::new(), Vec::new());
     for index in frames {
@@ -156,76 +209,111 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                 match_counts.push(reported.matches as f64);
                 inlier_counts.push(reported.inliers() as f64);
                 // The current camera relative to the keyframe: directly, and through the
-                // previous frame (its covariance grown by the chain's).
+                // previous frame (with its covariance grown by the chain's when the step has
+                // one).
                 let kf_direct = direct.rigid.as_ref().map(|r| (r.dst_from_src, r.covariance));
                 let kf_chained = through_previous.as_ref().and_then(|e| e.rigid.as_ref()).map(|r| {
                     entry["inliers_previous"] = r.inliers.len().into();
-                    let step = UncertainPose { pose: r.dst_from_src, covariance: r.covariance.unwrap_or_default() };
-                    (kf_from_prev.then(&step), r.covariance.is_some())
+                    let uncertain = r.covariance.map(|covariance| kf_from_prev.then(&UncertainPose { pose: r.dst_from_src, covariance }));
+                    (kf_from_prev.pose.compose(&r.dst_from_src), uncertain)
                 });
-                // (keyframe_from_current, what it came from, whether the current frame becomes
-                // the next keyframe).
+                // keyframe_from_current, with its covariance when the keyframe is kept (`None`:
+                // the current frame becomes the next keyframe), and what it came from.
                 let outcome = match (kf_direct, kf_chained) {
-                    (Some((pose, Some(covariance))), Some((chained, true))) => match fuse(&UncertainPose { pose, covariance }, &chained) {
+                    (Some((pose, Some(covariance))), Some((_, Some(chained)))) => match fuse(&UncertainPose { pose, covariance }, &chained) {
                         Ok(f) => {
                             fused += 1;
-                            Some((f, "fused", false))
+                            Some((f.pose, Some(f), "fused"))
                         }
                         Err(Disagreement { chi2 }) => {
                             // One of them is wrong: the shorter baseline is kept.
                             disagreed += 1;
                             entry["chi2"] = chi2.into();
-                            Some((chained, "previous (disagreed)", true))
+                            Some((chained.pose, None, "previous (disagreed)"))
                         }
                     },
-                    (Some((pose, covariance)), _) => Some((UncertainPose { pose, covariance: covariance.unwrap_or_default() }, "keyframe", covariance.is_none())),
+                    (Some((pose, covariance)), _) => Some((pose, covariance.map(|covariance| UncertainPose { pose, covariance }), "keyframe")),
                     (None, Some((chained, _))) => {
                         via_previous += 1;
-                        Some((chained, "previous", true))
+                        Some((chained, None, "previous"))
                     }
                     (None, None) => None,
                 };
                 match outcome {
-                    Some((kf_from_cur, against, mut new_keyframe)) => {
+                    Some((kf_from_cur, keep, against)) => {
                         tracked += 1;
                         consecutive_rejected = 0;
                         entry["against"] = against.into();
                         let first = *first_inliers.get_or_insert(direct.inliers());
-                        new_keyframe |= args.frame_to_frame || (direct.inliers() as f64) < args.keyframe_overlap * first as f64;
-                        extractor.accept(new_keyframe);
-                        let pose = world_from_keyframe.compose(&kf_from_cur.pose);
-                        if new_keyframe {
-                            world_from_kf = Some(pose);
-                            kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
-                            first_inliers = None;
-                        } else {
-                            kf_from_prev = kf_from_cur;
+                        let renew = args.frame_to_frame || (direct.inliers() as f64) < args.keyframe_overlap * first as f64;
+                        let keep = keep.filter(|_| !renew);
+                        extractor.accept(keep.is_none());
+                        let pose = world_from_keyframe.compose(&kf_from_cur);
+                        match keep {
+                            Some(kf_from_cur) => kf_from_prev = kf_from_cur,
+                            None => {
+                                world_from_kf = Some(pose);
+                                keyframe_index = Some(index);
+                                kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
+                                first_inliers = None;
+                            }
                         }
+                        recent.remember(&gpu, &mut extractor, index, pose)?;
                         pose
                     }
                     None => {
-                        entry["tracked"] = false.into();
-                        lost += 1;
-                        consecutive_rejected += 1;
-                        let pose = world_from_keyframe.compose(&kf_from_prev.pose);
-                        if consecutive_rejected >= REANCHOR_AFTER {
-                            // The stream has moved on from the reference (a gap, a cut): restart
-                            // from this frame at the last pose; the motion missed is lost.
-                            extractor.accept(true);
-                            world_from_kf = Some(pose);
-                            kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
-                            first_inliers = None;
-                            consecutive_rejected = 0;
-                            reanchored += 1;
-                            entry["reanchored"] = true.into();
+                        let last_tracked = world_from_keyframe.compose(&kf_from_prev.pose);
+                        // Neither the keyframe nor the previous frame: the recent tracked
+                        // frames before them (a blurred reference is the usual cause).
+                        let tried = [keyframe_index, recent.newest()];
+                        let relocalise = Stopwatch::start();
+                        let relocalised = pollster::block_on(recent.relocalise(&gpu, &mut extractor, &tried, keypoints, seed))?;
+                        times.record("relocalise (wall)", relocalise.ms());
+                        match relocalised {
+                            Some((pose, from_frame, inliers)) => {
+                                tracked += 1;
+                                relocalisations += 1;
+                                consecutive_rejected = 0;
+                                entry["tracked"] = true.into();
+                                entry["against"] = "recent".into();
+                                entry["relocalised"] = serde_json::json!({ "frame": from_frame, "inliers": inliers });
+                                extractor.accept(true);
+                                world_from_kf = Some(pose);
+                                keyframe_index = Some(index);
+                                kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
+                                first_inliers = None;
+                                recent.remember(&gpu, &mut extractor, index, pose)?;
+                                pose
+                            }
+                            None => {
+                                entry["tracked"] = false.into();
+                                lost += 1;
+                                consecutive_rejected += 1;
+                                if consecutive_rejected >= REANCHOR_AFTER {
+                                    // The stream has moved on from the reference (a gap, a cut):
+                                    // restart from this frame at the last pose; the motion
+                                    // missed is lost.
+                                    extractor.accept(true);
+                                    world_from_kf = Some(last_tracked);
+                                    keyframe_index = Some(index);
+                                    kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
+                                    first_inliers = None;
+                                    consecutive_rejected = 0;
+                                    reanchored += 1;
+                                    entry["reanchored"] = true.into();
+                                    recent.remember(&gpu, &mut extractor, index, last_tracked)?;
+                                }
+                                last_tracked
+                            }
                         }
-                        pose
                     }
                 }
             }
             None => {
                 extractor.accept(true);
                 world_from_kf = Some(Se3::IDENTITY);
+                keyframe_index = Some(index);
+                recent.remember(&gpu, &mut extractor, index, Se3::IDENTITY)?;
                 Se3::IDENTITY
             }
         };
@@ -251,6 +339,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
         "rejected": lost,
         "tracked_against_previous": via_previous,
         "reanchored": reanchored,
+        "relocalised": relocalisations,
         "fused": fused,
         "disagreed": disagreed,
         "frame_to_frame": args.frame_to_frame,
@@ -268,7 +357,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     std::fs::write(&stats_path, serde_json::to_string_pretty(&stats)?).with_context(|| format!("writing {}", stats_path.display()))?;
     times.print();
     println!(
-        "{} frames: {tracked} tracked, {lost} rejected ({reanchored} restarts); median {:.0} keypoints, {:.0} matches, {:.0} inliers{}",
+        "{} frames: {tracked} tracked ({relocalisations} relocalised), {lost} rejected ({reanchored} restarts); median {:.0} keypoints, {:.0} matches, {:.0} inliers{}",
         trajectory.len(),
         median(&keypoint_counts),
         median(&match_counts),

@@ -8,7 +8,7 @@ use std::process::{Command, Output};
 
 use webfusion_core::eval::{AteOptions, ate};
 use webfusion_core::io::trajectory::read_tum_trajectory;
-use webfusion_core::recording::RecordingReader;
+use webfusion_core::recording::{RecordingOptions, RecordingReader, RecordingWriter};
 use webfusion_core::source::FrameSource as _;
 
 const SAMPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/sample/fr1_rpy.wfr");
@@ -61,6 +61,54 @@ fn the_sample_is_tracked_by_features_near_its_ground_truth() {
         // Measured: frame to frame 1.04 cm, keyframes 0.96 cm. Drift over one second of
         // fr1_rpy's fast rotation.
         assert!(rmse_m < 0.03, "{mode}: ATE {rmse_m} m");
+    }
+}
+
+/// A reference too poor to match the next frame (seen on fr3_teddy across a gap of ten frames:
+/// frame 39, blurred, still tracked, then no consensus with frame 50, while frames 34–38 match
+/// it), built exactly: the sample's frame 0 three times at one pose, the second keeping only
+/// the right third of its colour (uniform grey elsewhere), the third only the left third.
+/// Frame to frame, the third has no keypoint in common with the second, so its estimate
+/// against it fails (the control: that estimate is in stats as rejected); it is relocalised
+/// against the first frame, at the identity, instead of being dropped and restarted.
+#[test]
+fn a_frame_its_reference_cannot_match_is_relocalised_against_an_earlier_one() {
+    let mut reader = RecordingReader::open(SAMPLE).expect("sample");
+    let base = reader.read_frame(0).expect("frame 0");
+    let dir = scratch("relocalise");
+    let recording = dir.join("thirds.wfr");
+    let mut writer = RecordingWriter::create(&recording, reader.calibration(), RecordingOptions::default()).expect("recording");
+    let w = base.color.width_px as usize;
+    // The colour's columns kept: all, the right third, the left third.
+    for (i, kept) in [0..w, 2 * w / 3..w, 0..w / 3].into_iter().enumerate() {
+        let mut frame = base.clone();
+        for (px, rgb) in frame.color.rgb8.chunks_exact_mut(3).enumerate() {
+            if !kept.contains(&(px % w)) {
+                rgb.fill(128);
+            }
+        }
+        frame.index = i as u64;
+        frame.depth_timestamp_ns = base.depth_timestamp_ns + i as i64 * 33_333_333;
+        frame.color_timestamp_ns = base.color_timestamp_ns + i as i64 * 33_333_333;
+        writer.write_frame(&frame).expect("frame");
+    }
+    writer.finish().expect("finish");
+    let out = dir.join("out");
+    let o = webfusion(&["odometry", recording.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--frame-to-frame"]);
+    assert!(o.status.success(), "odometry failed: {}", String::from_utf8_lossy(&o.stderr));
+    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).expect("stats.json")).expect("json");
+    let third = &stats["per_frame"][2];
+    eprintln!("second frame {}; third frame {third}", stats["per_frame"][1]);
+    assert_eq!(stats["per_frame"][1]["tracked"], true, "the right third matches the whole frame: {stats}");
+    assert_eq!(third["inliers"], 0, "the left third cannot match the right third: {third}");
+    assert_eq!(third["relocalised"]["frame"], 0, "{third}");
+    assert!(third["relocalised"]["inliers"].as_u64().is_some_and(|n| n >= 20), "{third}");
+    assert_eq!((stats["tracked"].as_u64(), stats["relocalised"].as_u64(), stats["rejected"].as_u64(), stats["reanchored"].as_u64()), (Some(2), Some(1), Some(0), Some(0)), "{stats}");
+    let poses = read_tum_trajectory(&out.join("trajectory.txt")).expect("trajectory.txt");
+    assert_eq!(poses.len(), 3);
+    for p in &poses {
+        let (t_m, r_rad) = (p.world_from_camera.translation_m.length(), p.world_from_camera.rotation_angle_rad());
+        assert!(t_m < 1e-3 && r_rad < 1e-3, "every frame is at the first one's pose: {t_m} m, {r_rad} rad");
     }
 }
 
