@@ -13,7 +13,8 @@
 //!    (Ω the residual's information at the current estimate, ρ Huber at √χ² · s, the update
 //!    exp(ξ) on the left, the 6 × 6 system Jacobi-scaled and Cholesky-factored by invocation 0,
 //!    stopping once |ξ| < GN_CONVERGED_STEP), then the scale and the inliers again, until
-//!    the inlier set no longer changes;
+//!    the inlier set no longer changes; if it still changes after `refits`, Gauss-Newton once
+//!    more on the last classification, so the estimate is the optimum of the inliers it reports;
 //! 5. accepted when at least `min_inliers` remain, no system was singular and the noise scale
 //!    is within max_noise_scale (002's rejection of poor residuals: pairs noisier than that
 //!    bound are not a motion the sensor model can vouch for); the inliers' RMS residual. The result goes into `estimate` (its pair count kept). Mirrors
@@ -177,6 +178,30 @@ fn accumulate(lid: u32, n: u32, pose: mat4x4<f32>, huber: f32) -> array<f32, GN_
 
 // Invocation 0: one Gauss-Newton step from the reduced sums; updates sh_pose, or rejects when
 // the system is singular, and marks convergence.
+// `params.iterations` Gauss-Newton steps on the current inliers from `sh_pose` when `running`
+// (stopping at convergence or a singular system), the Huber threshold from `sh_scale`; every
+// invocation calls it (it holds barriers) with the same `running`.
+fn gauss_newton(lid: u32, n: u32, running: bool) {
+    let huber = sqrt(CHI2_3DOF_95) * min(sh_scale, params.max_noise_scale);
+    if lid == 0u {
+        sh_converged = 0u;
+    }
+    for (var it = 0u; it < params.iterations; it++) {
+        workgroupBarrier();
+        let stepping = running && sh_state == REFINE_RUNNING && sh_converged == 0u;
+        let pose = sh_pose;
+        var acc: array<f32, GN_FLOATS>;
+        if stepping {
+            acc = accumulate(lid, n, pose, huber);
+        }
+        sh_sums[lid] = acc;
+        reduce_sums(lid);
+        if lid == 0u && stepping {
+            solve_step();
+        }
+    }
+}
+
 fn solve_step() {
     var a: array<f32, 36>;
     var g: array<f32, 6>;
@@ -282,24 +307,7 @@ fn main(@builtin(local_invocation_index) lid: u32) {
         }
         workgroupBarrier();
         let running = sh_state == REFINE_RUNNING;
-        let huber = sqrt(CHI2_3DOF_95) * min(sh_scale, params.max_noise_scale);
-        if lid == 0u {
-            sh_converged = 0u;
-        }
-        for (var it = 0u; it < params.iterations; it++) {
-            workgroupBarrier();
-            let stepping = running && sh_state == REFINE_RUNNING && sh_converged == 0u;
-            let pose = sh_pose;
-            var acc: array<f32, GN_FLOATS>;
-            if stepping {
-                acc = accumulate(lid, n, pose, huber);
-            }
-            sh_sums[lid] = acc;
-            reduce_sums(lid);
-            if lid == 0u && stepping {
-                solve_step();
-            }
-        }
+        gauss_newton(lid, n, running);
         workgroupBarrier();
         let still = running && sh_state == REFINE_RUNNING;
         if still {
@@ -318,6 +326,14 @@ fn main(@builtin(local_invocation_index) lid: u32) {
             }
         }
     }
+    // 4b. Inliers still changing after `refits`: Gauss-Newton once more on the last
+    // classification (none after it), so the estimate is the optimum of the inliers it reports.
+    workgroupBarrier();
+    if lid == 0u && sh_state == REFINE_RUNNING && sh_inliers < params.min_inliers {
+        sh_state = REFINE_REJECTED;
+    }
+    workgroupBarrier();
+    gauss_newton(lid, n, sh_state == REFINE_RUNNING);
     // 5. The verdict and the inliers' RMS residual.
     workgroupBarrier();
     let pose = sh_pose;

@@ -179,27 +179,32 @@ pub fn ransac_refine(params: &RansacParams, hypotheses: &[Mat4], costs: &[f32], 
     let mut scale = noise_scale(residuals, n, loose);
     let bound = scale.min(params.max_noise_scale);
     let (mut inliers, _) = classify(residuals, inlier_flags, n, CHI2_3DOF_95 * bound * bound, true);
+    // `params.iterations` Gauss-Newton steps on the inliers when `running` (the kernel's
+    // `gauss_newton`).
+    let gauss_newton = |pose: &mut Mat4, state: &mut State, inlier_flags: &[u32], scale: f32, running: bool| {
+        let huber = CHI2_3DOF_95.sqrt() * scale.min(params.max_noise_scale);
+        let mut converged = false;
+        for _ in 0..params.iterations {
+            if !(running && *state == State::Running && !converged) {
+                continue;
+            }
+            let mut sums: Vec<[f32; GN_FLOATS]> = (0..RANSAC_REFINE_WORKGROUP).map(|lid| accumulate(params, pairs, inlier_flags, lid, n, pose, huber)).collect();
+            match solve_step(&reduce_sums(&mut sums), pose) {
+                Some((next, done)) => {
+                    *pose = next;
+                    converged = done;
+                }
+                None => *state = State::Rejected,
+            }
+        }
+    };
     // 4.
     for _ in 0..params.refits {
         if state == State::Running && inliers < params.min_inliers {
             state = State::Rejected;
         }
         let running = state == State::Running;
-        let huber = CHI2_3DOF_95.sqrt() * scale.min(params.max_noise_scale);
-        let mut converged = false;
-        for _ in 0..params.iterations {
-            if !(running && state == State::Running && !converged) {
-                continue;
-            }
-            let mut sums: Vec<[f32; GN_FLOATS]> = (0..RANSAC_REFINE_WORKGROUP).map(|lid| accumulate(params, pairs, inlier_flags, lid, n, &pose, huber)).collect();
-            match solve_step(&reduce_sums(&mut sums), &pose) {
-                Some((next, done)) => {
-                    pose = next;
-                    converged = done;
-                }
-                None => state = State::Rejected,
-            }
-        }
+        gauss_newton(&mut pose, &mut state, inlier_flags, scale, running);
         let still = running && state == State::Running;
         if still {
             compute(&pose, residuals);
@@ -216,6 +221,12 @@ pub fn ransac_refine(params: &RansacParams, hypotheses: &[Mat4], costs: &[f32], 
             }
         }
     }
+    // 4b. Inliers still changing: once more on the last classification.
+    if state == State::Running && inliers < params.min_inliers {
+        state = State::Rejected;
+    }
+    let unsettled = state == State::Running;
+    gauss_newton(&mut pose, &mut state, inlier_flags, scale, unsettled);
     // 5.
     let mut sums: Vec<[f32; GN_FLOATS]> = (0..RANSAC_REFINE_WORKGROUP)
         .map(|lid| {
