@@ -289,7 +289,7 @@ impl DepthPreprocessor {
         if let (Some(b), Some(unfiltered)) = (config.bilateral, &depth_unfiltered_m) {
             let params = gpu.uniform_buffer("core.bilateral_filter.params", &b.params(&k0));
             let bg = bilateral_filter::Bindings { params: &params, depth_in_m: unfiltered, depth_out_m: &levels[0].depth_m }.bind_group(gpu);
-            push(IMAGES, "bilateral_filter".into(), |k| &k.bilateral_filter, params, bg, [w0, h0, 1]);
+            push(GEOMETRY, "bilateral_filter".into(), |k| &k.bilateral_filter, params, bg, [w0, h0, 1]);
         }
         for l in 1..levels.len() {
             let (fine, coarse) = (&levels[l - 1], &levels[l]);

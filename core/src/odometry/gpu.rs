@@ -197,7 +197,10 @@ impl FeatureExtractor {
         let sets = [set(0), set(1), set(2)];
         let pattern = gpu.storage_buffer::<[f32; 4]>("core.orb_describe.pattern", 256);
         gpu.write_buffer(&pattern, &descriptor_pattern());
-        let depth_m = &preprocessor.levels[0].depth_m;
+        // Keypoints are lifted from the raw metric depth (before the bilateral filter): its noise
+        // is the Kinect model's that the estimate weighs pairs by, independent between pixels,
+        // and what the border filter's 4σ test is calibrated for.
+        let depth_m = preprocessor.depth_unfiltered_m.as_ref().unwrap_or(&preprocessor.levels[0].depth_m);
         let levels = layout
             .iter()
             .map(|l| {

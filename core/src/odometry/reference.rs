@@ -7,7 +7,8 @@ use crate::cpu;
 use crate::kernels::hamming_match::HammingMatchParams;
 
 /// Keypoints, points and descriptors of one frame: `intensity[l]` is pyramid level l's
-/// intensity (level 0 at `k0`'s size) and `depth_m` the full-resolution depth.
+/// intensity (level 0 at `k0`'s size) and `depth_m` the full-resolution metric depth before the
+/// bilateral filter (what [`super::gpu::FeatureExtractor`] lifts keypoints with).
 ///
 /// # Panics
 /// If fewer intensity levels are given than the layout uses (a caller's bug).

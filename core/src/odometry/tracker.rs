@@ -119,7 +119,7 @@ mod tests {
         let features = |i: usize| {
             let pre = preprocess(&calibration, &PreprocessConfig::default(), &room.frame(&k, &path, i));
             let levels: Vec<&[f32]> = pre.levels.iter().map(|l| l.intensity.as_slice()).collect();
-            extract(&config.features, &k, &levels, &pre.levels[0].depth_m)
+            extract(&config.features, &k, &levels, &pre.depth_unfiltered_m)
         };
         let mut previous = features(0);
         for i in 1..4 {

@@ -4,7 +4,7 @@
 //! sets rotating through their roles) against the CPU chain of twins
 //! (`odometry::reference::extract`, `hamming_match` and `tracker::estimate_motion`) on four
 //! frames of the sample. The GPU's preprocessing is held to its twin within tolerances
-//! (bilateral filter), so a keypoint at a threshold may fall either way: at least 98 % of the
+//! (intensity), so a keypoint at a threshold may fall either way: at least 98 % of the
 //! slots and of the matches must be identical, and the motions agree within 2 mm and 0.2°
 //! (the same method on nearly the same pairs).
 
@@ -21,7 +21,7 @@ pub(crate) fn cpu_features(index: usize) -> Features {
     let (calibration, frame) = sample_frame(index);
     let pre = preprocess(&calibration, &PreprocessConfig::default(), &frame);
     let levels: Vec<&[f32]> = pre.levels.iter().map(|l| l.intensity.as_slice()).collect();
-    reference::extract(&FeatureConfig::default(), &calibration.intrinsics, &levels, &pre.levels[0].depth_m)
+    reference::extract(&FeatureConfig::default(), &calibration.intrinsics, &levels, &pre.depth_unfiltered_m)
 }
 
 /// Keypoint slots (position, level, whether held) at most 2 % different.

@@ -49,7 +49,22 @@ fn filtered_point(params: &KeypointSelectParams, depth_m: &[f32], x0: f32, y0: f
     if missing >= 3 {
         return INVALID_VEC4;
     }
-    [(x0 - params.cx_px) / params.fx_px * z, (y0 - params.cy_px) / params.fy_px * z, z, 1.0]
+    // The depth along the ray: the tent filter of radius 2 px about (x0, y0).
+    let (bx, by) = (x0.floor() as i32 - 1, y0.floor() as i32 - 1);
+    let (mut sum, mut weight) = (0.0f32, 0.0f32);
+    for j in 0..4 {
+        for i in 0..4 {
+            let (px, py) = ((bx + i).clamp(0, w - 1), (by + j).clamp(0, h - 1));
+            let wt = (2.0 - ((bx + i) as f32 - x0).abs()).max(0.0) * (2.0 - ((by + j) as f32 - y0).abs()).max(0.0);
+            let n = depth_m[(py * w + px) as usize];
+            if wt > 0.0 && is_valid_f32(n) && n > 0.0 && (n - z).abs() <= step {
+                sum += wt * n;
+                weight += wt;
+            }
+        }
+    }
+    let zm = sum / weight;
+    [(x0 - params.cx_px) / params.fx_px * zm, (y0 - params.cy_px) / params.fy_px * zm, zm, 1.0]
 }
 
 /// Selects every cell's keypoints as the kernel's invocations do.
