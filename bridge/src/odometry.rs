@@ -91,6 +91,23 @@ pub(crate) struct OdometryArgs {
 /// to the same references; two in a row mean the stream has moved on.
 const REANCHOR_AFTER: usize = 2;
 
+/// The keyframe frames are matched against: its source index and camera-to-world pose, the
+/// previous tracked frame relative to it with that relative pose's covariance (their features
+/// stay on the GPU), and the inliers of its first tracked frame (for `--keyframe-overlap`).
+struct Keyframe {
+    index: usize,
+    world_from_keyframe: Se3,
+    from_previous: UncertainPose,
+    first_inliers: Option<usize>,
+}
+
+impl Keyframe {
+    /// Frame `index`, at `world_from_keyframe`, as the new keyframe.
+    fn at(index: usize, world_from_keyframe: Se3) -> Self {
+        Self { index, world_from_keyframe, from_previous: UncertainPose::exact(Se3::IDENTITY), first_inliers: None }
+    }
+}
+
 /// Tracked frames whose features are kept for relocalisation: the candidates of one
 /// submission ([`RELOCALISATION_CANDIDATES`]) besides the keyframe and the previous frame,
 /// which the rejected estimates already tried.
@@ -162,17 +179,12 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     anyhow::ensure!(!trajectory_path.exists(), "{} exists: choose another --out", trajectory_path.display());
     let gpu = crate::gpu(options)?;
     let calibration = source.calibration();
-    // Odometry reads the intensity pyramid and the filtered depth, not the vertex and normal
-    // maps: only the image stages run (`images_only`).
+    // Odometry reads the intensity pyramid and the raw metric depth, not the filtered depth
+    // pyramid or the vertex and normal maps: only the image stages run (`images_only`).
     let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig { gradient_smoothing: None, ..PreprocessConfig::default() })?;
     let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config)?.images_only();
-    // The keyframe's camera-to-world pose and the previous tracked frame relative to it, with
-    // that relative pose's covariance (their features stay on the GPU); and the inliers of the
-    // keyframe's first tracked frame.
-    let mut world_from_kf: Option<Se3> = None;
-    let mut kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
-    let mut first_inliers: Option<usize> = None;
-    let mut keyframe_index: Option<usize> = None;
+    // None before the first frame.
+    let mut keyframe: Option<Keyframe> = None;
     let mut recent = RecentFrames::default();
     let mut trajectory = Vec::new();
     let mut times = StageTimes::default();
@@ -188,8 +200,8 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
         let result = pollster::block_on(extractor.process(&gpu, &preprocessor, &frame, seed)).with_context(|| format!("features of frame {index}"))?;
         let keypoints = result.features.keypoint_count();
         let mut entry = serde_json::json!({ "index": index, "keypoints": keypoints });
-        let pose = match world_from_kf {
-            Some(world_from_keyframe) => {
+        let pose = match keyframe.as_mut() {
+            Some(kf) => {
                 let direct = result.motion.clone().context("the extractor holds a reference, so it estimated a motion")?;
                 // With keyframes, the path through the previous tracked frame too (none while
                 // the keyframe is the previous frame); frame to frame only when the keyframe
@@ -214,8 +226,8 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                 let kf_direct = direct.rigid.as_ref().map(|r| (r.dst_from_src, r.covariance));
                 let kf_chained = through_previous.as_ref().and_then(|e| e.rigid.as_ref()).map(|r| {
                     entry["inliers_previous"] = r.inliers.len().into();
-                    let uncertain = r.covariance.map(|covariance| kf_from_prev.then(&UncertainPose { pose: r.dst_from_src, covariance }));
-                    (kf_from_prev.pose.compose(&r.dst_from_src), uncertain)
+                    let uncertain = r.covariance.map(|covariance| kf.from_previous.then(&UncertainPose { pose: r.dst_from_src, covariance }));
+                    (kf.from_previous.pose.compose(&r.dst_from_src), uncertain)
                 });
                 // keyframe_from_current, with its covariance when the keyframe is kept (`None`:
                 // the current frame becomes the next keyframe), and what it came from.
@@ -244,28 +256,23 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                         tracked += 1;
                         consecutive_rejected = 0;
                         entry["against"] = against.into();
-                        let first = *first_inliers.get_or_insert(direct.inliers());
+                        let first = *kf.first_inliers.get_or_insert(direct.inliers());
                         let renew = args.frame_to_frame || (direct.inliers() as f64) < args.keyframe_overlap * first as f64;
                         let keep = keep.filter(|_| !renew);
                         extractor.accept(keep.is_none());
-                        let pose = world_from_keyframe.compose(&kf_from_cur);
+                        let pose = kf.world_from_keyframe.compose(&kf_from_cur);
                         match keep {
-                            Some(kf_from_cur) => kf_from_prev = kf_from_cur,
-                            None => {
-                                world_from_kf = Some(pose);
-                                keyframe_index = Some(index);
-                                kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
-                                first_inliers = None;
-                            }
+                            Some(kf_from_cur) => kf.from_previous = kf_from_cur,
+                            None => *kf = Keyframe::at(index, pose),
                         }
                         recent.remember(&gpu, &mut extractor, index, pose)?;
                         pose
                     }
                     None => {
-                        let last_tracked = world_from_keyframe.compose(&kf_from_prev.pose);
+                        let last_tracked = kf.world_from_keyframe.compose(&kf.from_previous.pose);
                         // Neither the keyframe nor the previous frame: the recent tracked
                         // frames before them (a blurred reference is the usual cause).
-                        let tried = [keyframe_index, recent.newest()];
+                        let tried = [Some(kf.index), recent.newest()];
                         let relocalise = Stopwatch::start();
                         let relocalised = pollster::block_on(recent.relocalise(&gpu, &mut extractor, &tried, keypoints, seed))?;
                         times.record("relocalise (wall)", relocalise.ms());
@@ -278,10 +285,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                                 entry["against"] = "recent".into();
                                 entry["relocalised"] = serde_json::json!({ "frame": from_frame, "inliers": inliers });
                                 extractor.accept(true);
-                                world_from_kf = Some(pose);
-                                keyframe_index = Some(index);
-                                kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
-                                first_inliers = None;
+                                *kf = Keyframe::at(index, pose);
                                 recent.remember(&gpu, &mut extractor, index, pose)?;
                                 pose
                             }
@@ -294,10 +298,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                                     // restart from this frame at the last pose; the motion
                                     // missed is lost.
                                     extractor.accept(true);
-                                    world_from_kf = Some(last_tracked);
-                                    keyframe_index = Some(index);
-                                    kf_from_prev = UncertainPose::exact(Se3::IDENTITY);
-                                    first_inliers = None;
+                                    *kf = Keyframe::at(index, last_tracked);
                                     consecutive_rejected = 0;
                                     reanchored += 1;
                                     entry["reanchored"] = true.into();
@@ -311,8 +312,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
             }
             None => {
                 extractor.accept(true);
-                world_from_kf = Some(Se3::IDENTITY);
-                keyframe_index = Some(index);
+                keyframe = Some(Keyframe::at(index, Se3::IDENTITY));
                 recent.remember(&gpu, &mut extractor, index, Se3::IDENTITY)?;
                 Se3::IDENTITY
             }
