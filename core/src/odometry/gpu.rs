@@ -198,8 +198,8 @@ impl FeatureExtractor {
         let pattern = gpu.storage_buffer::<[f32; 4]>("core.orb_describe.pattern", 256);
         gpu.write_buffer(&pattern, &descriptor_pattern());
         // Keypoints are lifted from the raw metric depth (before the bilateral filter): its noise
-        // is the Kinect model's that the estimate weighs pairs by, independent between pixels,
-        // and what the border filter's 4σ test is calibrated for.
+        // is what the Kinect model that weighs the pairs describes and what the border filter's
+        // 4σ test is calibrated for; `keypoint_select` averages it along each keypoint's ray.
         let depth_m = preprocessor.depth_unfiltered_m.as_ref().unwrap_or(&preprocessor.levels[0].depth_m);
         let levels = layout
             .iter()
