@@ -28,7 +28,7 @@ use webfusion_core::{Gpu, GpuOptions};
 use webfusion_core::Se3;
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::odometry::gpu::{FeatureExtractor, RELOCALISATION_CANDIDATES, STAGES};
-use webfusion_core::odometry::keyframe::{Disagreement, UncertainPose, fuse};
+use webfusion_core::odometry::keyframe::{Disagreement, UncertainPose, fuse, mahalanobis_chi2};
 use webfusion_core::odometry::matching::MatchConfig;
 use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::odometry::FeatureConfig;
@@ -193,6 +193,8 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     let (mut tracked, mut lost, mut via_previous, mut reanchored, mut fused, mut disagreed, mut relocalisations) = (0usize, 0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
     let mut consecutive_rejected = 0usize;
     let (mut keypoint_counts, mut match_counts, mut inlier_counts) = (Vec::new(), Vec::new(), Vec::new());
+    // χ² of the two paths of every fused frame (χ²(6) when the covariances are right).
+    let mut fused_chi2: Vec<f64> = Vec::new();
     for index in frames {
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         let total = Stopwatch::start();
@@ -235,6 +237,9 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                     (Some((pose, Some(covariance))), Some((_, Some(chained)))) => match fuse(&UncertainPose { pose, covariance }, &chained) {
                         Ok(f) => {
                             fused += 1;
+                            let chi2 = mahalanobis_chi2(&UncertainPose { pose, covariance }, &chained);
+                            entry["chi2"] = chi2.into();
+                            fused_chi2.push(chi2);
                             Some((f.pose, Some(f), "fused"))
                         }
                         Err(Disagreement { chi2 }) => {
@@ -342,6 +347,7 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
         "relocalised": relocalisations,
         "fused": fused,
         "disagreed": disagreed,
+        "fused_chi2_mean": (!fused_chi2.is_empty()).then(|| fused_chi2.iter().sum::<f64>() / fused_chi2.len() as f64),
         "frame_to_frame": args.frame_to_frame,
         "keyframe_overlap": args.keyframe_overlap,
         "every": args.every,
