@@ -28,7 +28,7 @@ use webfusion_core::{Gpu, GpuOptions};
 use webfusion_core::Se3;
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::odometry::gpu::{FeatureExtractor, RELOCALISATION_CANDIDATES, STAGES};
-use webfusion_core::odometry::keyframe::{Disagreement, UncertainPose, fuse, mahalanobis_chi2};
+use webfusion_core::odometry::keyframe::{Disagreement, Fused, UncertainPose, fuse};
 use webfusion_core::odometry::matching::MatchConfig;
 use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::odometry::FeatureConfig;
@@ -235,9 +235,8 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
                 // the current frame becomes the next keyframe), and what it came from.
                 let outcome = match (kf_direct, kf_chained) {
                     (Some((pose, Some(covariance))), Some((_, Some(chained)))) => match fuse(&UncertainPose { pose, covariance }, &chained) {
-                        Ok(f) => {
+                        Ok(Fused { pose: f, chi2 }) => {
                             fused += 1;
-                            let chi2 = mahalanobis_chi2(&UncertainPose { pose, covariance }, &chained);
                             entry["chi2"] = chi2.into();
                             fused_chi2.push(chi2);
                             Some((f.pose, Some(f), "fused"))

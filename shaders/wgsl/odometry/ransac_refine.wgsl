@@ -176,8 +176,6 @@ fn accumulate(lid: u32, n: u32, pose: mat4x4<f32>, huber: f32) -> array<f32, GN_
     return acc;
 }
 
-// Invocation 0: one Gauss-Newton step from the reduced sums; updates sh_pose, or rejects when
-// the system is singular, and marks convergence.
 // `params.iterations` Gauss-Newton steps on the current inliers from `sh_pose` when `running`
 // (stopping at convergence or a singular system), the Huber threshold from `sh_scale`; every
 // invocation calls it (it holds barriers) with the same `running`.
@@ -202,6 +200,8 @@ fn gauss_newton(lid: u32, n: u32, running: bool) {
     }
 }
 
+// Invocation 0: one Gauss-Newton step from the reduced sums; updates sh_pose, or rejects when
+// the system is singular, and marks convergence.
 fn solve_step() {
     var a: array<f32, 36>;
     var g: array<f32, 6>;
