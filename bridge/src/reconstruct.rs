@@ -309,9 +309,9 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             times.record("frame", (now - prev).as_secs_f64() * 1e3);
         }
         if let Some(g) = report.gpu_ms {
-            // With features on, their pass preprocesses the frame (timed as "features …").
-            if !features_on {
-                times.record("gpu preprocess", g.preprocess);
+            times.record("gpu preprocess", g.preprocess);
+            if features_on {
+                times.record("gpu features", g.features.iter().sum());
             }
             if report.state != TrackingState::Initialised {
                 times.record("gpu track", g.track);
@@ -361,28 +361,19 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             fusion.set_initial_guess(&gpu, &pose);
             guess = Some(pose);
         }
-        if let Some(assist) = &mut assist {
-            let feature_guess = pollster::block_on(assist.guess(&gpu, fusion.preprocessor(), &frame)).with_context(|| format!("features of frame {index}"))?;
-            if let Some(Guess::Relocalised { keyframe, inliers, .. }) = feature_guess {
-                eprintln!("\nframe {index}: relocalised against frame {keyframe} ({inliers} feature inliers); ICP verifies");
-            }
-            if let Some(g) = feature_guess {
-                g.apply(&gpu, &mut fusion)?;
-            }
-            if let Some(&ms) = assist.frame_ms().last() {
-                times.record("features + preprocess (wall)", ms);
-            }
-        }
         timestamps.insert(frame.index, (frame.depth_timestamp_ns, guess));
-        // With features, their pass has uploaded and preprocessed the frame already.
-        let submitted = if assist.is_some() { pollster::block_on(fusion.submit_preprocessed_frame(&gpu, &frame)) } else { pollster::block_on(fusion.submit_frame(&gpu, &frame)) };
-        submitted.with_context(|| format!("processing frame {index}"))?;
-        // With features, the frame's outcome is needed before the next one's guess.
-        let reports = if assist.is_some() { pollster::block_on(fusion.flush(&gpu))? } else { fusion.poll_reports(&gpu)? };
-        for report in reports {
-            if let Some(assist) = &mut assist {
-                assist.verdict(&gpu, &mut fusion, &report)?;
+        if let Some(assist) = &mut assist {
+            // Features and tracking in one submission; the frame's outcome is needed before the
+            // next one's features.
+            let assisted = pollster::block_on(assist.process_frame(&gpu, &mut fusion, &frame)).with_context(|| format!("processing frame {index}"))?;
+            if let Some(Guess::Relocalised { keyframe, inliers, .. }) = assisted.guess {
+                eprintln!("\nframe {index}: relocalised against frame {keyframe} ({inliers} feature inliers); ICP: {}", assisted.report.state.name());
             }
+            on_report(FrameReport { host: assisted.host, ..assisted.report }, &mut times, &mut trajectory, &mut timestamps);
+            continue;
+        }
+        pollster::block_on(fusion.submit_frame(&gpu, &frame)).with_context(|| format!("processing frame {index}"))?;
+        for report in fusion.poll_reports(&gpu)? {
             on_report(report, &mut times, &mut trajectory, &mut timestamps);
         }
     }

@@ -503,16 +503,17 @@ impl FusionMode {
         }
         let Some(p) = self.pipeline.as_mut() else { return Ok(()) };
         let failed = |e: webfusion_core::Error| format!("frame {}: {e}", frame.index);
+        // With features, the frame (features, their guess, tracking: one submission) is
+        // awaited: the next frame's features need its outcome.
+        let mut assisted = None;
         if let Some(assist) = &mut p.assist {
-            if let Some(guess) = assist.guess(gpu, p.fusion.preprocessor(), frame).await.map_err(failed)? {
-                guess.apply(gpu, &mut p.fusion).map_err(failed)?;
-            }
+            let frame_done = assist.process_frame(gpu, &mut p.fusion, frame).await.map_err(failed)?;
             self.pair = assist.last_pair().cloned();
             self.current_image = Some((frame.index, frame.color.width_px, frame.color.height_px, view::rgba_from_rgb(&frame.color.rgb8)));
             if draw_views {
                 draw_odometry_view(self.pair.as_ref(), self.reference_image.as_ref(), self.current_image.as_ref(), self.odometry_stage);
             }
-            p.fusion.submit_preprocessed_frame(gpu, frame).await.map_err(failed)?;
+            assisted = Some(frame_done.report);
         } else {
             p.fusion.submit_frame(gpu, frame).await.map_err(failed)?;
         }
@@ -549,21 +550,12 @@ impl FusionMode {
             calibration,
         });
         self.last_submitted = Some(frame.index);
-        if p.assist.is_some() {
-            // The next frame's guess needs this one's verdict.
-            let reports = p.fusion.flush(gpu).await.map_err(failed)?;
-            for report in &reports {
-                if let Some(assist) = &mut p.assist {
-                    assist.verdict(gpu, &mut p.fusion, report).map_err(failed)?;
-                }
-                if report.index == frame.index && !report.state.is_lost() {
-                    // The next pair's left frame.
-                    self.reference_image = self.current_image.clone();
-                }
+        if let Some(report) = assisted {
+            if !report.state.is_lost() {
+                // The next pair's left frame.
+                self.reference_image = self.current_image.clone();
             }
-            for report in reports {
-                self.apply(report);
-            }
+            self.apply(report);
         }
         self.collect_planes(gpu)
     }

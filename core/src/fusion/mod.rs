@@ -359,15 +359,22 @@ pub struct StageTimesMs {
     pub integrate: f64,
     /// Surface prediction and keeping the reference.
     pub raycast: f64,
+    /// A feature pass recorded into the frame ([`KinectFusion::submit_frame_with`]): its
+    /// [`FEATURE_STAGES`] (0 without one).
+    pub features: [f64; 4],
     /// The whole frame.
     pub total: f64,
 }
+
+/// The stages a feature pass records into a frame (`odometry::gpu::STAGES` after the shared
+/// preprocessing), in [`StageTimesMs::features`]' order.
+pub const FEATURE_STAGES: [&str; 4] = ["detection", "description", "matching", "estimation"];
 
 impl StageTimesMs {
     /// From the GPU times of the frame's stages.
     pub fn from_stages(stages: &[StageTime]) -> Self {
         let get = |name: &str| stages.iter().filter(|s| s.name == name).map(|s| s.gpu_ms).sum::<f64>();
-        Self { preprocess: get("preprocess"), track: get("track"), integrate: get("integrate"), raycast: get("predict"), total: stages.iter().map(|s| s.gpu_ms).sum() }
+        Self { preprocess: get("preprocess"), track: get("track"), integrate: get("integrate"), raycast: get("predict"), features: FEATURE_STAGES.map(get), total: stages.iter().map(|s| s.gpu_ms).sum() }
     }
 }
 
@@ -559,17 +566,26 @@ impl KinectFusion {
     /// the GPU unless [`MAX_FRAMES_IN_FLIGHT`] readbacks are pending (then for the oldest).
     /// Reports arrive through [`Self::poll_reports`] or [`Self::flush`].
     pub async fn submit_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<()> {
-        self.submit(gpu, frame, true).await
+        self.submit(gpu, frame, true, None).await.map(drop)
+    }
+
+    /// [`Self::submit_frame`] with another pass recorded into the same submission between the
+    /// preprocessing and the tracking (feature odometry: it reads the preprocessed images and
+    /// may set the tracker's guess on the GPU, `feature_guess`). Returns the submission, for
+    /// the pass's own readback; its stages are timed with the frame's
+    /// ([`StageTimesMs::features`]).
+    pub async fn submit_frame_with(&mut self, gpu: &Gpu, frame: &RgbdFrame, before_tracking: &mut dyn FnMut(&mut FrameEncoder<'_>)) -> Result<wgpu::SubmissionIndex> {
+        self.submit(gpu, frame, true, Some(before_tracking)).await
     }
 
     /// [`Self::submit_frame`] for a frame that a pass sharing this pipeline's preprocessor
     /// ([`Self::preprocessor`]; feature extraction) already uploaded and preprocessed in an
     /// earlier submission: the frame skips both.
     pub async fn submit_preprocessed_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<()> {
-        self.submit(gpu, frame, false).await
+        self.submit(gpu, frame, false, None).await.map(drop)
     }
 
-    async fn submit(&mut self, gpu: &Gpu, frame: &RgbdFrame, preprocess: bool) -> Result<()> {
+    async fn submit(&mut self, gpu: &Gpu, frame: &RgbdFrame, preprocess: bool, before_tracking: Option<&mut dyn FnMut(&mut FrameEncoder<'_>)>) -> Result<wgpu::SubmissionIndex> {
         gpu.check_lost()?;
         let started = Instant::now();
         let before = gpu.counters.snapshot();
@@ -587,6 +603,9 @@ impl KinectFusion {
         if preprocess {
             self.preprocessor.encode_in(gpu, &mut fe.stage("preprocess"));
         }
+        if let Some(record) = before_tracking {
+            record(&mut fe);
+        }
         {
             // Tracking, then the tracker keeps this frame as the next one's reference.
             let mut pass = fe.stage("track");
@@ -602,6 +621,7 @@ impl KinectFusion {
         }
         let (commands, stages) = fe.finish(Some((slot_buffer, TIMESTAMPS_OFFSET)));
         let submission = gpu.submit([commands]);
+        let returned = submission.clone();
         self.mapper.frame_submitted(gpu, &submission);
         let mut host = gpu.counters.snapshot() - before;
         host.readbacks += 1;
@@ -611,7 +631,7 @@ impl KinectFusion {
         for done in self.readbacks.collect(gpu)? {
             self.finish_report(done.tag, &done.bytes)?;
         }
-        Ok(())
+        Ok(returned)
     }
 
     /// Reports of frames whose readback completed, oldest first (never waits).

@@ -3,24 +3,27 @@
 //! matched against the last frame the dense tracker accepted, and relocalisation against
 //! stored keyframes once tracking is lost.
 //!
-//! Per frame the caller asks [`FeatureAssist::guess`] before tracking and hands the guess to
-//! KinectFusion ([`Guess::apply`]), and reports the frame's outcome with
-//! [`FeatureAssist::verdict`] after it:
+//! [`FeatureAssist::process_frame`] takes a frame through both trackers:
 //!
-//! - **tracking**: the frame's motion against the last accepted frame, when RANSAC accepts it,
-//!   is a [`Guess::Motion`]: the dense tracker starts there instead of its motion model.
-//!   A motion beyond the dense tracker's plausible inter-frame jump
-//!   ([`FeatureAssist::set_jump_limits`]), which its jump check would reject, is proposed as
-//!   a relocalisation instead (below), verified the same way.
-//! - **lost**: the frame is matched against the last accepted frame and against up to
+//! - **tracking**: one submission with no host wait inside it. The feature pass is recorded
+//!   into the dense frame after the shared preprocessing
+//!   ([`KinectFusion::submit_frame_with`]); its motion against the last accepted frame, when
+//!   RANSAC accepts it, becomes the dense tracker's starting pose on the GPU (`feature_guess`:
+//!   a [`Guess::Motion`]) instead of its motion model. The host reads the frame's report and
+//!   its features after the submission. A motion beyond the dense tracker's plausible
+//!   inter-frame jump ([`FeatureAssist::set_jump_limits`]) makes ICP's jump check reject the
+//!   frame; the host then proposes that motion as a relocalisation (below) and tracks the
+//!   frame again from there (a second submission, for a rare frame).
+//! - **lost** (the host knows it from the last frame's report): the frame is matched against the last accepted frame and against up to
 //!   [`RELOCALISATION_CANDIDATES`] stored keyframes (nearest to the last good pose first, the
 //!   next ones on the next lost frame, so a long loss cycles through the whole store); the
 //!   candidate with the most RANSAC inliers (at least `min_inliers`) is a
 //!   [`Guess::Relocalised`]: the dense tracker re-renders its model at that pose and tracks
-//!   the frame from there. The relocalisation stands only when the dense tracker then tracks
-//!   the frame (its own inlier, conditioning and jump checks, the jump now measured from the
-//!   relocalised pose); otherwise [`FeatureAssist::verdict`] reseeds it back at the last good
-//!   pose, so a false relocalisation leaves nothing behind.
+//!   the frame from there. Choosing among the candidates needs their estimates on the host,
+//!   so a lost frame's features are a submission of their own, waited for. The relocalisation
+//!   stands only when the dense tracker then tracks the frame (its own inlier, conditioning
+//!   and jump checks, the jump now measured from the relocalised pose); otherwise the tracker
+//!   is reseeded back at the last good pose, so a false relocalisation leaves nothing behind.
 //!
 //! A tracked frame becomes a keyframe when no stored keyframe lies within
 //! [`KEYFRAME_SPACING_M`] and [`KEYFRAME_SPACING_RAD`] of it. The spacing keeps every view of
@@ -30,12 +33,13 @@
 //! store holds [`KEYFRAME_CAPACITY`]; when full, the most redundant keyframe (the one whose
 //! nearest other keyframe is closest) gives way, so the store keeps its spread over the room.
 
-use super::gpu::{FeatureExtractor, RELOCALISATION_CANDIDATES};
+use super::gpu::{FeatureExtractor, FrameFeatures, RELOCALISATION_CANDIDATES};
 use super::tracker::{MotionEstimate, OdometryConfig};
 use super::Features;
 use crate::fusion::{FrameReport, KinectFusion};
+use crate::kernels::feature_guess::{self, FeatureGuessParams};
 use crate::preprocess::DepthPreprocessor;
-use crate::{Gpu, Result, RgbdFrame, Se3};
+use crate::{Error, Gpu, GpuCounts, Result, RgbdFrame, Se3};
 
 /// Translation between keyframes, metres.
 pub const KEYFRAME_SPACING_M: f64 = 0.10;
@@ -74,6 +78,18 @@ impl Guess {
             Guess::Relocalised { world_from_camera, .. } => fusion.reseed(gpu, world_from_camera),
         }
     }
+}
+
+/// One frame taken through both trackers by [`FeatureAssist::process_frame`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct AssistedFrame {
+    /// The dense tracker's report of the frame.
+    pub report: FrameReport,
+    /// The feature guess it was tracked from (`None`: the dense tracker's own motion model).
+    pub guess: Option<Guess>,
+    /// What the frame asked of the GPU: while tracking one submission and one wait (for the
+    /// report, after the submission); more for a relocalisation.
+    pub host: GpuCounts,
 }
 
 /// Counts over a run.
@@ -115,6 +131,8 @@ pub struct FeatureAssist {
     ms: Vec<f64>,
     /// The last frame against the last accepted one, for display.
     last_pair: Option<PairView>,
+    /// `feature_guess`'s parameters.
+    guess_params: wgpu::Buffer,
 }
 
 /// One frame matched against the last accepted frame, as seed 002's step-by-step view shows it:
@@ -188,8 +206,9 @@ impl FeatureAssist {
     /// Feature odometry reading `preprocessor` (the dense pipeline's: the feature pass uploads
     /// and preprocesses each frame, and the dense pipeline then skips both).
     pub fn new(gpu: &Gpu, preprocessor: &DepthPreprocessor, config: OdometryConfig) -> Result<Self> {
+        let guess_params = gpu.uniform_buffer("core.assist.guess_params", &FeatureGuessParams { min_inliers: config.ransac.min_inliers as u32, ..Default::default() });
         let extractor = FeatureExtractor::new(gpu, preprocessor, config)?;
-        Ok(Self { extractor, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new(), last_pair: None })
+        Ok(Self { extractor, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new(), last_pair: None, guess_params })
     }
 
     /// The dense tracker's largest plausible inter-frame translation and rotation: a feature
@@ -232,38 +251,103 @@ impl FeatureAssist {
         self.keyframes.len()
     }
 
-    /// Uploads and preprocesses `frame` into the shared preprocessor, extracts its features and
-    /// proposes the dense tracker's starting pose (see the module docs), waiting for the GPU.
-    pub async fn guess(&mut self, gpu: &Gpu, preprocessor: &DepthPreprocessor, frame: &RgbdFrame) -> Result<Option<Guess>> {
+    /// Takes `frame` through both trackers (see the module docs): features and dense tracking in
+    /// one submission while tracking, relocalisation after a loss; then the frame's outcome
+    /// updates the reference and the keyframes. Waits for the frame's report.
+    pub async fn process_frame(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<AssistedFrame> {
         let started = web_time::Instant::now();
-        let seed = frame.index as u32;
-        let result = self.extractor.process(gpu, preprocessor, frame, seed).await?;
-        // The extractor estimated the motion against its reference, which is this one.
-        let estimate = if self.reference.is_some() { result.motion.clone() } else { None };
-        self.last_pair = self.reference.as_ref().zip(estimate.as_ref()).map(|(r, e)| PairView::new(frame.index, r.frame, &result.features, &r.features, e, result.gpu_ms.unwrap_or([f64::NAN; 5])));
-        let against_reference = self.reference.as_ref().zip(estimate).and_then(|(r, e)| Some((e.reference_from_current()?, e.inliers(), r)));
-        let guess = if self.lost_streak == 0 {
-            against_reference.map(|(ref_from_cur, inliers, r)| {
-                let world_from_camera = r.world_from_camera.compose(&ref_from_cur);
-                let beyond = self.jump_limits.is_some_and(|(m, rad)| ref_from_cur.translation_m.length() > m || ref_from_cur.rotation_angle_rad() > rad);
-                if beyond { Guess::Relocalised { world_from_camera, keyframe: r.frame, inliers } } else { Guess::Motion(world_from_camera) }
-            })
+        let before = gpu.counters.snapshot();
+        let mut assisted = if self.lost_streak == 0 {
+            self.track(gpu, fusion, frame).await?
         } else {
-            let mut best = against_reference.map(|(ref_from_cur, inliers, r)| (inliers, r.world_from_camera.compose(&ref_from_cur), r.frame));
-            for (inliers, pose, keyframe) in self.match_keyframes(gpu, result.features.keypoint_count(), seed).await? {
-                if best.as_ref().is_none_or(|b| inliers > b.0) {
-                    best = Some((inliers, pose, keyframe));
-                }
+            let result = self.extractor.process(gpu, fusion.preprocessor(), frame, frame.index as u32).await?;
+            let guess = self.propose(gpu, frame.index, result).await?;
+            if let Some(g) = guess {
+                g.apply(gpu, fusion)?;
             }
-            best.map(|(inliers, world_from_camera, keyframe)| Guess::Relocalised { world_from_camera, keyframe, inliers })
+            fusion.submit_preprocessed_frame(gpu, frame).await?;
+            AssistedFrame { report: report_of(gpu, fusion, frame.index).await?, guess, host: GpuCounts::default() }
         };
+        assisted.host = gpu.counters.snapshot() - before;
+        self.verdict(gpu, fusion, &assisted.report)?;
+        self.ms.push(started.elapsed().as_secs_f64() * 1e3);
+        Ok(assisted)
+    }
+
+    /// A frame while tracking: the feature pass, `feature_guess` and the dense frame in one
+    /// submission; a motion beyond the jump limits that ICP lost is relocalised and tracked again.
+    async fn track(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<AssistedFrame> {
+        let started = web_time::Instant::now();
+        self.extractor.begin(gpu, frame.index as u32);
+        let guess_bindings = self.reference.is_some().then(|| feature_guess::Bindings { params: &self.guess_params, estimate: self.extractor.estimate_buffer(), state: fusion.tracker().state_buffer() }.bind_group(gpu));
+        let extractor = &self.extractor;
+        let mut slot = Err(Error::Poll("the feature pass was not recorded".into()));
+        let submission = fusion
+            .submit_frame_with(gpu, frame, &mut |fe| {
+                slot = extractor.encode_frame(gpu, fe);
+                if let Some(bindings) = &guess_bindings {
+                    gpu.kernels.feature_guess.dispatch_in(&mut fe.stage("estimation"), bindings, [1, 1, 1]);
+                }
+            })
+            .await?;
+        self.extractor.frame_submitted(gpu, slot?, submission, None, started);
+        let mut report = report_of(gpu, fusion, frame.index).await?;
+        let result = self.extractor.finish_frame(gpu).await?;
+        let stages_ms = report.gpu_ms.map_or([f64::NAN; 5], |t| [t.preprocess, t.features[0], t.features[1], t.features[2], t.features[3]]);
+        let mut guess = self.candidate(frame.index, &result, stages_ms).map(|(world_from_camera, keyframe, inliers, beyond)| {
+            if beyond { Guess::Relocalised { world_from_camera, keyframe, inliers } } else { Guess::Motion(world_from_camera) }
+        });
         match guess {
+            Some(Guess::Relocalised { world_from_camera, .. }) if report.state.is_lost() => {
+                // ICP started at the motion and its jump check rejected it: track the frame
+                // again from the relocalised pose, where the check measures from.
+                fusion.reseed(gpu, &world_from_camera)?;
+                fusion.submit_preprocessed_frame(gpu, frame).await?;
+                report = report_of(gpu, fusion, frame.index).await?;
+                self.stats.relocalisations += 1;
+            }
+            Some(Guess::Relocalised { world_from_camera, .. }) => {
+                // Tracked from the motion after all: it was a guess.
+                guess = Some(Guess::Motion(world_from_camera));
+                self.stats.guesses += 1;
+            }
             Some(Guess::Motion(_)) => self.stats.guesses += 1,
-            Some(Guess::Relocalised { .. }) => self.stats.relocalisations += 1,
             None => {}
         }
         self.pending = Some((result.features, frame.index, guess));
-        self.ms.push(started.elapsed().as_secs_f64() * 1e3);
+        Ok(AssistedFrame { report, guess, host: GpuCounts::default() })
+    }
+
+    /// The motion of the frame whose features are `result` against the reference, as a pose:
+    /// (camera-to-world pose, the reference's frame index, RANSAC inliers, beyond the jump
+    /// limits); `None` when RANSAC rejected it or there is no reference. Keeps the pair for
+    /// display, with `stages_ms`.
+    fn candidate(&mut self, frame: u64, result: &FrameFeatures, stages_ms: [f64; 5]) -> Option<(Se3, u64, usize, bool)> {
+        let reference = self.reference.as_ref()?;
+        let estimate = result.motion.as_ref()?;
+        self.last_pair = Some(PairView::new(frame, reference.frame, &result.features, &reference.features, estimate, stages_ms));
+        let ref_from_cur = estimate.reference_from_current()?;
+        let beyond = self.jump_limits.is_some_and(|(m, rad)| ref_from_cur.translation_m.length() > m || ref_from_cur.rotation_angle_rad() > rad);
+        Some((reference.world_from_camera.compose(&ref_from_cur), reference.frame, estimate.inliers(), beyond))
+    }
+
+    /// After a loss: the relocalisation of the frame whose features are `result` (matched
+    /// against the last accepted frame) among it and this loss's window of keyframes, the most
+    /// inliers winning.
+    async fn propose(&mut self, gpu: &Gpu, frame: u64, result: FrameFeatures) -> Result<Option<Guess>> {
+        let seed = frame as u32;
+        let stages_ms = result.gpu_ms.unwrap_or([f64::NAN; 5]);
+        let mut best = self.candidate(frame, &result, stages_ms).map(|(pose, keyframe, inliers, _)| (inliers, pose, keyframe));
+        for (inliers, pose, keyframe) in self.match_keyframes(gpu, result.features.keypoint_count(), seed).await? {
+            if best.as_ref().is_none_or(|b| inliers > b.0) {
+                best = Some((inliers, pose, keyframe));
+            }
+        }
+        let guess = best.map(|(inliers, world_from_camera, keyframe)| Guess::Relocalised { world_from_camera, keyframe, inliers });
+        if guess.is_some() {
+            self.stats.relocalisations += 1;
+        }
+        self.pending = Some((result.features, frame, guess));
         Ok(guess)
     }
 
@@ -291,11 +375,11 @@ impl FeatureAssist {
             .collect())
     }
 
-    /// `fusion`'s report of the frame last given to [`Self::guess`]: tracked (it becomes the
-    /// reference, and a keyframe where the store has none near it) or lost. A relocalisation
-    /// the report does not confirm is undone: `fusion` is reseeded at the last good pose, so it
-    /// leaves nothing behind. A report of another frame is ignored.
-    pub fn verdict(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, report: &FrameReport) -> Result<()> {
+    /// `fusion`'s report of the frame being processed: tracked (it becomes the reference, and a
+    /// keyframe where the store has none near it) or lost. A relocalisation the report does not
+    /// confirm is undone: `fusion` is reseeded at the last good pose, so it leaves nothing
+    /// behind. A report of another frame is ignored.
+    fn verdict(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, report: &FrameReport) -> Result<()> {
         let Some((features, frame, guess)) = self.pending.take_if(|p| p.1 == report.index) else { return Ok(()) };
         let relocalised = matches!(guess, Some(Guess::Relocalised { .. }));
         let world_from_camera = &report.world_from_camera;
@@ -332,6 +416,12 @@ impl FeatureAssist {
         self.stats.keyframes_added += 1;
         Ok(())
     }
+}
+
+/// `fusion`'s report of frame `index`, waiting for it (the last one: a frame tracked again
+/// after a relocalisation reports twice).
+async fn report_of(gpu: &Gpu, fusion: &mut KinectFusion, index: u64) -> Result<FrameReport> {
+    fusion.flush(gpu).await?.into_iter().rev().find(|r| r.index == index).ok_or_else(|| Error::Poll(format!("frame {index} produced no report")))
 }
 
 /// The keyframe whose nearest other keyframe is closest (the first of such a pair).

@@ -125,6 +125,16 @@ pub struct FrameFeatures {
     pub wall_ms: f64,
 }
 
+/// What a feature readback carries besides its bytes.
+struct FeatureTag {
+    /// The frame was matched against a reference (its matches and estimate were copied).
+    has_reference: bool,
+    /// The stages timed into the slot, when the frame was the extractor's own submission.
+    stages: Option<Vec<&'static str>>,
+    /// When the frame began.
+    started: Instant,
+}
+
 /// Detects, describes and matches keypoints on the GPU.
 pub struct FeatureExtractor {
     config: OdometryConfig,
@@ -150,7 +160,7 @@ pub struct FeatureExtractor {
     estimate: EstimateTarget,
     candidate_estimates: Vec<EstimateTarget>,
     _pattern: wgpu::Buffer,
-    readback: ReadbackRing<()>,
+    readback: ReadbackRing<FeatureTag>,
     /// Stored keyframes, by keyframe slot.
     keyframes: Vec<StoredSet>,
     /// Per relocalisation candidate: forward and backward matches.
@@ -320,6 +330,13 @@ impl FeatureExtractor {
         self.slots
     }
 
+    /// The frame's estimate against the reference (a `RigidEstimate`, written by
+    /// `match_select` and `ransac_refine`), for a kernel that reads it in the same submission
+    /// (`feature_guess`).
+    pub fn estimate_buffer(&self) -> &wgpu::Buffer {
+        &self.estimate.estimate
+    }
+
     /// Whether a reference frame is held (the next frame is matched against it).
     pub fn has_reference(&self) -> bool {
         self.reference.is_some()
@@ -345,15 +362,15 @@ impl FeatureExtractor {
         (0..SETS).find(|s| Some(*s) != self.reference && Some(*s) != self.previous).expect("three sets, two roles")
     }
 
-    /// Chooses the set the next frame is written to; [`Self::encode`] records into it.
-    pub fn begin_frame(&mut self) {
+    /// Chooses the set the next frame is written to; [`Self::encode_in`] records into it.
+    fn begin_frame(&mut self) {
         self.current = self.free_set();
     }
 
-    /// Records, after [`Self::begin_frame`], detection and description of the frame in the
+    /// Records, after [`Self::begin`], detection and description of the frame in the
     /// preprocessor's buffers, and its matching against the reference and the motion estimate
-    /// when there is a reference ([`Self::set_seed`] first).
-    pub fn encode(&self, gpu: &Gpu, fe: &mut FrameEncoder<'_>) {
+    /// when there is a reference.
+    fn encode_in(&self, gpu: &Gpu, fe: &mut FrameEncoder<'_>) {
         let s = self.current;
         {
             let mut pass = fe.stage("detection");
@@ -455,7 +472,7 @@ impl FeatureExtractor {
         let (slot, buffer) = self.readback.free_slot().ok_or_else(|| Error::Poll("the feature readback is still in flight".into()))?;
         self.copy_estimate(&mut encoder, &self.estimate, buffer, 0);
         let submission = gpu.submit([encoder.finish()]);
-        self.readback.start(gpu, slot, submission, ());
+        self.readback.start(gpu, slot, submission, FeatureTag { has_reference: true, stages: None, started: Instant::now() });
         let done = self.readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the feature readback vanished".into()))?;
         Ok(Some(self.read_estimate(&done.bytes, keypoints)))
     }
@@ -530,13 +547,14 @@ impl FeatureExtractor {
     }
 
     /// Uploads and preprocesses `frame`, extracts its features, matches them against the
-    /// reference and estimates the motion (RANSAC seeded by `seed`), and waits for the result.
+    /// reference and estimates the motion (RANSAC seeded by `seed`), and waits for the result:
+    /// one submission of its own ([`Self::begin`], [`Self::encode_frame`],
+    /// [`Self::frame_submitted`], [`Self::finish_frame`]).
     pub async fn process(&mut self, gpu: &Gpu, preprocessor: &DepthPreprocessor, frame: &RgbdFrame, seed: u32) -> Result<FrameFeatures> {
         gpu.check_lost()?;
         let started = Instant::now();
         preprocessor.upload(gpu, frame)?;
-        self.set_seed(gpu, seed);
-        self.begin_frame();
+        self.begin(gpu, seed);
         let mut fe = FrameEncoder::new(gpu, "core.features.frame", self.timer.as_ref());
         {
             let mut pass = fe.stage("update");
@@ -546,27 +564,66 @@ impl FeatureExtractor {
                 preprocessor.encode_in(gpu, &mut pass);
             }
         }
-        self.encode(gpu, &mut fe);
+        let slot = self.encode_frame(gpu, &mut fe)?;
+        let (_, buffer) = self.readback.free_slot().expect("encode_frame found this slot free");
+        let (commands, stages) = fe.finish(Some((buffer, self.timestamps_offset())));
+        let submission = gpu.submit([commands]);
+        self.frame_submitted(gpu, slot, submission, Some(stages), started);
+        self.finish_frame(gpu).await
+    }
+
+    /// Starts a frame: seeds its RANSAC sample stream with `seed` and picks the keypoint set it
+    /// writes. [`Self::encode_frame`] then records it.
+    pub fn begin(&mut self, gpu: &Gpu, seed: u32) {
+        self.set_seed(gpu, seed);
+        self.begin_frame();
+    }
+
+    /// Records, after [`Self::begin`] and the preprocessor's stages, the frame's features
+    /// ([`Self::encode`]) and the copies of its keypoints, matches and estimate into a free
+    /// readback slot, which it returns for [`Self::frame_submitted`].
+    pub fn encode_frame(&self, gpu: &Gpu, fe: &mut FrameEncoder<'_>) -> Result<usize> {
         let (slot, buffer) = self.readback.free_slot().ok_or_else(|| Error::Poll("the feature readback is still in flight".into()))?;
+        self.encode_in(gpu, fe);
         let n = self.slots as u64 * 16;
-        let has_reference = self.reference.is_some();
         let set = &self.sets[self.current];
         for (i, b) in [&set.keypoints, &set.features, &set.points, &self.forward, &self.backward].into_iter().enumerate() {
             fe.encoder().copy_buffer_to_buffer(b, 0, buffer, i as u64 * n, n);
         }
-        let estimate_bytes = self.estimate_bytes();
         self.copy_estimate(fe.encoder(), &self.estimate, buffer, 5 * n);
-        let (commands, stages) = fe.finish(Some((buffer, 5 * n + estimate_bytes)));
-        let submission = gpu.submit([commands]);
-        self.readback.start(gpu, slot, submission, ());
-        let done = self.readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the feature readback vanished".into()))?;
-        let bytes = &done.bytes;
+        Ok(slot)
+    }
+
+    /// Where [`Self::process`] has the frame's timestamps written in its readback slot.
+    fn timestamps_offset(&self) -> u64 {
+        5 * self.slots as u64 * 16 + self.estimate_bytes()
+    }
+
+    /// The submission that holds the frame [`Self::encode_frame`] recorded into `slot`: its
+    /// readback starts. `stages` are the stages timed into the slot (only when the frame is
+    /// this extractor's own submission); `started` is when the frame began, for its wall time.
+    pub fn frame_submitted(&mut self, gpu: &Gpu, slot: usize, submission: wgpu::SubmissionIndex, stages: Option<Vec<&'static str>>, started: Instant) {
+        let tag = FeatureTag { has_reference: self.reference.is_some(), stages, started };
+        self.readback.start(gpu, slot, submission, tag);
+    }
+
+    /// The frame whose readback [`Self::frame_submitted`] started, once it arrives: at once
+    /// when its submission is known done (a dense frame it shared was reported), otherwise
+    /// after waiting for it.
+    pub async fn finish_frame(&mut self, gpu: &Gpu) -> Result<FrameFeatures> {
+        let arrived = self.readback.collect(gpu)?.pop();
+        let done = match arrived {
+            Some(done) => done,
+            None => self.readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("no feature readback in flight".into()))?,
+        };
+        let (bytes, tag) = (&done.bytes, done.tag);
+        let n = self.slots as u64 * 16;
         let part = |i: usize| &bytes[i * n as usize..(i + 1) * n as usize];
         let features = Features { keypoints: bytemuck::pod_collect_to_vec(part(0)), features: bytemuck::pod_collect_to_vec(part(1)), points: bytemuck::pod_collect_to_vec(part(2)), descriptors: Vec::new() };
-        let (forward, backward) = if has_reference { (bytemuck::pod_collect_to_vec(part(3)), bytemuck::pod_collect_to_vec(part(4))) } else { (Vec::new(), Vec::new()) };
-        let motion = has_reference.then(|| self.read_estimate(&bytes[5 * n as usize..], features.keypoint_count()));
-        let gpu_ms = self.timer.as_ref().map(|timer| {
-            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[(5 * n + estimate_bytes) as usize..][..16 * stages.len()]);
+        let (forward, backward) = if tag.has_reference { (bytemuck::pod_collect_to_vec(part(3)), bytemuck::pod_collect_to_vec(part(4))) } else { (Vec::new(), Vec::new()) };
+        let motion = tag.has_reference.then(|| self.read_estimate(&bytes[5 * n as usize..], features.keypoint_count()));
+        let gpu_ms = self.timer.as_ref().zip(tag.stages).map(|(timer, stages)| {
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[self.timestamps_offset() as usize..][..16 * stages.len()]);
             let times = timer.stage_times(&stages, &ticks);
             let mut out = [0.0; 5];
             for t in times {
@@ -576,6 +633,6 @@ impl FeatureExtractor {
             }
             out
         });
-        Ok(FrameFeatures { features, forward, backward, motion, gpu_ms, wall_ms: started.elapsed().as_secs_f64() * 1e3 })
+        Ok(FrameFeatures { features, forward, backward, motion, gpu_ms, wall_ms: tag.started.elapsed().as_secs_f64() * 1e3 })
     }
 }
