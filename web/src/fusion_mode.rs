@@ -134,6 +134,8 @@ impl Pipeline {
             match FeatureAssist::new(gpu, fusion.preprocessor(), OdometryConfig::default()) {
                 Ok(mut assist) => {
                     assist.set_jump_limits(f64::from(config.icp.max_jump_m), f64::from(config.icp.max_jump_rad));
+                    // The odometry view draws every frame's keypoints and matches.
+                    assist.keep_pair_view(true);
                     Some(assist)
                 }
                 // Frames too small for the keypoint grid: ICP alone.

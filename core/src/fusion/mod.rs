@@ -402,6 +402,9 @@ pub struct FrameReport {
     /// A sparse map's counters after this frame (read back with the frame's summary): blocks
     /// used and any exhaustion; `None` for a dense map.
     pub map: Option<MapStats>,
+    /// What a pass recorded into the frame copied for the host ([`PassSummary`],
+    /// [`PASS_SUMMARY_BYTES`]); empty for a frame without one.
+    pub pass_summary: Vec<u8>,
 }
 
 /// What a frame's readback slot carries besides its bytes.
@@ -413,14 +416,41 @@ struct FrameTag {
     submitted_at: Instant,
     encode_ms: f64,
     host: GpuCounts,
+    /// A pass recorded into the frame wrote a summary.
+    with_summary: bool,
 }
 
 /// Byte offset of the timestamps in a frame's readback (after the `TrackState`).
 const TIMESTAMPS_OFFSET: u64 = tracker::TRACK_STATE_BYTES.next_multiple_of(8);
 /// Byte offset of a sparse map's counters in a frame's readback (after the timestamps).
 const MAP_COUNTERS_OFFSET: u64 = TIMESTAMPS_OFFSET + StageTimer::BYTES;
+/// Bytes of a sparse map's counters.
+const MAP_COUNTERS_BYTES: u64 = (crate::cpu::shared::MAP_COUNTERS * 4) as u64;
+/// Byte offset of a pass's summary in a frame's readback (after the map's counters).
+const PASS_SUMMARY_OFFSET: u64 = MAP_COUNTERS_OFFSET + MAP_COUNTERS_BYTES;
+/// Bytes a pass recorded into the frame ([`KinectFusion::submit_frame_with`]) may have read
+/// back with the frame's report ([`FrameReport::pass_summary`]).
+pub const PASS_SUMMARY_BYTES: u64 = 256;
 /// Bytes of a frame's readback.
-const READBACK_BYTES: u64 = MAP_COUNTERS_OFFSET + (crate::cpu::shared::MAP_COUNTERS * 4) as u64;
+const READBACK_BYTES: u64 = PASS_SUMMARY_OFFSET + PASS_SUMMARY_BYTES;
+
+/// Where a pass recorded into a frame ([`KinectFusion::submit_frame_with`]) copies what the
+/// host needs of it, so that it arrives with the frame's report in the frame's one readback.
+#[derive(Debug)]
+pub struct PassSummary<'a> {
+    buffer: &'a wgpu::Buffer,
+}
+
+impl PassSummary<'_> {
+    /// Records a copy of `source`'s first `bytes` into the summary.
+    ///
+    /// # Panics
+    /// If `bytes` exceeds [`PASS_SUMMARY_BYTES`] or is not a multiple of 4 (a bug in the pass).
+    pub fn copy_from(&self, encoder: &mut wgpu::CommandEncoder, source: &wgpu::Buffer, bytes: u64) {
+        assert!(bytes <= PASS_SUMMARY_BYTES && bytes.is_multiple_of(4), "a pass summary of {bytes} bytes");
+        encoder.copy_buffer_to_buffer(source, 0, self.buffer, PASS_SUMMARY_OFFSET, bytes);
+    }
+}
 
 /// The KinectFusion pipeline on one GPU, for one camera.
 #[derive(Debug)]
@@ -572,9 +602,10 @@ impl KinectFusion {
     /// [`Self::submit_frame`] with another pass recorded into the same submission between the
     /// preprocessing and the tracking (feature odometry: it reads the preprocessed images and
     /// may set the tracker's guess on the GPU, `feature_guess`). Returns the submission, for
-    /// the pass's own readback; its stages are timed with the frame's
+    /// a readback of the pass's own; what the host needs every frame the pass copies into the
+    /// frame's readback ([`PassSummary`]). Its stages are timed with the frame's
     /// ([`StageTimesMs::features`]).
-    pub async fn submit_frame_with(&mut self, gpu: &Gpu, frame: &RgbdFrame, before_tracking: &mut dyn FnMut(&mut FrameEncoder<'_>)) -> Result<wgpu::SubmissionIndex> {
+    pub async fn submit_frame_with(&mut self, gpu: &Gpu, frame: &RgbdFrame, before_tracking: &mut dyn FnMut(&mut FrameEncoder<'_>, &PassSummary<'_>)) -> Result<wgpu::SubmissionIndex> {
         self.submit(gpu, frame, true, Some(before_tracking)).await
     }
 
@@ -585,7 +616,7 @@ impl KinectFusion {
         self.submit(gpu, frame, false, None).await.map(drop)
     }
 
-    async fn submit(&mut self, gpu: &Gpu, frame: &RgbdFrame, preprocess: bool, before_tracking: Option<&mut dyn FnMut(&mut FrameEncoder<'_>)>) -> Result<wgpu::SubmissionIndex> {
+    async fn submit(&mut self, gpu: &Gpu, frame: &RgbdFrame, preprocess: bool, before_tracking: Option<&mut dyn FnMut(&mut FrameEncoder<'_>, &PassSummary<'_>)>) -> Result<wgpu::SubmissionIndex> {
         gpu.check_lost()?;
         let started = Instant::now();
         let before = gpu.counters.snapshot();
@@ -603,8 +634,10 @@ impl KinectFusion {
         if preprocess {
             self.preprocessor.encode_in(gpu, &mut fe.stage("preprocess"));
         }
+        let (slot, slot_buffer) = self.readbacks.free_slot().expect("a readback slot was freed above");
+        let with_summary = before_tracking.is_some();
         if let Some(record) = before_tracking {
-            record(&mut fe);
+            record(&mut fe, &PassSummary { buffer: slot_buffer });
         }
         {
             // Tracking, then the tracker keeps this frame as the next one's reference.
@@ -614,10 +647,9 @@ impl KinectFusion {
         }
         self.mapper.encode(gpu, &mut fe, "integrate");
         self.predictor.encode(gpu, &mut fe, "predict");
-        let (slot, slot_buffer) = self.readbacks.free_slot().expect("a readback slot was freed above");
         fe.encoder().copy_buffer_to_buffer(self.tracker.state_buffer(), 0, slot_buffer, 0, tracker::TRACK_STATE_BYTES);
         if let Some(map) = self.mapper.sparse() {
-            fe.encoder().copy_buffer_to_buffer(map.counters(), 0, slot_buffer, MAP_COUNTERS_OFFSET, READBACK_BYTES - MAP_COUNTERS_OFFSET);
+            fe.encoder().copy_buffer_to_buffer(map.counters(), 0, slot_buffer, MAP_COUNTERS_OFFSET, MAP_COUNTERS_BYTES);
         }
         let (commands, stages) = fe.finish(Some((slot_buffer, TIMESTAMPS_OFFSET)));
         let submission = gpu.submit([commands]);
@@ -625,7 +657,7 @@ impl KinectFusion {
         self.mapper.frame_submitted(gpu, &submission);
         let mut host = gpu.counters.snapshot() - before;
         host.readbacks += 1;
-        let tag = FrameTag { index: frame.index, run: self.run, stages, submitted_at: started, encode_ms: ms_since(started), host };
+        let tag = FrameTag { index: frame.index, run: self.run, stages, submitted_at: started, encode_ms: ms_since(started), host, with_summary };
         self.readbacks.start(gpu, slot, submission, tag);
         self.frames_submitted += 1;
         for done in self.readbacks.collect(gpu)? {
@@ -671,8 +703,11 @@ impl KinectFusion {
             StageTimesMs::from_stages(&timer.stage_times(&tag.stages, &ticks))
         });
         let mut report = report_from_state(&state, &self.config, self.preprocessor.levels[0].intrinsics.pixel_count(), tag.index, gpu_ms, tag.encode_ms, ms_since(tag.submitted_at), tag.host);
+        if tag.with_summary {
+            report.pass_summary = bytes[PASS_SUMMARY_OFFSET as usize..READBACK_BYTES as usize].to_vec();
+        }
         report.map = self.mapper.sparse().map(|m| {
-            let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[MAP_COUNTERS_OFFSET as usize..READBACK_BYTES as usize]);
+            let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[MAP_COUNTERS_OFFSET as usize..PASS_SUMMARY_OFFSET as usize]);
             MapStats::from_words(&words, m.desc().pool_blocks)
         });
         if let Some(stats) = &mut report.map {
@@ -728,7 +763,7 @@ pub fn report_from_state(state: &TrackState, config: &FusionConfig, pixels: usiz
             })
             .collect()
     };
-    FrameReport { index, world_from_camera: Se3::from_cols_f32(&state.pose.world_from_camera), state: tracking, icp, gpu_ms, encode_ms, latency_ms, host, map: None }
+    FrameReport { index, world_from_camera: Se3::from_cols_f32(&state.pose.world_from_camera), state: tracking, icp, gpu_ms, encode_ms, latency_ms, host, map: None, pass_summary: Vec::new() }
 }
 
 fn ms_since(t: Instant) -> f64 {

@@ -33,11 +33,11 @@
 //! store holds [`KEYFRAME_CAPACITY`]; when full, the most redundant keyframe (the one whose
 //! nearest other keyframe is closest) gives way, so the store keeps its spread over the room.
 
-use super::gpu::{FeatureExtractor, FrameFeatures, RELOCALISATION_CANDIDATES};
+use super::gpu::{ESTIMATE_BYTES, FeatureExtractor, FrameFeatures, RELOCALISATION_CANDIDATES};
 use super::tracker::{MotionEstimate, OdometryConfig};
 use super::Features;
-use crate::fusion::{FrameReport, KinectFusion};
-use crate::kernels::feature_guess::{self, FeatureGuessParams};
+use crate::fusion::{FrameReport, KinectFusion, PassSummary};
+use crate::kernels::feature_guess::{self, FeatureGuessParams, RigidEstimate};
 use crate::preprocess::DepthPreprocessor;
 use crate::{Error, Gpu, GpuCounts, Result, RgbdFrame, Se3};
 
@@ -133,6 +133,8 @@ pub struct FeatureAssist {
     last_pair: Option<PairView>,
     /// `feature_guess`'s parameters.
     guess_params: wgpu::Buffer,
+    /// Read each tracked frame's keypoints and matches back for [`Self::last_pair`].
+    pair_view: bool,
 }
 
 /// One frame matched against the last accepted frame, as seed 002's step-by-step view shows it:
@@ -177,7 +179,8 @@ impl PairView {
             .iter()
             .enumerate()
             .filter_map(|(i, m)| {
-                let (q, t) = (cur_at[m.query as usize], ref_at[m.train as usize]);
+                // A frame kept without its keypoints (read back only with the pair view) has none.
+                let (q, t) = (*cur_at.get(m.query as usize)?, *ref_at.get(m.train as usize)?);
                 (q != u32::MAX && t != u32::MAX).then_some((q, t, inliers.contains(&i)))
             })
             .collect();
@@ -208,7 +211,7 @@ impl FeatureAssist {
     pub fn new(gpu: &Gpu, preprocessor: &DepthPreprocessor, config: OdometryConfig) -> Result<Self> {
         let guess_params = gpu.uniform_buffer("core.assist.guess_params", &FeatureGuessParams { min_inliers: config.ransac.min_inliers as u32, ..Default::default() });
         let extractor = FeatureExtractor::new(gpu, preprocessor, config)?;
-        Ok(Self { extractor, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new(), last_pair: None, guess_params })
+        Ok(Self { extractor, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new(), last_pair: None, guess_params, pair_view: false })
     }
 
     /// The dense tracker's largest plausible inter-frame translation and rotation: a feature
@@ -241,7 +244,15 @@ impl FeatureAssist {
         &self.ms
     }
 
-    /// The last frame matched against the last accepted one (`None` before the second frame).
+    /// Whether tracked frames read their keypoints and matches back (about 160 KB a frame at
+    /// 640×480) for [`Self::last_pair`]; off, a tracked frame reads back only the estimate,
+    /// with the dense frame's report. Off by default.
+    pub fn keep_pair_view(&mut self, on: bool) {
+        self.pair_view = on;
+    }
+
+    /// The last frame matched against the last accepted one (`None` before the second frame,
+    /// and while tracking without [`Self::keep_pair_view`]).
     pub fn last_pair(&self) -> Option<&PairView> {
         self.last_pair.as_ref()
     }
@@ -275,26 +286,41 @@ impl FeatureAssist {
     }
 
     /// A frame while tracking: the feature pass, `feature_guess` and the dense frame in one
-    /// submission; a motion beyond the jump limits that ICP lost is relocalised and tracked again.
+    /// submission, the estimate read back with the frame's report ([`PassSummary`]); a motion
+    /// beyond the jump limits that ICP lost is relocalised and tracked again.
     async fn track(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<AssistedFrame> {
         let started = web_time::Instant::now();
         self.extractor.begin(gpu, frame.index as u32);
-        let guess_bindings = self.reference.is_some().then(|| feature_guess::Bindings { params: &self.guess_params, estimate: self.extractor.estimate_buffer(), state: fusion.tracker().state_buffer() }.bind_group(gpu));
-        let extractor = &self.extractor;
-        let mut slot = Err(Error::Poll("the feature pass was not recorded".into()));
+        let with_reference = self.reference.is_some();
+        let guess_bindings = with_reference.then(|| feature_guess::Bindings { params: &self.guess_params, estimate: self.extractor.estimate_buffer(), state: fusion.tracker().state_buffer() }.bind_group(gpu));
+        let (extractor, pair_view) = (&self.extractor, self.pair_view);
+        let mut slot = Ok(None);
         let submission = fusion
-            .submit_frame_with(gpu, frame, &mut |fe| {
-                slot = extractor.encode_frame(gpu, fe);
+            .submit_frame_with(gpu, frame, &mut |fe, summary: &PassSummary<'_>| {
+                if pair_view {
+                    slot = extractor.encode_frame(gpu, fe).map(Some);
+                } else {
+                    extractor.encode_features(gpu, fe);
+                }
                 if let Some(bindings) = &guess_bindings {
                     gpu.kernels.feature_guess.dispatch_in(&mut fe.stage("estimation"), bindings, [1, 1, 1]);
                 }
+                summary.copy_from(fe.encoder(), extractor.estimate_buffer(), ESTIMATE_BYTES);
             })
             .await?;
-        self.extractor.frame_submitted(gpu, slot?, submission, None, started);
+        if let Some(slot) = slot? {
+            self.extractor.frame_submitted(gpu, slot, submission, None, started);
+        }
         let mut report = report_of(gpu, fusion, frame.index).await?;
-        let result = self.extractor.finish_frame(gpu).await?;
-        let stages_ms = report.gpu_ms.map_or([f64::NAN; 5], |t| [t.preprocess, t.features[0], t.features[1], t.features[2], t.features[3]]);
-        let mut guess = self.candidate(frame.index, &result, stages_ms).map(|(world_from_camera, keyframe, inliers, beyond)| {
+        let summary = report.pass_summary.get(..ESTIMATE_BYTES as usize).ok_or_else(|| Error::Poll(format!("frame {}: its report carries no feature estimate", frame.index)))?;
+        let estimate: RigidEstimate = bytemuck::pod_read_unaligned(summary);
+        let result = if pair_view { Some(self.extractor.finish_frame(gpu).await?) } else { None };
+        if let (Some(result), Some(reference)) = (&result, &self.reference) {
+            let stages_ms = report.gpu_ms.map_or([f64::NAN; 5], |t| [t.preprocess, t.features[0], t.features[1], t.features[2], t.features[3]]);
+            self.last_pair = result.motion.as_ref().map(|m| PairView::new(frame.index, reference.frame, &result.features, &reference.features, m, stages_ms));
+        }
+        let accepted = (with_reference && estimate.accepted == 1).then(|| (Se3::from_cols_f32(&estimate.dst_from_src), estimate.inliers as usize));
+        let mut guess = accepted.and_then(|(ref_from_cur, inliers)| self.candidate(ref_from_cur, inliers)).map(|(world_from_camera, keyframe, inliers, beyond)| {
             if beyond { Guess::Relocalised { world_from_camera, keyframe, inliers } } else { Guess::Motion(world_from_camera) }
         });
         match guess {
@@ -314,21 +340,16 @@ impl FeatureAssist {
             Some(Guess::Motion(_)) => self.stats.guesses += 1,
             None => {}
         }
-        self.pending = Some((result.features, frame.index, guess));
+        self.pending = Some((result.map(|r| r.features).unwrap_or_default(), frame.index, guess));
         Ok(AssistedFrame { report, guess, host: GpuCounts::default() })
     }
 
-    /// The motion of the frame whose features are `result` against the reference, as a pose:
-    /// (camera-to-world pose, the reference's frame index, RANSAC inliers, beyond the jump
-    /// limits); `None` when RANSAC rejected it or there is no reference. Keeps the pair for
-    /// display, with `stages_ms`.
-    fn candidate(&mut self, frame: u64, result: &FrameFeatures, stages_ms: [f64; 5]) -> Option<(Se3, u64, usize, bool)> {
+    /// A motion `ref_from_cur` (with `inliers` RANSAC inliers) against the reference, as a pose:
+    /// (camera-to-world pose, the reference's frame index, inliers, beyond the jump limits).
+    fn candidate(&self, ref_from_cur: Se3, inliers: usize) -> Option<(Se3, u64, usize, bool)> {
         let reference = self.reference.as_ref()?;
-        let estimate = result.motion.as_ref()?;
-        self.last_pair = Some(PairView::new(frame, reference.frame, &result.features, &reference.features, estimate, stages_ms));
-        let ref_from_cur = estimate.reference_from_current()?;
         let beyond = self.jump_limits.is_some_and(|(m, rad)| ref_from_cur.translation_m.length() > m || ref_from_cur.rotation_angle_rad() > rad);
-        Some((reference.world_from_camera.compose(&ref_from_cur), reference.frame, estimate.inliers(), beyond))
+        Some((reference.world_from_camera.compose(&ref_from_cur), reference.frame, inliers, beyond))
     }
 
     /// After a loss: the relocalisation of the frame whose features are `result` (matched
@@ -337,7 +358,11 @@ impl FeatureAssist {
     async fn propose(&mut self, gpu: &Gpu, frame: u64, result: FrameFeatures) -> Result<Option<Guess>> {
         let seed = frame as u32;
         let stages_ms = result.gpu_ms.unwrap_or([f64::NAN; 5]);
-        let mut best = self.candidate(frame, &result, stages_ms).map(|(pose, keyframe, inliers, _)| (inliers, pose, keyframe));
+        if let (Some(reference), Some(motion)) = (&self.reference, &result.motion) {
+            self.last_pair = Some(PairView::new(frame, reference.frame, &result.features, &reference.features, motion, stages_ms));
+        }
+        let against_reference = result.motion.as_ref().and_then(|m| Some((m.reference_from_current()?, m.inliers())));
+        let mut best = against_reference.and_then(|(ref_from_cur, inliers)| self.candidate(ref_from_cur, inliers)).map(|(pose, keyframe, inliers, _)| (inliers, pose, keyframe));
         for (inliers, pose, keyframe) in self.match_keyframes(gpu, result.features.keypoint_count(), seed).await? {
             if best.as_ref().is_none_or(|b| inliers > b.0) {
                 best = Some((inliers, pose, keyframe));

@@ -42,7 +42,7 @@ const SLOT_BYTES: u64 = 5 * 16 + PAIR_BYTES + 4;
 /// Bytes of one [`FeaturePair`].
 const PAIR_BYTES: u64 = size_of::<FeaturePair>() as u64;
 /// Bytes of one [`RigidEstimate`].
-const ESTIMATE_BYTES: u64 = size_of::<RigidEstimate>() as u64;
+pub const ESTIMATE_BYTES: u64 = size_of::<RigidEstimate>() as u64;
 
 struct Set {
     keypoints: wgpu::Buffer,
@@ -362,15 +362,15 @@ impl FeatureExtractor {
         (0..SETS).find(|s| Some(*s) != self.reference && Some(*s) != self.previous).expect("three sets, two roles")
     }
 
-    /// Chooses the set the next frame is written to; [`Self::encode_in`] records into it.
+    /// Chooses the set the next frame is written to; [`Self::encode_features`] records into it.
     fn begin_frame(&mut self) {
         self.current = self.free_set();
     }
 
     /// Records, after [`Self::begin`], detection and description of the frame in the
     /// preprocessor's buffers, and its matching against the reference and the motion estimate
-    /// when there is a reference.
-    fn encode_in(&self, gpu: &Gpu, fe: &mut FrameEncoder<'_>) {
+    /// ([`Self::estimate_buffer`]) when there is a reference; nothing is read back.
+    pub fn encode_features(&self, gpu: &Gpu, fe: &mut FrameEncoder<'_>) {
         let s = self.current;
         {
             let mut pass = fe.stage("detection");
@@ -580,11 +580,11 @@ impl FeatureExtractor {
     }
 
     /// Records, after [`Self::begin`] and the preprocessor's stages, the frame's features
-    /// ([`Self::encode`]) and the copies of its keypoints, matches and estimate into a free
+    /// ([`Self::encode_features`]) and the copies of its keypoints, matches and estimate into a free
     /// readback slot, which it returns for [`Self::frame_submitted`].
     pub fn encode_frame(&self, gpu: &Gpu, fe: &mut FrameEncoder<'_>) -> Result<usize> {
         let (slot, buffer) = self.readback.free_slot().ok_or_else(|| Error::Poll("the feature readback is still in flight".into()))?;
-        self.encode_in(gpu, fe);
+        self.encode_features(gpu, fe);
         let n = self.slots as u64 * 16;
         let set = &self.sets[self.current];
         for (i, b) in [&set.keypoints, &set.features, &set.points, &self.forward, &self.backward].into_iter().enumerate() {

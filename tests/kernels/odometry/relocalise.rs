@@ -33,13 +33,15 @@ fn a_return_after_a_jump_is_relocalised_against_a_keyframe_and_confirmed_by_icp(
     let mut fusion = KinectFusion::new(&gpu, calibration, config.clone()).expect("fusion");
     let mut assist = FeatureAssist::new(&gpu, fusion.preprocessor(), OdometryConfig::default()).expect("features");
     assist.set_jump_limits(f64::from(config.icp.max_jump_m), f64::from(config.icp.max_jump_rad));
+    assist.keep_pair_view(true);
     let mut outcomes = Vec::new();
     for (i, truth) in poses.iter().enumerate() {
         let frame = room.frame(&K, &poses, i);
         let AssistedFrame { report, guess, host } = pollster::block_on(assist.process_frame(&gpu, &mut fusion, &frame)).expect("frame");
         if matches!(report.state, TrackingState::Tracked | TrackingState::Initialised) {
-            // Features, their guess and the dense frame: one submission, one wait after it.
-            assert_eq!((host.submits, host.host_waits), (1, 1), "frame {i}: {host:?}");
+            // Features, their guess and the dense frame: one submission, one wait after it (and
+            // the keypoints for the pair view beside the frame's report).
+            assert_eq!((host.submits, host.host_waits, host.readbacks), (1, 1, 2), "frame {i}: {host:?}");
         }
         let error = poses[0].inverse().compose(truth).inverse().compose(&report.world_from_camera);
         let (t_cm, r_deg) = (error.translation_m.length() * 100.0, error.rotation_angle_rad().to_degrees());
@@ -151,7 +153,9 @@ fn a_jump_beyond_icps_limits_is_relocalised_at_the_feature_motion() {
             assert_eq!(host.submits, 3, "the frame, the reseed's render, the frame again");
         } else {
             assert!(matches!(report.state, TrackingState::Tracked | TrackingState::Initialised), "frame {i}: {:?}", report.state);
-            assert_eq!((host.submits, host.host_waits), (1, 1), "frame {i}: {host:?}");
+            // Without the pair view, the estimate comes back in the frame's one small readback.
+            assert_eq!((host.submits, host.host_waits, host.readbacks), (1, 1, 1), "frame {i}: {host:?}");
+            assert!(host.readback_bytes < 4096, "frame {i}: {host:?}");
             assert_eq!(guess.is_some(), i > 0, "frame {i}: {guess:?}");
         }
     }
