@@ -434,6 +434,10 @@ pub const PASS_SUMMARY_BYTES: u64 = 256;
 /// Bytes of a frame's readback.
 const READBACK_BYTES: u64 = PASS_SUMMARY_OFFSET + PASS_SUMMARY_BYTES;
 
+/// A pass recorded into a frame between preprocessing and tracking
+/// ([`KinectFusion::submit_frame_with`]).
+pub type FramePass<'p> = dyn FnMut(&mut FrameEncoder<'_>, &PassSummary<'_>) + 'p;
+
 /// Where a pass recorded into a frame ([`KinectFusion::submit_frame_with`]) copies what the
 /// host needs of it, so that it arrives with the frame's report in the frame's one readback.
 #[derive(Debug)]
@@ -605,7 +609,7 @@ impl KinectFusion {
     /// a readback of the pass's own; what the host needs every frame the pass copies into the
     /// frame's readback ([`PassSummary`]). Its stages are timed with the frame's
     /// ([`StageTimesMs::features`]).
-    pub async fn submit_frame_with(&mut self, gpu: &Gpu, frame: &RgbdFrame, before_tracking: &mut dyn FnMut(&mut FrameEncoder<'_>, &PassSummary<'_>)) -> Result<wgpu::SubmissionIndex> {
+    pub async fn submit_frame_with(&mut self, gpu: &Gpu, frame: &RgbdFrame, before_tracking: &mut FramePass<'_>) -> Result<wgpu::SubmissionIndex> {
         self.submit(gpu, frame, true, Some(before_tracking)).await
     }
 
@@ -616,7 +620,7 @@ impl KinectFusion {
         self.submit(gpu, frame, false, None).await.map(drop)
     }
 
-    async fn submit(&mut self, gpu: &Gpu, frame: &RgbdFrame, preprocess: bool, before_tracking: Option<&mut dyn FnMut(&mut FrameEncoder<'_>, &PassSummary<'_>)>) -> Result<wgpu::SubmissionIndex> {
+    async fn submit(&mut self, gpu: &Gpu, frame: &RgbdFrame, preprocess: bool, before_tracking: Option<&mut FramePass<'_>>) -> Result<wgpu::SubmissionIndex> {
         gpu.check_lost()?;
         let started = Instant::now();
         let before = gpu.counters.snapshot();
