@@ -888,7 +888,7 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
     ));
     lines.push(match &f.features {
         Some(x) => format!(
-            "feature odometry: {} guesses · {} relocalisations ({} confirmed by ICP) · {} keyframes · {:.0} ms/frame",
+            "feature odometry: {} guesses · {} relocalisations ({} confirmed by ICP) · {} keyframes · {:.0} ms/frame with tracking",
             x.guesses, x.relocalisations, x.relocalisations_confirmed, x.keyframes, x.median_ms
         ),
         None => "feature odometry off".to_owned(),

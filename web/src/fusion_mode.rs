@@ -300,7 +300,8 @@ pub(crate) struct FeatureStatus {
     pub(crate) relocalisations_confirmed: usize,
     pub(crate) recoveries: usize,
     pub(crate) keyframes: usize,
-    /// Median milliseconds of a frame's feature work (extraction to estimate).
+    /// Median milliseconds of a frame through features and dense tracking (one submission while
+    /// tracking).
     pub(crate) median_ms: f64,
     /// The last frame pair (the odometry view).
     pub(crate) pair: Option<PairStatus>,

@@ -127,7 +127,8 @@ pub struct FeatureAssist {
     /// The dense tracker's largest plausible inter-frame motion (metres, radians).
     jump_limits: Option<(f64, f64)>,
     stats: AssistStats,
-    /// Host milliseconds per frame (features, matching, estimation, relocalisation).
+    /// Host milliseconds of each frame through [`Self::process_frame`] (features and dense
+    /// tracking together: while tracking they are one submission).
     ms: Vec<f64>,
     /// The last frame against the last accepted one, for display.
     last_pair: Option<PairView>,
@@ -239,7 +240,9 @@ impl FeatureAssist {
         self.stats
     }
 
-    /// Host milliseconds of each frame's feature work.
+    /// Host milliseconds of each frame through [`Self::process_frame`], features and dense
+    /// tracking together (while tracking they share one submission; per-stage GPU times are in
+    /// the report's [`crate::fusion::StageTimesMs::features`]).
     pub fn frame_ms(&self) -> &[f64] {
         &self.ms
     }
