@@ -366,8 +366,8 @@ pub struct StageTimesMs {
     pub total: f64,
 }
 
-/// The stages a feature pass records into a frame (`odometry::gpu::STAGES` after the shared
-/// preprocessing), in [`StageTimesMs::features`]' order.
+/// The stages a feature pass records into a frame (`odometry::gpu::FeatureExtractor`'s, which
+/// names them from this list), in [`StageTimesMs::features`]' order.
 pub const FEATURE_STAGES: [&str; 4] = ["detection", "description", "matching", "estimation"];
 
 impl StageTimesMs {

@@ -33,7 +33,7 @@
 //! store holds [`KEYFRAME_CAPACITY`]; when full, the most redundant keyframe (the one whose
 //! nearest other keyframe is closest) gives way, so the store keeps its spread over the room.
 
-use super::gpu::{ESTIMATE_BYTES, FeatureExtractor, FrameFeatures, RELOCALISATION_CANDIDATES};
+use super::gpu::{ESTIMATE_BYTES, FeatureExtractor, RELOCALISATION_CANDIDATES};
 use super::tracker::{MotionEstimate, OdometryConfig};
 use super::Features;
 use crate::fusion::{FrameReport, KinectFusion, PassSummary};
@@ -64,20 +64,6 @@ pub enum Guess {
         /// RANSAC inliers against it.
         inliers: usize,
     },
-}
-
-impl Guess {
-    /// Hands the guess to `fusion` before the frame is submitted: a motion becomes the
-    /// tracker's initial guess, a relocalisation reseeds it ([`KinectFusion::reseed`]).
-    pub fn apply(&self, gpu: &Gpu, fusion: &mut KinectFusion) -> Result<()> {
-        match self {
-            Guess::Motion(pose) => {
-                fusion.set_initial_guess(gpu, pose);
-                Ok(())
-            }
-            Guess::Relocalised { world_from_camera, .. } => fusion.reseed(gpu, world_from_camera),
-        }
-    }
 }
 
 /// One frame taken through both trackers by [`FeatureAssist::process_frame`].
@@ -121,8 +107,6 @@ pub struct FeatureAssist {
     /// The last accepted frame.
     reference: Option<Keyframe>,
     keyframes: Vec<Keyframe>,
-    /// The frame being tracked: its features and the guess given for it.
-    pending: Option<(Features, u64, Option<Guess>)>,
     lost_streak: usize,
     /// The dense tracker's largest plausible inter-frame motion (metres, radians).
     jump_limits: Option<(f64, f64)>,
@@ -212,7 +196,7 @@ impl FeatureAssist {
     pub fn new(gpu: &Gpu, preprocessor: &DepthPreprocessor, config: OdometryConfig) -> Result<Self> {
         let guess_params = gpu.uniform_buffer("core.assist.guess_params", &FeatureGuessParams { min_inliers: config.ransac.min_inliers as u32, ..Default::default() });
         let extractor = FeatureExtractor::new(gpu, preprocessor, config)?;
-        Ok(Self { extractor, reference: None, keyframes: Vec::new(), pending: None, lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new(), last_pair: None, guess_params, pair_view: false })
+        Ok(Self { extractor, reference: None, keyframes: Vec::new(), lost_streak: 0, jump_limits: None, stats: AssistStats::default(), ms: Vec::new(), last_pair: None, guess_params, pair_view: false })
     }
 
     /// The dense tracker's largest plausible inter-frame translation and rotation: a feature
@@ -228,7 +212,6 @@ impl FeatureAssist {
         self.extractor.reset();
         self.reference = None;
         self.keyframes.clear();
-        self.pending = None;
         self.lost_streak = 0;
         self.stats = AssistStats::default();
         self.ms.clear();
@@ -271,27 +254,18 @@ impl FeatureAssist {
     pub async fn process_frame(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<AssistedFrame> {
         let started = web_time::Instant::now();
         let before = gpu.counters.snapshot();
-        let mut assisted = if self.lost_streak == 0 {
-            self.track(gpu, fusion, frame).await?
-        } else {
-            let result = self.extractor.process(gpu, fusion.preprocessor(), frame, frame.index as u32).await?;
-            let guess = self.propose(gpu, frame.index, result).await?;
-            if let Some(g) = guess {
-                g.apply(gpu, fusion)?;
-            }
-            fusion.submit_preprocessed_frame(gpu, frame).await?;
-            AssistedFrame { report: report_of(gpu, fusion, frame.index).await?, guess, host: GpuCounts::default() }
-        };
+        let (mut assisted, features) = if self.lost_streak == 0 { self.track(gpu, fusion, frame).await? } else { self.recover(gpu, fusion, frame).await? };
         assisted.host = gpu.counters.snapshot() - before;
-        self.verdict(gpu, fusion, &assisted.report)?;
+        self.verdict(gpu, fusion, features, assisted.guess, &assisted.report)?;
         self.ms.push(started.elapsed().as_secs_f64() * 1e3);
         Ok(assisted)
     }
 
     /// A frame while tracking: the feature pass, `feature_guess` and the dense frame in one
     /// submission, the estimate read back with the frame's report ([`PassSummary`]); a motion
-    /// beyond the jump limits that ICP lost is relocalised and tracked again.
-    async fn track(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<AssistedFrame> {
+    /// beyond the jump limits that ICP lost is relocalised and tracked again. Returns the frame
+    /// and its features (read back only with the pair view).
+    async fn track(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<(AssistedFrame, Features)> {
         let started = web_time::Instant::now();
         self.extractor.begin(gpu, frame.index as u32);
         let with_reference = self.reference.is_some();
@@ -343,8 +317,7 @@ impl FeatureAssist {
             Some(Guess::Motion(_)) => self.stats.guesses += 1,
             None => {}
         }
-        self.pending = Some((result.map(|r| r.features).unwrap_or_default(), frame.index, guess));
-        Ok(AssistedFrame { report, guess, host: GpuCounts::default() })
+        Ok((AssistedFrame { report, guess, host: GpuCounts::default() }, result.map(|r| r.features).unwrap_or_default()))
     }
 
     /// A motion `ref_from_cur` (with `inliers` RANSAC inliers) against the reference, as a pose:
@@ -355,14 +328,15 @@ impl FeatureAssist {
         Some((reference.world_from_camera.compose(&ref_from_cur), reference.frame, inliers, beyond))
     }
 
-    /// After a loss: the relocalisation of the frame whose features are `result` (matched
-    /// against the last accepted frame) among it and this loss's window of keyframes, the most
-    /// inliers winning.
-    async fn propose(&mut self, gpu: &Gpu, frame: u64, result: FrameFeatures) -> Result<Option<Guess>> {
-        let seed = frame as u32;
+    /// A frame after a loss: its features alone (waited for), matched against the last accepted
+    /// frame and this loss's window of keyframes; the most inliers win and the dense tracker is
+    /// reseeded there before it tracks the frame. Returns the frame and its features.
+    async fn recover(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<(AssistedFrame, Features)> {
+        let seed = frame.index as u32;
+        let result = self.extractor.process(gpu, fusion.preprocessor(), frame, seed).await?;
         let stages_ms = result.gpu_ms.unwrap_or([f64::NAN; 5]);
         if let (Some(reference), Some(motion)) = (&self.reference, &result.motion) {
-            self.last_pair = Some(PairView::new(frame, reference.frame, &result.features, &reference.features, motion, stages_ms));
+            self.last_pair = Some(PairView::new(frame.index, reference.frame, &result.features, &reference.features, motion, stages_ms));
         }
         let against_reference = result.motion.as_ref().and_then(|m| Some((m.reference_from_current()?, m.inliers())));
         let mut best = against_reference.and_then(|(ref_from_cur, inliers)| self.candidate(ref_from_cur, inliers)).map(|(pose, keyframe, inliers, _)| (inliers, pose, keyframe));
@@ -372,11 +346,13 @@ impl FeatureAssist {
             }
         }
         let guess = best.map(|(inliers, world_from_camera, keyframe)| Guess::Relocalised { world_from_camera, keyframe, inliers });
-        if guess.is_some() {
+        if let Some(Guess::Relocalised { world_from_camera, .. }) = guess {
             self.stats.relocalisations += 1;
+            fusion.reseed(gpu, &world_from_camera)?;
         }
-        self.pending = Some((result.features, frame, guess));
-        Ok(guess)
+        fusion.submit_preprocessed_frame(gpu, frame).await?;
+        let report = report_of(gpu, fusion, frame.index).await?;
+        Ok((AssistedFrame { report, guess, host: GpuCounts::default() }, result.features))
     }
 
     /// The accepted estimates of the last processed frame against this loss's window of
@@ -403,12 +379,12 @@ impl FeatureAssist {
             .collect())
     }
 
-    /// `fusion`'s report of the frame being processed: tracked (it becomes the reference, and a
-    /// keyframe where the store has none near it) or lost. A relocalisation the report does not
-    /// confirm is undone: `fusion` is reseeded at the last good pose, so it leaves nothing
-    /// behind. A report of another frame is ignored.
-    fn verdict(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, report: &FrameReport) -> Result<()> {
-        let Some((features, frame, guess)) = self.pending.take_if(|p| p.1 == report.index) else { return Ok(()) };
+    /// `fusion`'s report of the frame just processed (its `features` and the `guess` it was
+    /// tracked from): tracked (it becomes the reference, and a keyframe where the store has none
+    /// near it) or lost. A relocalisation the report does not confirm is undone: `fusion` is
+    /// reseeded at the last good pose, so it leaves nothing behind.
+    fn verdict(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, features: Features, guess: Option<Guess>, report: &FrameReport) -> Result<()> {
+        let frame = report.index;
         let relocalised = matches!(guess, Some(Guess::Relocalised { .. }));
         let world_from_camera = &report.world_from_camera;
         if report.state.is_lost() {

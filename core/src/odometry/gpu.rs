@@ -22,13 +22,15 @@ use super::{Features, LevelLayout, descriptor_pattern, slot_count};
 use crate::cpu::odometry::estimate::RANSAC_MAX_HYPOTHESES;
 use crate::cpu::shared::DESCRIPTOR_WORDS;
 use crate::engine::{FrameEncoder, ReadbackRing, StageTimer};
+use crate::fusion::FEATURE_STAGES;
 use crate::kernels::gpu_data::{FeaturePair, RigidEstimate};
 use crate::kernels::{fast_score, feature_smooth, hamming_match, keypoint_select, match_select, orb_describe, ransac_hypotheses, ransac_refine};
 use crate::preprocess::DepthPreprocessor;
 use crate::{Error, Gpu, Result, RgbdFrame};
 
-/// The stages a frame is timed by, in order.
-pub const STAGES: [&str; 5] = ["update", "detection", "description", "matching", "estimation"];
+/// The stages a frame is timed by, in order: the update (upload and preprocessing), then the
+/// stages it records into a dense frame too ([`FEATURE_STAGES`]).
+pub const STAGES: [&str; 5] = ["update", FEATURE_STAGES[0], FEATURE_STAGES[1], FEATURE_STAGES[2], FEATURE_STAGES[3]];
 
 /// Keyframes matched per [`FeatureExtractor::match_keyframes`].
 pub const RELOCALISATION_CANDIDATES: usize = 4;
