@@ -314,6 +314,8 @@ fn info(options: &GpuOptions) -> anyhow::Result<()> {
     println!("adapter: {}", gpu.adapter_summary());
     println!("driver: {} {}", gpu.adapter_info.driver, gpu.adapter_info.driver_info);
     println!("max_storage_buffer_binding_size: {} MiB", l.max_storage_buffer_binding_size >> 20);
+    let pool = webfusion_core::map::max_pool_blocks(l.max_storage_buffer_binding_size);
+    println!("largest sparse pool: {pool} blocks of 8³ ({:.0} MiB with colour)", webfusion_core::map::pool_budget_mib(pool));
     println!("max_compute_workgroup_storage_size: {} KiB", l.max_compute_workgroup_storage_size >> 10);
     println!("kernels:");
     for k in webfusion_shaders::ALL {

@@ -47,8 +47,10 @@ pub(crate) struct ReconstructArgs {
     /// Do not swap a sparse map's blocks to host memory: a full pool refuses new blocks.
     #[arg(long)]
     no_swap: bool,
-    /// GPU memory for a sparse map's voxel pool and colour, MiB (at most 65536 blocks of 8³;
-    /// default: that largest pool, 261 MiB; the browser's default is 32768 blocks, 130 MiB).
+    /// GPU memory for a sparse map's voxel pool and colour, MiB (default: 65536 blocks of 8³,
+    /// 261 MiB, the largest pool every device holds; more where the device's storage bindings
+    /// allow, up to 524,288 blocks, 2088 MiB: `webfusion info` prints the binding; the browser's
+    /// default is 32768 blocks, 130 MiB).
     #[arg(long)]
     map_budget_mib: Option<u64>,
     /// Put the first camera at a dense cube's centre instead of in front of it (for a camera
@@ -142,7 +144,7 @@ impl ReconstructArgs {
     fn config(&self) -> anyhow::Result<FusionConfig> {
         let mut config = FusionConfig::default();
         let voxel = self.voxel_size.unwrap_or(webfusion_core::tsdf::DEFAULT_VOLUME_SIZE_M / self.volume as f32);
-        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), noise_band_sigmas: self.noise_band_sigmas.unwrap_or(webfusion_core::tsdf::DEFAULT_NOISE_BAND_SIGMAS), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, kind: self.map_kind, pool_blocks: self.map_budget_mib.map_or(webfusion_core::map::NATIVE_POOL_BLOCKS, |mib| webfusion_core::map::pool_blocks_for_budget(mib << 20)), swap: !self.no_swap, ..TsdfConfig::cube(self.volume, voxel) };
+        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), noise_band_sigmas: self.noise_band_sigmas.unwrap_or(webfusion_core::tsdf::DEFAULT_NOISE_BAND_SIGMAS), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, kind: self.map_kind, pool_blocks: self.map_budget_mib.map_or(webfusion_core::map::NATIVE_POOL_BLOCKS, |mib| webfusion_core::map::pool_blocks_for_budget(mib << 20, webfusion_core::map::max_pool_blocks(u64::MAX))), swap: !self.no_swap, ..TsdfConfig::cube(self.volume, voxel) };
         config.icp.iterations_per_level = self.icp_iterations.clone();
         config.icp.dist_thresh_m = self.icp_dist;
         config.icp.angle_thresh_rad = self.icp_angle_deg.to_radians();

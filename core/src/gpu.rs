@@ -16,6 +16,12 @@ use crate::{Error, Result};
 pub const PREFERRED_WORKGROUP_STORAGE_BYTES: u32 = 32 * 1024;
 /// Storage-buffer binding size the volume kernels need: a 256^3 TSDF of 2 x 16-bit voxels.
 pub const REQUIRED_STORAGE_BINDING_BYTES: u64 = 128 * 1024 * 1024;
+/// The largest storage binding requested where the adapter offers more than
+/// [`REQUIRED_STORAGE_BINDING_BYTES`] (natively and in browsers alike): 1 GiB, a 512^3 dense box
+/// or a sparse pool of 524,288 blocks. Beyond it a byte offset into one binding would pass
+/// 2^31, which some drivers compute in signed 32-bit arithmetic. Requesting the limit costs
+/// nothing: buffers are still sized by what they hold.
+pub const LARGEST_STORAGE_BINDING_BYTES: u64 = 1 << 30;
 /// Seconds a native wait on the GPU may take before it is reported as an error.
 pub const POLL_TIMEOUT_S: u64 = 30;
 
@@ -400,8 +406,11 @@ fn required_limits(adapter: &str, available: &wgpu::Limits) -> Result<wgpu::Limi
     check("max_storage_buffer_binding_size", REQUIRED_STORAGE_BINDING_BYTES, available.max_storage_buffer_binding_size)?;
     check("max_compute_workgroup_storage_size", 16 * 1024, available.max_compute_workgroup_storage_size.into())?;
     limits.max_storage_buffers_per_shader_stage = limits.max_storage_buffers_per_shader_stage.max(need_storage_buffers);
-    limits.max_storage_buffer_binding_size = limits.max_storage_buffer_binding_size.max(REQUIRED_STORAGE_BINDING_BYTES);
-    limits.max_buffer_size = limits.max_buffer_size.max(REQUIRED_STORAGE_BINDING_BYTES).min(available.max_buffer_size);
+    // As large a binding as the adapter offers, up to the largest one the kernels index safely
+    // (maps larger than WebGPU's default 128 MiB binding where the hardware allows them).
+    let binding = available.max_storage_buffer_binding_size.min(available.max_buffer_size).min(LARGEST_STORAGE_BINDING_BYTES);
+    limits.max_storage_buffer_binding_size = limits.max_storage_buffer_binding_size.max(REQUIRED_STORAGE_BINDING_BYTES).max(binding);
+    limits.max_buffer_size = limits.max_buffer_size.max(limits.max_storage_buffer_binding_size).min(available.max_buffer_size);
     limits.max_compute_workgroup_storage_size = PREFERRED_WORKGROUP_STORAGE_BYTES.min(available.max_compute_workgroup_storage_size);
     Ok(limits)
 }

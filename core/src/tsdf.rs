@@ -3,7 +3,8 @@
 //!
 //! Layout (see `shaders/wgsl/shared/tsdf.wgsl`): one u32 per voxel, x fastest, packing a
 //! signed-normalised 16-bit TSDF in truncation units (low half) and a 16-bit weight (high half).
-//! 256³ voxels take 64 MiB, half of the 128 MiB binding the device is created with; the optional
+//! 256³ voxels take 64 MiB, half of the 128 MiB binding every device is created with (larger
+//! where the adapter offers it, see [`crate::gpu::LARGEST_STORAGE_BINDING_BYTES`]); the optional
 //! colour volume takes as much again in its own binding.
 //!
 //! The pipeline talks to the store through [`TsdfStore`] (its description and buffers), so a
@@ -11,7 +12,7 @@
 //! tracking or export.
 
 use crate::cpu::shared::{MAP_DENSE, MAP_SPARSE};
-use crate::map::{DEFAULT_POOL_BLOCKS, MAX_POOL_BLOCKS, SPARSE_DIMS_VOXELS};
+use crate::map::{DEFAULT_POOL_BLOCKS, SPARSE_DIMS_VOXELS, max_pool_blocks};
 use crate::{Error, Gpu, Result, Se3};
 
 pub use crate::map::MapKind;
@@ -132,8 +133,9 @@ impl TsdfConfig {
         if !(self.voxel_size_m > 0.0 && self.voxel_size_m.is_finite()) {
             return bad(format!("voxel size {} m must be positive", self.voxel_size_m));
         }
-        if self.kind == MapKind::Sparse && !(1..=MAX_POOL_BLOCKS).contains(&self.pool_blocks) {
-            return bad(format!("a sparse map's pool of {} blocks must hold 1..={MAX_POOL_BLOCKS}", self.pool_blocks));
+        let largest_pool = max_pool_blocks(max_binding_bytes);
+        if self.kind == MapKind::Sparse && !(1..=largest_pool).contains(&self.pool_blocks) {
+            return bad(format!("a sparse map's pool of {} blocks must hold 1..={largest_pool} (the device's {} MiB storage binding holds {largest_pool} blocks of 2 KiB)", self.pool_blocks, max_binding_bytes.min(crate::gpu::LARGEST_STORAGE_BINDING_BYTES) >> 20));
         }
         if self.kind == MapKind::Sparse && self.truncation_m > 8.0 * self.voxel_size_m {
             return bad(format!("truncation {} m: a sparse map allows at most a block (8 voxels, {} m)", self.truncation_m, 8.0 * self.voxel_size_m));

@@ -39,15 +39,18 @@ pub const SPARSE_DIMS_VOXELS: [u32; 3] = [2048 * 8, 2048 * 8, 1023 * 8];
 /// Default pool size, blocks of 8³ voxels: 32768 blocks take 64 MiB of TSDF words (and as much
 /// colour), what the default dense box takes, and fit WebGPU's default 128 MiB binding.
 pub const DEFAULT_POOL_BLOCKS: u32 = 32768;
-/// Most pool blocks: the voxel words of one pool are one binding, at most 128 MiB in the browser.
-pub const MAX_POOL_BLOCKS: u32 = 65536;
-/// Default pool size of the native commands, blocks of 8³ voxels: the largest pool (its voxel
-/// words fill the 128 MiB binding every device webfusion opens has; 261 MiB with colour). A
+/// The largest pool every device webfusion opens holds: its voxel words fill WebGPU's default
+/// 128 MiB storage binding (the pool's words are one binding, its colour words another). A
+/// device that offers larger bindings holds more ([`max_pool_blocks`]).
+pub const PORTABLE_MAX_POOL_BLOCKS: u32 = 65536;
+/// Default pool size of the native commands, blocks of 8³ voxels: the largest portable pool (its
+/// voxel words fill the 128 MiB binding every device webfusion opens has; 261 MiB with colour;
+/// `--map-budget-mib` buys more where the device's bindings are larger). A
 /// native GPU has the memory, and fine voxels need it: at 6 mm, TUM fr1_rpy's office needs
 /// about 49,000 resident blocks, which the browser's default pool cannot hold even with
 /// swapping (the camera's view alone fills it). It costs no time at the default voxel size
 /// (the per-block kernels skip unused blocks at once).
-pub const NATIVE_POOL_BLOCKS: u32 = MAX_POOL_BLOCKS;
+pub const NATIVE_POOL_BLOCKS: u32 = PORTABLE_MAX_POOL_BLOCKS;
 /// Bytes one pool block costs with colour: TSDF and colour words, its surface-brick word, its
 /// key, its visible-list and free-list slots and eight hash slots ([`hash_slots_for_pool`]).
 pub const BLOCK_BYTES_WITH_COLOR: u64 = BLOCK_VOXELS as u64 * 8 + 4 + 4 + 4 + 4 + 8 * 8;
@@ -86,20 +89,28 @@ impl std::str::FromStr for MapKind {
     }
 }
 
-/// Pool blocks a memory budget holds (with colour), clamped to [1, [`MAX_POOL_BLOCKS`]].
-pub fn pool_blocks_for_budget(budget_bytes: u64) -> u32 {
-    (budget_bytes / BLOCK_BYTES_WITH_COLOR).clamp(1, u64::from(MAX_POOL_BLOCKS)) as u32
+/// The largest pool a device whose storage bindings hold `max_binding_bytes` can hold: its
+/// voxel words in one binding (and its colour words in another), at most what
+/// [`crate::gpu::LARGEST_STORAGE_BINDING_BYTES`] holds (524,288 blocks).
+pub fn max_pool_blocks(max_binding_bytes: u64) -> u32 {
+    (max_binding_bytes.min(crate::gpu::LARGEST_STORAGE_BINDING_BYTES) / (4 * u64::from(BLOCK_VOXELS))) as u32
+}
+
+/// Pool blocks a memory budget holds (with colour), clamped to [1, `largest`].
+pub fn pool_blocks_for_budget(budget_bytes: u64, largest: u32) -> u32 {
+    (budget_bytes / BLOCK_BYTES_WITH_COLOR).clamp(1, u64::from(largest.max(1))) as u32
 }
 
 /// The pool a memory budget of `budget_mib` MiB buys (the browser's "map memory" setting): an
 /// error naming it when it is not a finite number of MiB that holds at least one block;
-/// budgets beyond the largest pool get the largest pool, as [`pool_blocks_for_budget`] does.
+/// budgets beyond the largest portable pool get that pool, as [`pool_blocks_for_budget`] does
+/// (the form is read before a device is chosen, so it offers what every device holds).
 pub fn pool_blocks_for_budget_mib(budget_mib: f64) -> Result<u32> {
     let bytes = budget_mib * 1048576.0;
     if !(bytes.is_finite() && bytes >= BLOCK_BYTES_WITH_COLOR as f64) {
         return Err(Error::InvalidConfig(format!("map memory {budget_mib} MiB does not hold a block ({BLOCK_BYTES_WITH_COLOR} bytes)")));
     }
-    Ok(pool_blocks_for_budget(bytes as u64))
+    Ok(pool_blocks_for_budget(bytes as u64, PORTABLE_MAX_POOL_BLOCKS))
 }
 
 /// The memory, MiB, of a pool of `pool_blocks` blocks with colour (what
@@ -512,7 +523,7 @@ pub fn upload_dense_blocks(gpu: &Gpu, dense: &DenseTsdfVolume, blocks: &[MapBloc
 pub async fn mesh_of_blocks(gpu: &Gpu, config: &TsdfConfig, origin_in_world: [f32; 3], blocks: &[MapBlock]) -> Result<crate::mesh::Mesh> {
     let n = u32::try_from(blocks.len()).unwrap_or(u32::MAX).max(1);
     let config = TsdfConfig { pool_blocks: n, swap: false, kind: MapKind::Sparse, ..*config };
-    if n <= MAX_POOL_BLOCKS && config.validate(gpu.limits.max_storage_buffer_binding_size).is_ok() {
+    if config.validate(gpu.limits.max_storage_buffer_binding_size).is_ok() {
         let map = SparseMap::new(gpu, config, origin_in_world)?;
         map.upload_blocks(gpu, blocks)?;
         return crate::mesh::extract_mesh(gpu, &map).await;
@@ -539,12 +550,13 @@ pub fn resident_map(gpu: &Gpu, header: &file::MapFileHeader, blocks: &[MapBlock]
         MapKind::Sparse => {
             let n = u32::try_from(blocks.len()).unwrap_or(u32::MAX).max(1);
             let config = TsdfConfig { kind: MapKind::Sparse, pool_blocks: n, ..base };
-            if n > MAX_POOL_BLOCKS || config.validate(gpu.limits.max_storage_buffer_binding_size).is_err() {
+            if config.validate(gpu.limits.max_storage_buffer_binding_size).is_err() {
                 return Err(Error::InvalidConfig(format!(
-                    "the map's {} blocks do not fit one GPU binding ({} blocks of {} KiB at most): rendering it needs it all on the GPU (fuse it with larger voxels, a shorter --max-depth, or --noise-band-sigmas 0, whose narrower band at far range takes fewer blocks)",
+                    "the map's {} blocks do not fit one GPU binding of this device ({} blocks of {} KiB at most, {} MiB): rendering it needs it all on the GPU (fuse it with larger voxels, a shorter --max-depth, or --noise-band-sigmas 0, whose narrower band at far range takes fewer blocks)",
                     blocks.len(),
-                    MAX_POOL_BLOCKS.min((gpu.limits.max_storage_buffer_binding_size / (4 * u64::from(crate::cpu::shared::BLOCK_VOXELS))) as u32),
-                    4 * crate::cpu::shared::BLOCK_VOXELS / 1024
+                    max_pool_blocks(gpu.limits.max_storage_buffer_binding_size),
+                    4 * crate::cpu::shared::BLOCK_VOXELS / 1024,
+                    gpu.limits.max_storage_buffer_binding_size >> 20
                 )));
             }
             let map = SparseMap::new(gpu, config, header.origin_in_world)?;
@@ -686,11 +698,14 @@ mod tests {
     #[test]
     fn a_memory_budget_in_mib_buys_its_pool_and_bad_ones_are_named() {
         // The browser's default and largest pools, through the MiB the form shows (one decimal).
-        for pool in [DEFAULT_POOL_BLOCKS, MAX_POOL_BLOCKS] {
+        for pool in [DEFAULT_POOL_BLOCKS, PORTABLE_MAX_POOL_BLOCKS] {
             let shown: f64 = format!("{:.1}", pool_budget_mib(pool)).parse().expect("a number");
             assert_eq!(pool_blocks_for_budget_mib(shown).expect("a budget"), pool, "{shown} MiB");
         }
-        assert_eq!(pool_blocks_for_budget_mib(100_000.0).expect("a budget"), MAX_POOL_BLOCKS, "beyond the largest pool: the largest");
+        assert_eq!(pool_blocks_for_budget_mib(100_000.0).expect("a budget"), PORTABLE_MAX_POOL_BLOCKS, "beyond the largest pool: the largest");
+        assert_eq!(pool_blocks_for_budget(100_000 << 20, 200_000), 200_000, "a device's largest pool caps a native budget");
+        assert_eq!(max_pool_blocks(crate::gpu::REQUIRED_STORAGE_BINDING_BYTES), PORTABLE_MAX_POOL_BLOCKS, "WebGPU's default binding: the portable pool");
+        assert_eq!(max_pool_blocks(u64::MAX), 524_288, "at most what the largest binding requested holds");
         assert_eq!(pool_blocks_for_budget_mib(0.01).expect("a budget"), 2, "10 KiB: two blocks");
         for bad in [0.0, -5.0, 0.001, f64::NAN, f64::INFINITY] {
             let err = pool_blocks_for_budget_mib(bad).expect_err("not a budget").to_string();

@@ -151,3 +151,43 @@ fn blocks_round_trip_and_bad_uploads_are_refused() {
     assert!(pollster::block_on(map.download_blocks(&gpu)).expect("download").is_empty(), "a refused upload leaves the map empty");
     finish(&gpu);
 }
+
+#[test]
+fn the_devices_largest_pool_is_addressed_to_its_last_block_and_one_more_is_refused() {
+    // The largest pool one storage binding of this device holds (65,536 blocks on a device with
+    // WebGPU's default 128 MiB binding, more where the adapter offers larger bindings: the
+    // device requests them). The sphere's blocks are uploaded last, so they occupy the pool's
+    // top slots, past every index a smaller pool has.
+    let gpu = gpu();
+    let largest = webfusion_core::map::max_pool_blocks(gpu.limits.max_storage_buffer_binding_size);
+    assert!(largest >= webfusion_core::map::PORTABLE_MAX_POOL_BLOCKS, "every device holds the portable pool: {largest}");
+    let map = sparse_map(&gpu, largest);
+    let sphere = sphere_blocks(&map.desc());
+    let sphere_keys: std::collections::BTreeSet<u32> = sphere.iter().map(|b| webfusion_core::cpu::shared::block_key(b.coords)).collect();
+    // Filler: observed free space (TSDF +1) in blocks far from the sphere, along x at z = 0.
+    let free = pack_voxel(1.0, 1);
+    let fillers = (largest as usize) - sphere.len();
+    let mut blocks: Vec<MapBlock> = (0..fillers as u32)
+        .map(|i| MapBlock { coords: [i % 2048, (i / 2048) % 2048, 1 + i / (2048 * 2048)], voxels: vec![free; BLOCK_VOXELS as usize], colors: Vec::new() })
+        .filter(|b| !sphere_keys.contains(&webfusion_core::cpu::shared::block_key(b.coords)))
+        .collect();
+    assert_eq!(blocks.len(), fillers, "no filler block meets the sphere's");
+    blocks.extend(sphere.iter().cloned());
+    map.upload_blocks(&gpu, &blocks).expect("a full pool uploads");
+    let stats = pollster::block_on(map.stats(&gpu)).expect("stats");
+    assert_eq!(stats.blocks_used, largest, "every block of the pool in use");
+    let full = pollster::block_on(extract_mesh(&gpu, &map)).expect("mesh of the full pool");
+    // The same sphere alone in a small pool: the same surface.
+    let small = sparse_map(&gpu, 2048);
+    small.upload_blocks(&gpu, &sphere).expect("upload");
+    let alone = pollster::block_on(extract_mesh(&gpu, &small)).expect("mesh of the sphere alone");
+    eprintln!("pool of {largest} blocks ({} MiB binding): {} triangles, the sphere alone {}", gpu.limits.max_storage_buffer_binding_size >> 20, full.triangle_count(), alone.triangle_count());
+    assert!(alone.triangle_count() > 1000, "the sphere meshes: {}", alone.triangle_count());
+    assert_eq!(full.triangle_count(), alone.triangle_count(), "the pool's top blocks mesh as the sphere");
+    assert!(max_vertex_distance(&full, &alone).max(max_vertex_distance(&alone, &full)) < 1e-6, "the same vertices");
+    // A pool one block larger than a binding holds is refused, naming the binding.
+    let config = TsdfConfig { color: false, ..TsdfConfig::sparse(VOXEL_M, largest + 1) };
+    let err = SparseMap::new(&gpu, config, config.origin_for_first_camera(&Se3::IDENTITY)).map(|_| ()).expect_err("one block too many").to_string();
+    assert!(err.contains(&format!("1..={largest}")) && err.contains("storage binding"), "{err}");
+    finish(&gpu);
+}
