@@ -173,7 +173,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     // Whether `prev` came from the nearest voxel rather than trilinear interpolation.
     var prev_nearest = false;
     var hit = false;
-    var t_hit = 0.0;
+    // The first negative sample after a positive one (the crossing's far side).
+    var after = TsdfSample(0.0, false);
     for (var i = 0u; i < params.max_steps && t < t_end; i++) {
         let p = origin + dir * t;
         let slot = nearest_slot(d, p);
@@ -209,14 +210,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // starting inside an object, or entering it from unobserved space) no front face
             // can follow before the back one, so the ray sees nothing here.
             if prev.valid && prev.tsdf > 0.0 {
-                var before = prev;
-                if prev_nearest {
-                    let exact = sample_tsdf(d, origin + dir * prev_t);
-                    if exact.valid && exact.tsdf > 0.0 {
-                        before = exact;
-                    }
-                }
-                t_hit = prev_t + (t - prev_t) * before.tsdf / (before.tsdf - s.tsdf);
+                after = s;
                 hit = true;
             }
             break;
@@ -234,6 +228,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         write_miss(ix);
         return;
     }
+    // The crossing: the sample before it re-read trilinearly when it was a nearest-voxel one
+    // (after the march, so that this sample's code is not part of every step).
+    var before = prev;
+    if prev_nearest {
+        let exact = sample_tsdf(d, origin + dir * prev_t);
+        if exact.valid && exact.tsdf > 0.0 {
+            before = exact;
+        }
+    }
+    let t_hit = prev_t + (t - prev_t) * before.tsdf / (before.tsdf - after.tsdf);
     let p = origin + dir * t_hit;
     vertex_in_world[ix] = vec4<f32>(p, 1.0);
     depth_m[ix] = t_hit * z_per_t;
