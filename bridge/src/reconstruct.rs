@@ -144,7 +144,7 @@ impl ReconstructArgs {
     fn config(&self) -> anyhow::Result<FusionConfig> {
         let mut config = FusionConfig::default();
         let voxel = self.voxel_size.unwrap_or(webfusion_core::tsdf::DEFAULT_VOLUME_SIZE_M / self.volume as f32);
-        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), noise_band_sigmas: self.noise_band_sigmas.unwrap_or(webfusion_core::tsdf::DEFAULT_NOISE_BAND_SIGMAS), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, kind: self.map_kind, pool_blocks: self.map_budget_mib.map_or(webfusion_core::map::NATIVE_POOL_BLOCKS, |mib| webfusion_core::map::pool_blocks_for_budget(mib << 20, webfusion_core::map::max_pool_blocks(u64::MAX))), swap: !self.no_swap, ..TsdfConfig::cube(self.volume, voxel) };
+        config.tsdf = TsdfConfig { truncation_m: self.truncation.unwrap_or(DEFAULT_TRUNCATION_VOXELS * voxel), noise_band_sigmas: self.noise_band_sigmas.unwrap_or(webfusion_core::tsdf::DEFAULT_NOISE_BAND_SIGMAS), color: !self.no_color, placement: if self.centred { VolumePlacement::Centred } else { VolumePlacement::InFront }, kind: self.map_kind, pool_blocks: self.map_budget_mib.map_or(webfusion_core::map::NATIVE_POOL_BLOCKS, |mib| webfusion_core::map::pool_blocks_for_budget(mib.saturating_mul(1 << 20), webfusion_core::map::max_pool_blocks(u64::MAX))), swap: !self.no_swap, ..TsdfConfig::cube(self.volume, voxel) };
         config.icp.iterations_per_level = self.icp_iterations.clone();
         config.icp.dist_thresh_m = self.icp_dist;
         config.icp.angle_thresh_rad = self.icp_angle_deg.to_radians();
