@@ -348,20 +348,25 @@ fn a_disabled_pose_renders_nothing() {
     assert!(c.depth.iter().all(|&d| d == 0.0), "nor did the CPU twin");
 }
 
+/// Block coordinates of the sparse map's block holding the world point `p`.
+fn block_containing(desc: &VolumeDesc, p: [f32; 3]) -> [u32; 3] {
+    let corner = webfusion_core::cpu::shared::box_corner_in_world(desc);
+    let block_m = desc.voxel_size_m * (1 << webfusion_core::cpu::shared::BRICK_SHIFT) as f32;
+    std::array::from_fn(|i| ((p[i] - corner[i]) / block_m).floor() as u32)
+}
+
 /// The scene as a sparse map of the same voxel size: the blocks of the region the dense box
 /// covers that hold part of the truncation band (the rest never allocated), in key order, with
 /// the scene's colours.
 fn sparse_scene() -> (VolumeDesc, Vec<webfusion_core::map::MapBlock>) {
-    use webfusion_core::cpu::shared::{BLOCK_VOXELS, BRICK_SHIFT, box_corner_in_world, pack_voxel, voxel_centre_in_world, voxel_tsdf};
+    use webfusion_core::cpu::shared::{BLOCK_VOXELS, BRICK_SHIFT, pack_voxel, voxel_centre_in_world, voxel_tsdf};
     let config = TsdfConfig { color: true, ..TsdfConfig::sparse(0.04, 4096) };
     let desc = config.desc(config.origin_for_first_camera(&Se3::IDENTITY));
-    let corner = box_corner_in_world(&desc);
-    let block_m = desc.voxel_size_m * (1 << BRICK_SHIFT) as f32;
-    let block_of = |p: f32, i: usize| ((p - corner[i]) / block_m).floor() as u32;
+    let (lo, hi) = (block_containing(&desc, [-1.3, -1.3, 0.1]), block_containing(&desc, [1.3, 1.3, 2.2]));
     let mut blocks = Vec::new();
-    for bz in block_of(0.1, 2)..=block_of(2.2, 2) {
-        for by in block_of(-1.3, 1)..=block_of(1.3, 1) {
-            for bx in block_of(-1.3, 0)..=block_of(1.3, 0) {
+    for bz in lo[2]..=hi[2] {
+        for by in lo[1]..=hi[1] {
+            for bx in lo[0]..=hi[0] {
                 let centres: Vec<[f32; 3]> = (0..BLOCK_VOXELS)
                     .map(|l| voxel_centre_in_world(&desc, (bx << BRICK_SHIFT) + (l & 7), (by << BRICK_SHIFT) + ((l >> 3) & 7), (bz << BRICK_SHIFT) + (l >> 6)))
                     .collect();
@@ -405,9 +410,7 @@ fn a_sparse_map_renders_like_the_twin_and_the_dense_box_and_a_missing_block_is_s
     // renders differently from the twin's full map (the comparison sees block contents).
     let centre = (0..c.depth.len()).filter(|&i| !c.depth[i].is_nan()).min_by_key(|&i| (i as i64 - (60 * 160 + 80) as i64).abs()).expect("a hit");
     let p = c.vertex[centre];
-    let corner = webfusion_core::cpu::shared::box_corner_in_world(&desc);
-    let block_m = desc.voxel_size_m * 8.0;
-    let hit_block: [u32; 3] = std::array::from_fn(|i| ((p[i] - corner[i]) / block_m).floor() as u32);
+    let hit_block = block_containing(&desc, [p[0], p[1], p[2]]);
     let holed: Vec<_> = blocks.iter().filter(|b| b.coords != hit_block).cloned().collect();
     assert_eq!(holed.len() + 1, blocks.len(), "the hit's block is one of the map's");
     let holed = webfusion_core::map::PoolImage::from_blocks(desc, true, &holed).expect("pool image");
