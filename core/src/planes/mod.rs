@@ -38,6 +38,7 @@
 pub mod export;
 pub mod gpu;
 pub mod mesh;
+pub mod overlay;
 pub mod reference;
 pub mod world;
 
