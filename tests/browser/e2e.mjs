@@ -213,6 +213,29 @@ try {
     && textured === world.planes && gltf.images.length === world.planes && rest.attributes.COLOR_0 !== undefined && restTriangles > 0 && restTriangles < faces,
     `world ${JSON.stringify(world)}; scene.glb ${glb.length} bytes: ${textured} textured plane meshes, ${gltf.images.length} textures, remainder ${restTriangles} of the mesh's ${faces} triangles`);
 
+  // 6c''. The world's textured planes in the free view (the plane_overlay kernel over the
+  // raycast): with them off the view is the model's grey shading; on, every world plane is
+  // drawn and the pixels on the desk and the partition take their texture's colours.
+  stage = 'the textured planes in the free view';
+  const freeShot = async (name) => decodePng(await page.locator('#view-free').screenshot({ path: join(out, name) }));
+  await page.uncheck('#free-planes');
+  await waitFor(page, 'the free view without planes', (s) => s.world?.drawn?.planes === 0, 30_000);
+  const bare = await freeShot('free_view_no_planes.png');
+  await page.check('#free-planes');
+  const drawnState = await waitFor(page, 'the free view with planes', (s) => s.world?.drawn?.planes > 0 && s.world.drawn.planes === s.world.planes, 30_000);
+  const withPlanes = await freeShot('free_view_planes.png');
+  let changed = 0;
+  let coloured = 0;
+  for (let i = 0; i < bare.width * bare.height; i++) {
+    const o = i * bare.channels;
+    const [r, g, b] = [withPlanes.pixels[o], withPlanes.pixels[o + 1], withPlanes.pixels[o + 2]];
+    if (Math.abs(r - bare.pixels[o]) + Math.abs(g - bare.pixels[o + 1]) + Math.abs(b - bare.pixels[o + 2]) > 24) changed++;
+    if (Math.max(r, g, b) - Math.min(r, g, b) > 12) coloured++;
+  }
+  const n = bare.width * bare.height;
+  check('textured planes in the free view', drawnState.world.drawn.left_out === 0 && drawnState.world.drawn.texels > 0 && changed / n > 0.03 && coloured / n > 0.03,
+    `drawn ${JSON.stringify(drawnState.world.drawn)} of ${drawnState.world.planes} world planes; ${(100 * changed / n).toFixed(1)} % of the pixels changed, ${(100 * coloured / n).toFixed(1)} % coloured (saved free_view_no_planes.png, free_view_planes.png)`);
+
   // 6d. The virtual sensor in the fused map at the last frame's tracked pose, beside that
   // frame's real depth: the model explains the frame it was fused from (bounds from the
   // voxel size: 4 cm voxels blur depth edges; measured coverage 90.2 %, 1.8 % of pixels over

@@ -593,6 +593,7 @@ impl App {
                 }
             }
             Ui::ViewColour(on) => self.mode.set_free_colour(on),
+            Ui::ViewPlanes(on) => self.mode.set_free_planes(on),
             Ui::SimRender => match crate::sim::parse_pose(&ui::value("sim-pose")) {
                 Ok(pose) => self.render_sensor(SensorPose::At(pose)),
                 Err(message) => self.last_error = Some(format!("virtual sensor pose: {message}")),

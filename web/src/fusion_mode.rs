@@ -35,11 +35,12 @@ use webfusion_core::odometry::tracker::OdometryConfig;
 use webfusion_core::source::TimedPose;
 use webfusion_core::planes::PlaneConfig;
 use webfusion_core::planes::gpu::GpuPlaneSegmenter;
+use webfusion_core::planes::overlay::{OverlayTarget, PlaneOverlay};
 use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, LabelView, NormalView};
 use webfusion_core::{Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
 
 use crate::canvas::GpuCanvas;
-use crate::planes_world::{PlaneWorldModel, WorldStatus};
+use crate::planes_world::{Drawn, PlaneWorldModel, WorldStatus};
 use crate::sim::{OpenedMap, RealFrame, SensorPanel, SensorStatus};
 use crate::status::{HostPerFrame, STATS_WINDOW, StageMedians, VolumeStatus, Window};
 use crate::ui;
@@ -83,13 +84,18 @@ struct FreeView {
     target: RaycastTarget,
     shading: NormalView,
     canvas: GpuCanvas,
+    /// The world model's textured planes, drawn over the raycast (`plane_overlay`).
+    overlay: PlaneOverlay,
+    /// The world model's version the overlay holds, and what it left out.
+    overlay_of: Option<(u64, usize, usize)>,
 }
 
 impl FreeView {
     fn new(gpu: &Gpu, store: &webfusion_core::map::Map) -> Result<Self, String> {
         let target = RaycastTarget::new(gpu, store, FREE_VIEW, "web.free_view");
         let shading = NormalView::new(gpu, "web.view.free", &target.normal_in_world, [FREE_VIEW.width_px, FREE_VIEW.height_px]);
-        Ok(Self { target, shading, canvas: GpuCanvas::new(gpu, "view-free", [FREE_VIEW.width_px, FREE_VIEW.height_px])? })
+        let overlay = PlaneOverlay::new(gpu, "web.free_view.planes");
+        Ok(Self { target, shading, canvas: GpuCanvas::new(gpu, "view-free", [FREE_VIEW.width_px, FREE_VIEW.height_px])?, overlay, overlay_of: None })
     }
 }
 
@@ -211,6 +217,8 @@ pub(crate) struct FusionMode {
     free_model_dirty: bool,
     free_drawn_at: Option<Instant>,
     free_colour: bool,
+    /// Draw the world model's textured planes in the free view.
+    free_planes: bool,
     /// The odometry view: the stage shown (an index into `PAIR_STAGES`), the last pair and the
     /// colour images of its two frames.
     odometry_stage: usize,
@@ -351,6 +359,7 @@ impl FusionMode {
             free_model_dirty: false,
             free_drawn_at: None,
             free_colour: false,
+            free_planes: true,
             odometry_stage: PAIR_STAGES.len() - 1,
             pair: None,
             reference_image: None,
@@ -669,6 +678,7 @@ impl FusionMode {
     /// Takes the plane tables that came back (never waits) into the status and the caption.
     fn collect_planes(&mut self, gpu: &Gpu) -> Result<(), String> {
         let Some(planes) = self.pipeline.as_mut().and_then(|p| p.planes.as_mut()) else { return Ok(()) };
+        let version = planes.world.version();
         for (frame, seg, stats) in planes.segmenter.collect_tables(gpu).map_err(|e| format!("planes: {e}"))? {
             while self.planes_sent.front().is_some_and(|(f, _)| *f != frame) {
                 self.planes_sent.pop_front();
@@ -690,6 +700,8 @@ impl FusionMode {
                 planes.world.labels_arrived(frame, seg);
             }
         }
+        // The free view's textured planes follow the world as it grows.
+        self.free_model_dirty |= planes.world.version() != version;
         Ok(())
     }
 
@@ -768,6 +780,11 @@ impl FusionMode {
         self.free_dirty = true;
     }
 
+    pub(crate) fn set_free_planes(&mut self, on: bool) {
+        self.free_planes = on;
+        self.free_dirty = true;
+    }
+
     /// Redraws the free view if its camera moved, or if the model changed and a redraw is due
     /// ([`FREE_VIEW_MODEL_REFRESH_MS`] while frames stream).
     pub(crate) fn draw_free_view(&mut self, gpu: &Gpu) -> Result<(), String> {
@@ -777,6 +794,20 @@ impl FusionMode {
         let Some(orbit) = self.orbit else { return Ok(()) };
         let world_from_viewer = orbit.world_from_viewer();
         let map_from_viewer = self.map_from_world() * world_from_viewer;
+        // The world of planes is in the pipeline's frame (the map's): its textured planes are
+        // drawn over the pipeline's model, not over an opened map.
+        let planes_shown = self.free_planes && self.opened.is_none();
+        if let Some(p) = self.pipeline.as_mut().filter(|_| planes_shown) {
+            if let Some(planes) = &p.planes {
+                let version = planes.world.version();
+                if p.free.overlay_of.is_none_or(|(v, _, _)| v != version) {
+                    let model = planes.world.overlay_model();
+                    p.free.overlay.upload(gpu, &model).map_err(|e| format!("the free view's planes: {e}"))?;
+                    p.free.overlay_of = Some((version, model.texels.len(), model.left_out));
+                }
+            }
+        }
+        let occlusion_m = (2.0 * self.config.tsdf.voxel_size_m).max(PlaneConfig::default().label_min_distance_m);
         let (free, store) = match (&self.opened, &self.pipeline) {
             (Some((o, free)), _) => (free, &o.map),
             (None, Some(p)) if !self.trajectory.is_empty() => (&p.free, p.fusion.volume()),
@@ -787,17 +818,27 @@ impl FusionMode {
         self.free_drawn_at = Some(Instant::now());
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.free_view") });
         free.target.render(gpu, &mut encoder, store, &map_from_viewer, FREE_VIEW_RANGE_M).map_err(|e| e.to_string())?;
-        let texture = if self.free_colour {
-            free.canvas.draw_packed(&mut encoder, &free.target.color_rgba8, FREE_VIEW.width_px)?
-        } else {
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("web.free_view.shading"), timestamp_writes: None });
-                free.shading.dispatch_in(gpu, &mut pass);
+        if !self.free_colour {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("web.free_view.shading"), timestamp_writes: None });
+            free.shading.dispatch_in(gpu, &mut pass);
+        }
+        // The textured planes over the model's colour or shading, where the model's surface
+        // lies on them (within two voxels, or the plane's labelling distance).
+        let (image, row_stride_px) = if self.free_colour { (&free.target.color_rgba8, FREE_VIEW.width_px) } else { (&free.shading.image.rgba8, free.shading.image.row_stride_px) };
+        let drawn = match free.overlay_of {
+            Some((_, texels, left_out)) if planes_shown => {
+                let target = OverlayTarget { intrinsics: FREE_VIEW, depth_m: &free.target.depth_m, rgba8: image, row_stride_px };
+                free.overlay.draw(gpu, &mut encoder, &target, &map_from_viewer, FREE_VIEW_RANGE_M, occlusion_m);
+                Drawn { planes: free.overlay.plane_count(), texels, left_out }
             }
-            free.canvas.draw(&mut encoder, &free.shading.image)?
+            _ => Drawn::default(),
         };
+        let texture = if self.free_colour { free.canvas.draw_packed(&mut encoder, image, FREE_VIEW.width_px)? } else { free.canvas.draw(&mut encoder, &free.shading.image)? };
         gpu.submit([encoder.finish()]);
         GpuCanvas::present(gpu, [texture]);
+        if let Some(planes) = self.pipeline.as_mut().and_then(|p| p.planes.as_mut()) {
+            planes.world.set_drawn(drawn);
+        }
         self.draw_overlay(&world_from_viewer)
     }
 

@@ -55,6 +55,8 @@ pub(crate) enum Ui {
     Zoom(f32),
     /// Show the model's fused colour instead of shading in the free view.
     ViewColour(bool),
+    /// Draw the world model's textured planes in the free view.
+    ViewPlanes(bool),
     /// The odometry view's next stage (after the last: the next frame, paused).
     OdometryStage,
     /// The virtual sensor: render at the pose typed into its panel, at the free view's camera,

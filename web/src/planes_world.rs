@@ -20,6 +20,7 @@ use webfusion_core::cpu::shared::pack_u16_pairs;
 use webfusion_core::mesh::Mesh;
 use webfusion_core::planes::export::{mesh_remainder, write_scene_glb};
 use webfusion_core::planes::mesh::{PlaneMesh, blend_reach_px, complete_labels};
+use webfusion_core::planes::overlay::{DEFAULT_MAX_OVERLAY_TEXELS, OverlayModel};
 use webfusion_core::planes::world::{PlaneView, PlaneWorld, WorldConfig};
 use webfusion_core::planes::{PlaneConfig, Segmentation};
 use webfusion_core::preprocess::PreprocessConfig;
@@ -53,6 +54,21 @@ pub(crate) struct PlaneWorldModel {
     merged: usize,
     clipped_texels: u64,
     add_ms: Window,
+    /// Bumped whenever the world changes (a frame added, a reset).
+    version: u64,
+    /// What the free view draws of it, as [`PlaneWorldModel::set_drawn`] last said.
+    drawn: Drawn,
+}
+
+/// What the free view drew of the world at its last draw.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub(crate) struct Drawn {
+    /// World planes drawn as textured quadtree meshes.
+    pub(crate) planes: u32,
+    /// Their texels (the overlay's memory is 4 bytes each).
+    pub(crate) texels: usize,
+    /// World planes left out (beyond the overlay's texel budget).
+    pub(crate) left_out: usize,
 }
 
 /// The world model's part of the status.
@@ -70,11 +86,13 @@ pub(crate) struct WorldStatus {
     pub(crate) waiting: usize,
     /// Median milliseconds of adding a frame (label completion and the world's update).
     pub(crate) median_ms: f64,
+    /// What the free view's last draw showed of the world's textured planes.
+    pub(crate) drawn: Drawn,
 }
 
 impl PlaneWorldModel {
     pub(crate) fn new(plane_config: PlaneConfig, preprocess: PreprocessConfig) -> Self {
-        Self { world: PlaneWorld::new(WorldConfig::default()), plane_config, preprocess, waiting: VecDeque::new(), last_asked: None, frames: 0, merged: 0, clipped_texels: 0, add_ms: Window::default() }
+        Self { world: PlaneWorld::new(WorldConfig::default()), plane_config, preprocess, waiting: VecDeque::new(), last_asked: None, frames: 0, merged: 0, clipped_texels: 0, add_ms: Window::default(), version: 0, drawn: Drawn::default() }
     }
 
     /// Whether the next segmented frame should bring its labels back: none is waiting and the
@@ -133,12 +151,30 @@ impl PlaneWorldModel {
         self.frames += 1;
         self.merged += association.merged;
         self.clipped_texels += association.clipped_texels;
+        self.version += 1;
         self.add_ms.push(started.elapsed().as_secs_f64() * 1e3);
     }
 
     /// Forgets the world and the frames on their way (a new run).
     pub(crate) fn reset(&mut self) {
+        let version = self.version + 1;
         *self = Self::new(self.plane_config, self.preprocess);
+        self.version = version;
+    }
+
+    /// Changes whenever the world does.
+    pub(crate) fn version(&self) -> u64 {
+        self.version
+    }
+
+    /// The live planes' textured meshes as the free view's overlay draws them.
+    pub(crate) fn overlay_model(&self) -> OverlayModel {
+        OverlayModel::from_world(&self.world, DEFAULT_MAX_OVERLAY_TEXELS)
+    }
+
+    /// The free view drew this much of the world.
+    pub(crate) fn set_drawn(&mut self, drawn: Drawn) {
+        self.drawn = drawn;
     }
 
     pub(crate) fn status(&self) -> WorldStatus {
@@ -149,6 +185,7 @@ impl PlaneWorldModel {
             clipped_texels: self.clipped_texels,
             waiting: self.waiting.len(),
             median_ms: self.add_ms.median().unwrap_or(0.0),
+            drawn: self.drawn,
         }
     }
 
@@ -220,12 +257,18 @@ mod tests {
         let s = model.status();
         assert_eq!((s.frames, s.waiting), (3, 0), "frame 5 (lost) left out, 6 added");
         // The scene: one textured mesh per plane and the remainder, as glTF binary.
+        // The overlay's model: a plane per world plane, each with covered texels.
+        let overlay = model.overlay_model();
+        assert_eq!((overlay.planes.len(), overlay.left_out), (seg.planes.len(), 0));
+        assert!(overlay.texels.iter().any(|&w| w >> 24 == 0xff), "covered texels");
         let glb = model.scene_glb(&Mesh::default(), 0.01).expect("glb");
         assert_eq!(&glb[..4], b"glTF", "glTF magic");
         assert_eq!(model.meshes().len(), seg.planes.len(), "a mesh per world plane");
         assert!(model.meshes().iter().all(|m| !m.triangles.is_empty() && m.texture.width_px > 0), "textured meshes");
+        let before = model.version();
         model.reset();
         assert_eq!((model.status().frames, model.status().planes), (0, 0), "a new run starts a new world");
+        assert_ne!(model.version(), before, "a reset changes the version (the overlay is rebuilt)");
         // Negative control: frames never reported stay waiting and add nothing.
         model.asked(7, &colour, Rc::clone(&depth), calibration);
         model.labels_arrived(7, seg);

@@ -137,6 +137,7 @@ pub(crate) fn bind_controls(inbox: &Rc<Inbox>) {
     on(inbox, "loop", "change", || Some(Ui::Playback(Control::Loop(!value("loop").is_empty()))));
     on(inbox, "every-frame", "change", || Some(Ui::EveryFrame(!value("every-frame").is_empty())));
     on(inbox, "free-colour", "change", || Some(Ui::ViewColour(!value("free-colour").is_empty())));
+    on(inbox, "free-planes", "change", || Some(Ui::ViewPlanes(!value("free-planes").is_empty())));
     on(inbox, "sim-follow", "change", || Some(Ui::SimFollow(!value("sim-follow").is_empty())));
     on(inbox, "sim-noise", "change", || Some(Ui::SimNoise));
     on(inbox, "sim-seed", "change", || Some(Ui::SimNoise));
