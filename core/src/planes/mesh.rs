@@ -243,7 +243,9 @@ pub struct PlaneMesh {
     pub uv: Vec<[f32; 2]>,
     /// Counter-clockwise seen from the side the normal points to.
     pub triangles: Vec<[u32; 3]>,
-    /// The texture: RGB, power-of-two sides at most [`MAX_TEXTURE_PX`], black where no texel
+    /// The texture: RGB, power-of-two sides at most [`MAX_TEXTURE_PX`]; a texel a quad covers
+    /// that no view saw takes its observed neighbours' mean ([`fill_covered_texels`]); black
+    /// where no texel
     /// was observed; row 0 is texel row 0 (v = 0).
     pub texture: ColorImage,
     /// Quads (each two triangles).
@@ -308,10 +310,11 @@ impl PlaneMesh {
         let texel_m2 = 1.0 / (grid.px_per_m * grid.px_per_m);
         let area_m2 = cells.iter().filter(|&&c| c).count() as f32 * texel_m2;
         // Texture at the grid's resolution, then halved to fit.
+        let filled = fill_covered_texels(colours, &cells, w, step as u32);
         let mut tex: Vec<Option<[f32; 3]>> = vec![None; (pw * ph) as usize];
         for y in 0..h {
             for x in 0..w {
-                tex[y * pw as usize + x] = colours[y * w + x].map(|c| c.map(f32::from));
+                tex[y * pw as usize + x] = filled[y * w + x];
             }
         }
         let (mut tw, mut th) = (pw as usize, ph as usize);
@@ -338,6 +341,42 @@ impl PlaneMesh {
         let texture = ColorImage { width_px: tw as u32, height_px: th as u32, rgb8 };
         PlaneMesh { grid, positions_m, uv, triangles, texture, quads, area_m2, cells }
     }
+}
+
+/// The colours of a grid `width` texels wide (`None`: no view saw the texel) with each texel
+/// a quad covers (`covered`) but no view saw given the mean of its observed 8-neighbours,
+/// spreading one texel per pass for at most `passes` passes (a quad's cell of `passes` texels
+/// across is at least half observed, so its gaps close): a pixel left unlabelled inside a
+/// plane (a dropout, a noisy normal) would otherwise be a black speck in the texture.
+pub fn fill_covered_texels(colours: &[Option<[u8; 3]>], covered: &[bool], width: usize, passes: u32) -> Vec<Option<[f32; 3]>> {
+    let mut out: Vec<Option<[f32; 3]>> = colours.iter().map(|c| c.map(|c| c.map(f32::from))).collect();
+    let height = colours.len() / width.max(1);
+    for _ in 0..passes {
+        let prev = out.clone();
+        let mut changed = false;
+        for i in (0..out.len()).filter(|&i| covered[i] && prev[i].is_none()) {
+            let (x, y) = ((i % width) as i64, (i / width) as i64);
+            let (mut sum, mut n) = ([0.0f32; 3], 0.0f32);
+            for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                let (nx, ny) = (x + dx, y + dy);
+                if nx < 0 || ny < 0 || nx >= width as i64 || ny >= height as i64 {
+                    continue;
+                }
+                if let Some(c) = prev[(ny * width as i64 + nx) as usize] {
+                    (0..3).for_each(|a| sum[a] += c[a]);
+                    n += 1.0;
+                }
+            }
+            if n > 0.0 {
+                out[i] = Some(sum.map(|v| v / n));
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    out
 }
 
 /// The textured quadtree mesh of plane `index` of a frame's segmentation, in the camera frame
@@ -510,6 +549,31 @@ pub(crate) mod tests {
     use crate::preprocess::PreprocessConfig;
     use crate::sim::plane_scenes::{NO_PLANE, PlaneScene, RenderedScene, ScenePlane, UNITS_PER_METRE};
     use crate::{RgbdCalibration, Se3};
+
+    /// A covered texel no view saw takes its observed neighbours' mean, a gap two texels wide
+    /// closes in two passes (not one), and a texel no quad covers stays unseen.
+    #[test]
+    fn covered_gaps_in_a_texture_are_filled_from_their_neighbours() {
+        // A row of 5: seen, gap, gap, seen, and an uncovered unseen texel.
+        let colours = [Some([10, 20, 30]), None, None, Some([30, 40, 50]), None];
+        let covered = [true, true, true, true, false];
+        let one = fill_covered_texels(&colours, &covered, 5, 1);
+        assert_eq!(one[1], Some([10.0, 20.0, 30.0]));
+        assert_eq!(one[2], Some([30.0, 40.0, 50.0]));
+        assert_eq!(one[4], None, "not covered: left unseen");
+        let wide = [Some([0, 0, 0]), None, None, None, Some([90, 90, 90])];
+        let one = fill_covered_texels(&wide, &[true; 5], 5, 1);
+        assert_eq!(one[2], None, "the middle of a 3-texel gap needs two passes");
+        let two = fill_covered_texels(&wide, &[true; 5], 5, 2);
+        assert_eq!(two[2], Some([45.0, 45.0, 45.0]));
+        // In a quadtree mesh: a plane seen everywhere but one texel has no black texel.
+        let grid = TexelGrid { frame: PlaneFrame::new([0.0, 0.0, -1.0], 2.0, [0.0, 0.0, 2.0], [1.0, 0.0, 0.0]), px_per_m: 64.0, min_m: [0.0, 0.0], width: 8, height: 8 };
+        let mut seen = vec![Some([200u8, 100, 50]); 64];
+        seen[9] = None;
+        let mesh = PlaneMesh::build(grid, &seen, 1);
+        assert!(mesh.cells[9], "its cell is covered (3 of 4 texels seen)");
+        assert_eq!(&mesh.texture.rgb8[3 * 9..3 * 9 + 3], &[200, 100, 50], "filled, not black");
+    }
 
     #[test]
     fn a_full_grid_is_one_quad_per_256_block() {
