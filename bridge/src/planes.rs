@@ -12,6 +12,11 @@
 //!   cover (the non-planar remainder) as `DIR/scene.glb` and `DIR/scene.obj` (+ `scene.mtl`,
 //!   `scene_textures/`).
 //!
+//! With `--from-model` each frame's depth is replaced by the fused map's, as a virtual sensor
+//! (`core::sim::VirtualSensor`, exact) sees it from the frame's pose after the whole sequence
+//! was fused: the planes of the model (noise averaged over every view, holes filled from
+//! other views) rather than of one noisy frame; the frame's colour textures them as before.
+//!
 //! Preprocessing and segmentation run on the GPU (`core::planes::gpu`: one submission per
 //! frame and one readback), or with `--cpu-reference` the CPU reference
 //! (`core::planes::reference`) on the CPU twin of the preprocessor; tracking and fusion run on
@@ -27,7 +32,9 @@ use webfusion_core::planes::{NO_LABEL, PlaneConfig, reference};
 use webfusion_core::cpu::shared::{pack_u16_pairs, plane_colour};
 use webfusion_core::planes::gpu::GpuPlaneSegmenter;
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
-use webfusion_core::{ColorImage, Gpu, GpuOptions, Se3, codec::png};
+use webfusion_core::map::Map;
+use webfusion_core::sim::sensor::{SensorOptions, VirtualSensor};
+use webfusion_core::{ColorImage, DepthImage, Gpu, GpuOptions, RgbdFrame, Se3, codec::png};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, pose_driven::PoseDrivenMapper};
 use webfusion_core::io::trajectory::{TimedPose, write_tum_trajectory};
 use webfusion_core::mesh::Mesh;
@@ -75,6 +82,11 @@ pub(crate) struct PlanesArgs {
     /// kernel's time per frame in `frames.json` (`kernels_ms`; slower overall).
     #[arg(long, conflicts_with = "cpu_reference")]
     kernel_times: bool,
+    /// Segment the fused map instead of the raw frames: each frame's depth is the map's, as a
+    /// virtual sensor at the frame's pose sees it once every frame is fused (frames without a
+    /// pose are left out).
+    #[arg(long, conflicts_with = "no_world")]
+    from_model: bool,
     /// Texels per metre of the world planes' textures (a power of two).
     #[arg(long, default_value_t = WorldConfig::default().px_per_m)]
     texture_px_per_m: f32,
@@ -90,6 +102,23 @@ struct WorldPoses {
     origin: &'static str,
     /// Frames left out: tracking lost, or no given pose.
     left_out: Vec<u64>,
+    /// The fused map, kept for `--from-model`.
+    map: Option<FusedMap>,
+}
+
+/// The map the world pass fused, with what fused it.
+enum FusedMap {
+    Tracked(Box<KinectFusion>),
+    Given(Box<PoseDrivenMapper>),
+}
+
+impl FusedMap {
+    fn store(&self) -> &Map {
+        match self {
+            FusedMap::Tracked(f) => f.volume(),
+            FusedMap::Given(m) => m.volume(),
+        }
+    }
 }
 
 /// Tracks (or fuses at the given poses) every frame of `range` on the GPU.
@@ -123,7 +152,8 @@ fn world_poses(gpu: &Gpu, args: &PlanesArgs, range: std::ops::Range<usize>) -> a
         let Some(mut mapper) = mapper else { anyhow::bail!("no frame of {} has a given pose (within 20 ms, or in the per-frame list) in {path}", source.name()) };
         pollster::block_on(mapper.flush(gpu))?;
         let mesh = pollster::block_on(mapper.extract_mesh(gpu)).context("extracting the mesh")?;
-        return Ok(WorldPoses { poses, mesh, voxel_m, origin: "given", left_out });
+        let map = args.from_model.then(|| FusedMap::Given(Box::new(mapper)));
+        return Ok(WorldPoses { poses, mesh, voxel_m, origin: "given", left_out, map });
     }
     let mut fusion = KinectFusion::new(gpu, source.calibration(), config)?;
     let on_report = |r: FrameReport, poses: &mut HashMap<u64, Se3>, left_out: &mut Vec<u64>| {
@@ -148,7 +178,8 @@ fn world_poses(gpu: &Gpu, args: &PlanesArgs, range: std::ops::Range<usize>) -> a
     let errors = gpu.take_errors();
     anyhow::ensure!(errors.is_empty(), "GPU reported errors: {}", errors.join("; "));
     let mesh = pollster::block_on(fusion.mapper_mut().extract_mesh(gpu)).context("extracting the mesh")?;
-    Ok(WorldPoses { poses, mesh, voxel_m, origin: "tracked", left_out })
+    let map = args.from_model.then(|| FusedMap::Tracked(Box::new(fusion)));
+    Ok(WorldPoses { poses, mesh, voxel_m, origin: "tracked", left_out, map })
 }
 
 /// A plane's colour in the label images (the browser's plane view uses the same).
@@ -192,6 +223,12 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         }
         _ => None,
     };
+    // With --from-model, the fused map's depth at each frame's pose (exact: no noise).
+    let mut model_sensor = match (&gpu, world_input.as_ref().and_then(|w| w.map.as_ref())) {
+        (Some(gpu), Some(map)) => Some(VirtualSensor::new(gpu, map.store(), k, SensorOptions { units_per_metre: calibration.depth_units_per_metre, ..SensorOptions::default() })?),
+        _ => None,
+    };
+    let mut without_pose = 0usize;
     // The labels leave the GPU only for the label images and the world model.
     let read_labels = args.labels || world_input.is_some();
     let mut overflow = 0u32;
@@ -204,6 +241,21 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         let sw = Stopwatch::start();
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         let read_ms = sw.ms();
+        let mut model_ms = None;
+        let frame = match (&mut model_sensor, &gpu, &world_input) {
+            (Some(sensor), Some(gpu), Some(input)) => {
+                let Some(pose) = input.poses.get(&frame.index) else {
+                    without_pose += 1;
+                    continue;
+                };
+                let sw = Stopwatch::start();
+                let map = input.map.as_ref().expect("the map is kept for --from-model");
+                let model = pollster::block_on(sensor.render(gpu, map.store(), pose, index as u32)).with_context(|| format!("rendering the model at frame {index}"))?;
+                model_ms = Some(sw.ms());
+                RgbdFrame { depth: DepthImage::new(k.width_px, k.height_px, model.depth_units)?, ..frame }
+            }
+            _ => frame,
+        };
         let mut kernels_ms: Vec<(&str, f64)> = Vec::new();
         let (seg, raw_depth_m, preprocess_ms, segment_ms) = match &on_gpu {
             None => {
@@ -237,6 +289,9 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         };
         for (stage, ms) in [("read+decode", read_ms), ("preprocess", preprocess_ms), ("segment", segment_ms)] {
             times.record(stage, ms);
+        }
+        if let Some(ms) = model_ms {
+            times.record("model depth", ms);
         }
         counts.push(seg.planes.len());
         let mut world_ids = None;
@@ -289,7 +344,7 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
             "timestamp": frame.depth_timestamp_ns as f64 * 1e-9,
             "planes": planes,
             "curved_rejected": seg.curved_rejected,
-            "stages_ms": {"preprocess": preprocess_ms, "segment": segment_ms, "world": world_ms},
+            "stages_ms": {"model_depth": model_ms, "preprocess": preprocess_ms, "segment": segment_ms, "world": world_ms},
             "kernels_ms": (!kernels_ms.is_empty()).then(|| kernels_ms.iter().map(|(k, ms)| ((*k).to_owned(), serde_json::json!(ms))).collect::<serde_json::Map<_, _>>()),
         }));
         eprint!("\rframe {index}: {} planes", seg.planes.len());
@@ -306,6 +361,8 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
     let json = serde_json::json!({
         "source": source.name(),
         "implementation": if args.cpu_reference { "cpu-reference" } else { "gpu" },
+        "depth": if args.from_model { "model" } else { "sensor" },
+        "frames_without_pose": args.from_model.then_some(without_pose),
         "adapter": on_gpu.as_ref().map(|(gpu, _, _)| gpu.adapter_summary()),
         "planes_overflow": overflow,
         "frames": frames,
@@ -385,6 +442,7 @@ fn write_world(args: &PlanesArgs, world: &PlaneWorld, input: &WorldPoses, clippe
         "source": args.source.display().to_string(),
         "world_frame": if input.origin == "given" { "the given poses' frame" } else { "the first tracked camera's frame" },
         "poses": input.origin,
+        "depth": if args.from_model { "model" } else { "sensor" },
         "frames_with_pose": input.poses.len(),
         "frames_left_out": input.left_out,
         "texel_grid_px_per_m": world.config.px_per_m,

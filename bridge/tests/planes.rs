@@ -204,6 +204,33 @@ fn a_posed_room_corner_becomes_three_textured_world_planes() {
     for line in mtl.lines().filter_map(|l| l.strip_prefix("map_Kd ")) {
         assert!(out.join(line).is_file(), "{line} missing");
     }
+    // The fused map segmented instead of the frames (--from-model): each frame's depth is the
+    // map's at its pose, where six noisy views were averaged, so the same three world planes
+    // come back and each frame's planes fit their points more tightly than the raw frame's.
+    let model_out = dir.join("model");
+    let o = webfusion(&["planes", recording.to_str().expect("utf-8"), "--out", model_out.to_str().expect("utf-8"), "--poses", pose_file.to_str().expect("utf-8"), "--from-model"]);
+    assert!(o.status.success(), "planes --from-model failed: {}", String::from_utf8_lossy(&o.stderr));
+    let model_json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(model_out.join("planes.json")).expect("planes.json")).expect("json");
+    assert_eq!((&model_json["depth"], &json["depth"]), (&serde_json::json!("model"), &serde_json::json!("sensor")));
+    let model_planes = model_json["planes"].as_array().expect("planes");
+    assert_eq!(model_planes.len(), truth.len(), "{model_planes:?}");
+    for p in model_planes {
+        let n = vec3(&p["normal"]);
+        let t = truth.iter().max_by(|a, b| (a.normal.x * n[0] + a.normal.y * n[1] + a.normal.z * n[2]).total_cmp(&(b.normal.x * n[0] + b.normal.y * n[1] + b.normal.z * n[2]))).expect("truth");
+        let cos = t.normal.x * n[0] + t.normal.y * n[1] + t.normal.z * n[2];
+        assert!(cos > 1f64.to_radians().cos() && (p["offset_m"].as_f64().expect("offset") - t.offset_m).abs() < 0.01, "model: {p} is not {t:?}");
+    }
+    let model_frames = frames_json(&model_out);
+    assert_eq!((&model_frames["depth"], &model_frames["frames_without_pose"]), (&serde_json::json!("model"), &serde_json::json!(0)));
+    let median_rms = |frames: &serde_json::Value| {
+        let mut rms: Vec<f64> = frames["frames"].as_array().expect("frames").iter().flat_map(|f| f["planes"].as_array().expect("planes").iter().map(|p| p["rms_m"].as_f64().expect("rms"))).collect();
+        rms.sort_by(f64::total_cmp);
+        rms[rms.len() / 2]
+    };
+    let (rms_model, rms_sensor) = (median_rms(&model_frames), median_rms(&frames_json(&out)));
+    eprintln!("median plane rms: model {:.2} mm, frames {:.2} mm", rms_model * 1e3, rms_sensor * 1e3);
+    assert!(rms_model < rms_sensor, "the model's planes fit no more tightly ({rms_model} m) than the frames' ({rms_sensor} m)");
+
     // The same poses as seed 000's robot poses (x y z in cm, α β γ with R = Rz(α) Ry(β) Rx(γ) ·
     // (Eq. 5.3's axis change)⁻¹), one per frame in frame order: the same world planes.
     let camera_from_sensor = glam::DMat3::from_cols(DVec3::X, -DVec3::Z, DVec3::Y).transpose();
