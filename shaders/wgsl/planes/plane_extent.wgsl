@@ -50,7 +50,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let rel = p.xyz - list[base + 1u].xyz;
     for (var a = 0u; a < 2u; a++) {
         let key = ordered_key(dot(rel, list[base + 2u + a].xyz));
-        atomicMax(&extents[4u * l + 2u * a], ~key);
-        atomicMax(&extents[4u * l + 2u * a + 1u], key);
+        // Only a point beyond the extent so far writes (a load first: once the extent has
+        // grown, nearly every pixel of a plane lies inside it, and contended
+        // read-modify-writes on four words per plane are what this kernel would cost).
+        let lo = 4u * l + 2u * a;
+        if ~key > atomicLoad(&extents[lo]) {
+            atomicMax(&extents[lo], ~key);
+        }
+        if key > atomicLoad(&extents[lo + 1u]) {
+            atomicMax(&extents[lo + 1u], key);
+        }
     }
 }

@@ -117,6 +117,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     keys[ix] = key;
     if key != NO_LABEL {
-        atomicOr(&chunk_masks[(ix / PLANE_SUMS_CHUNK_PX) * CHUNK_MASK_WORDS + key / 32u], 1u << (key % 32u));
+        // Most pixels of a chunk find their plane's bit set already: a load, not a
+        // read-modify-write every pixel of the chunk contends for.
+        let word = (ix / PLANE_SUMS_CHUNK_PX) * CHUNK_MASK_WORDS + key / 32u;
+        let bit = 1u << (key % 32u);
+        if (atomicLoad(&chunk_masks[word]) & bit) == 0u {
+            atomicOr(&chunk_masks[word], bit);
+        }
     }
 }
