@@ -797,14 +797,14 @@ impl FusionMode {
         // The world of planes is in the pipeline's frame (the map's): its textured planes are
         // drawn over the pipeline's model, not over an opened map.
         let planes_shown = self.free_planes && self.opened.is_none();
-        if let Some(p) = self.pipeline.as_mut().filter(|_| planes_shown) {
-            if let Some(planes) = &p.planes {
-                let version = planes.world.version();
-                if p.free.overlay_of.is_none_or(|(v, _, _)| v != version) {
-                    let model = planes.world.overlay_model();
-                    p.free.overlay.upload(gpu, &model).map_err(|e| format!("the free view's planes: {e}"))?;
-                    p.free.overlay_of = Some((version, model.texels.len(), model.left_out));
-                }
+        if let Some(p) = self.pipeline.as_mut().filter(|_| planes_shown)
+            && let Some(planes) = &p.planes
+        {
+            let version = planes.world.version();
+            if p.free.overlay_of.is_none_or(|(v, _, _)| v != version) {
+                let model = planes.world.overlay_model();
+                p.free.overlay.upload(gpu, &model).map_err(|e| format!("the free view's planes: {e}"))?;
+                p.free.overlay_of = Some((version, model.texels.len(), model.left_out));
             }
         }
         let occlusion_m = (2.0 * self.config.tsdf.voxel_size_m).max(PlaneConfig::default().label_min_distance_m);
