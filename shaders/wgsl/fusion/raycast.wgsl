@@ -2,16 +2,23 @@
 //! Each invocation casts the ray of one pixel through the TSDF (000-digest §1.3.3) from the pose
 //! in `pose` (the tracker's, a free view's, a virtual sensor's); nothing is written when that
 //! pose is inactive (a lost frame keeps the previous prediction). The march starts at the near
-//! plane (or the volume's entry) and reads only the nearest voxel while that voxel says the
-//! surface is far: unobserved space and the truncated band (TSDF within `FAR_TSDF` of +1, at
-//! least μ - ½√3 voxel from any surface) are crossed in steps of `step_factor * μ` with one read
-//! per step. Nearer the surface it samples the trilinear TSDF and steps by the sampled distance
-//! (at least half a voxel), until the TSDF changes sign from + to - (a ray that reaches negative
-//! space any other way, from unobserved space or starting inside an object, ends there: only a
-//! back face could follow); the surface point is the
-//! linear interpolation of the crossing (the sample before it re-read trilinearly when it was a
-//! nearest-voxel one). Writes the world-frame vertex, the depth (camera z) a virtual sensor at
-//! this pose would see and the model colour (nearest voxel); `surface_normals` then derives the
+//! plane (or the volume's entry) and reads only the nearest voxel (coarse): unobserved space
+//! and the truncated band (TSDF within `FAR_TSDF` of +1, at least μ - ½√3 voxel from any
+//! surface) are crossed in steps of `step_factor * μ`; nearer a surface each step is what the
+//! nearest voxel's TSDF less half a voxel diagonal allows (no farther than a trilinear sample
+//! there could say), at least half a voxel, until the nearest voxel lies within that margin of
+//! a surface or behind one.
+//! Then (fine) trilinear samples look for a bracket of the crossing, a positive sample before
+//! a non-positive one at most two voxels apart (probing back from the candidate, on past a
+//! positive sample, or halving; at most `FINE_SAMPLES`); the surface point is the linear
+//! interpolation of that bracket. A ray that reaches
+//! negative space any other way (from unobserved space, or starting inside an object) ends
+//! there: only a back face could follow. A bracket that does not close (an unobserved corner,
+//! a thin edge) marches on coarsely. Trilinear samples cost most on CPU adapters, which run
+//! invocations in lockstep: the coarse march reads one word a step, and the two to four
+//! trilinear samples of the fine step come after it. Writes the world-frame vertex, the depth
+//! (camera z) a virtual sensor at this pose would see and the model colour (nearest voxel);
+//! `surface_normals` then derives the
 //! normals from the vertices. Misses, back faces and unobserved space give NaN / 0. A prediction rendered at the pose a depth image was just fused at may
 //! search each ray only within μ + 3σ (Kinect noise) of that pixel's measured depth instead of
 //! the whole depth range: the fused surface lies there, and a model surface further in front is
@@ -82,6 +89,11 @@ struct RaycastParams {
 @group(0) @binding(9) var<storage, read> block_table: array<u32>;
 
 const OPAQUE: u32 = 0xff000000u;
+// Coarse-then-fine rounds per ray (a round ends in a hit, a miss, or marches on: a ray
+// grazing a surface within the margin without crossing it).
+const REFINE_ROUNDS: u32 = 8u;
+// Trilinear samples of a fine step, at most.
+const FINE_SAMPLES: u32 = 8u;
 
 fn write_miss(ix: u32) {
     vertex_in_world[ix] = invalid_vec4();
@@ -168,76 +180,133 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let min_step = 0.5 * d.voxel_size_m;
-    var prev_t = t;
-    var prev = TsdfSample(0.0, false);
-    // Whether `prev` came from the nearest voxel rather than trilinear interpolation.
-    var prev_nearest = false;
+    // How much lower than at a voxel's centre the TSDF may be anywhere within half its
+    // diagonal, truncation units (a distance changes by at most one voxel per voxel).
+    let nearest_margin = 0.5 * sqrt(3.0) * d.voxel_size_m / d.truncation_m;
+    let t_start = t;
+    var i = 0u;
     var hit = false;
-    // The first negative sample after a positive one (the crossing's far side).
-    var after = TsdfSample(0.0, false);
-    for (var i = 0u; i < params.max_steps && t < t_end; i++) {
-        let p = origin + dir * t;
-        let slot = nearest_slot(d, p);
-        if slot == NO_SLOT && d.kind == MAP_SPARSE {
-            // A block a sparse map never allocated holds no surface: cross it in one step.
-            prev = TsdfSample(0.0, false);
-            prev_nearest = false;
-            prev_t = t;
-            t = max(block_exit_t(d, origin, inv_dir, p) + 0.01 * d.voxel_size_m, t + min_step);
-            continue;
-        }
-        var word = 0u;
-        if slot != NO_SLOT {
-            word = tsdf_volume[slot];
-        }
-        if voxel_weight(word) == 0u {
-            prev = TsdfSample(0.0, false);
-            prev_nearest = false;
-            prev_t = t;
-            t += max_step;
-            continue;
-        }
-        if voxel_tsdf(word) >= FAR_TSDF {
-            prev = TsdfSample(1.0, true);
-            prev_nearest = true;
-            prev_t = t;
-            t += max_step;
-            continue;
-        }
-        let s = sample_tsdf(d, p);
-        if s.valid && s.tsdf <= 0.0 {
-            // A crossing from + to -: the surface. Without a positive sample before it (a ray
-            // starting inside an object, or entering it from unobserved space) no front face
-            // can follow before the back one, so the ray sees nothing here.
-            if prev.valid && prev.tsdf > 0.0 {
-                after = s;
-                hit = true;
+    var t_hit = 0.0;
+    // Whether the last coarse sample, at prev_t, was a positive one.
+    var prev_positive = false;
+    var prev_t = t;
+    for (var round = 0u; round < REFINE_ROUNDS; round++) {
+        // Coarse: the nearest voxel only, until it lies behind a surface.
+        var candidate = false;
+        loop {
+            if i >= params.max_steps || !(t < t_end) {
+                break;
             }
+            i++;
+            let p = origin + dir * t;
+            let slot = nearest_slot(d, p);
+            if slot == NO_SLOT && d.kind == MAP_SPARSE {
+                // A block a sparse map never allocated holds no surface: cross it in one step.
+                prev_positive = false;
+                prev_t = t;
+                t = max(block_exit_t(d, origin, inv_dir, p) + 0.01 * d.voxel_size_m, t + min_step);
+                continue;
+            }
+            var word = 0u;
+            if slot != NO_SLOT {
+                word = tsdf_volume[slot];
+            }
+            if voxel_weight(word) == 0u {
+                prev_positive = false;
+                prev_t = t;
+                t += max_step;
+                continue;
+            }
+            let n = voxel_tsdf(word);
+            // Above the margin the trilinear TSDF here is positive too: march on. (A first
+            // positive sample after unobserved space is taken as the start of a bracket.)
+            if n > nearest_margin || (n > 0.0 && !prev_positive) {
+                prev_positive = true;
+                prev_t = t;
+                if n >= FAR_TSDF {
+                    t += max_step;
+                } else {
+                    // No farther than a trilinear sample here could say (n less the margin).
+                    t += clamp((n - nearest_margin) * d.truncation_m * params.step_factor, min_step, max_step);
+                }
+                continue;
+            }
+            // Within the margin of a surface, or behind one: a crossing may be near. Behind a
+            // surface without a positive sample before it (a ray starting inside an object, or
+            // entering it from unobserved space) no front face can follow: the ray ends here.
+            candidate = prev_positive;
             break;
         }
-        prev = s;
-        prev_nearest = false;
-        prev_t = t;
-        var step = max_step;
-        if s.valid {
-            step = clamp(s.tsdf * d.truncation_m * params.step_factor, min_step, max_step);
+        if !candidate {
+            break;
         }
-        t += step;
+        // Fine: the trilinear TSDF at both ends of the coarse step, moved back (half a voxel
+        // at a time) until the first is positive and on (by the sampled distance) until the
+        // second is not, so that they bracket the crossing as a trilinear march would.
+        // Fine: trilinear samples at probes chosen one after another, one sample call per
+        // step whatever the probe (lanes run in lockstep, so a lane's extra probe costs every
+        // lane one sample, not a loop of its own): first the candidate; then, lacking a
+        // positive end, the last positive coarse sample and on back (half a voxel, doubling);
+        // lacking a non-positive end, half a voxel past the distance the positive end samples
+        // (a surface facing the ray lies within it); with both more than two voxels apart,
+        // their midpoint.
+        var a_t = 0.0;
+        var a = TsdfSample(0.0, false);
+        var have_a = false;
+        var b_t = 0.0;
+        var b = TsdfSample(0.0, false);
+        var have_b = false;
+        var probe_t = t;
+        var back = min_step;
+        for (var k = 0u; k < FINE_SAMPLES; k++) {
+            let s = sample_tsdf(d, origin + dir * probe_t);
+            if !s.valid {
+                break;
+            }
+            if s.tsdf > 0.0 {
+                a = s;
+                a_t = probe_t;
+                have_a = true;
+            } else {
+                b = s;
+                b_t = probe_t;
+                have_b = true;
+            }
+            if !have_a {
+                if probe_t > prev_t {
+                    probe_t = prev_t;
+                } else if probe_t > t_start {
+                    probe_t = max(probe_t - back, t_start);
+                    back *= 2.0;
+                } else {
+                    break;
+                }
+            } else if !have_b {
+                probe_t = a_t + min(a.tsdf * d.truncation_m + min_step, max_step);
+                if !(probe_t < t_end) {
+                    break;
+                }
+            } else if b_t - a_t > 4.0 * min_step {
+                probe_t = 0.5 * (a_t + b_t);
+            } else {
+                break;
+            }
+        }
+        if have_a && have_b {
+            t_hit = a_t + (b_t - a_t) * a.tsdf / (a.tsdf - b.tsdf);
+            hit = true;
+            break;
+        }
+        // No bracket (an unobserved corner, a ray grazing a surface within the margin): march
+        // on coarsely from the farthest positive sample, or past the candidate.
+        prev_positive = have_a;
+        prev_t = select(t, a_t, have_a);
+        t = select(t, a_t, have_a) + min_step;
     }
     if !hit {
         write_miss(ix);
         return;
     }
-    // The crossing: the sample before it re-read trilinearly when it was a nearest-voxel one
-    // (after the march, so that this sample's code is not part of every step).
-    var before = prev;
-    if prev_nearest {
-        let exact = sample_tsdf(d, origin + dir * prev_t);
-        if exact.valid && exact.tsdf > 0.0 {
-            before = exact;
-        }
-    }
-    let t_hit = prev_t + (t - prev_t) * before.tsdf / (before.tsdf - after.tsdf);
     let p = origin + dir * t_hit;
     vertex_in_world[ix] = vec4<f32>(p, 1.0);
     depth_m[ix] = t_hit * z_per_t;

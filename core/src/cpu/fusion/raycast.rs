@@ -8,6 +8,10 @@ use crate::kernels::raycast::{CameraPose, RaycastParams};
 use crate::tsdf::VolumeDesc;
 
 const OPAQUE: u32 = 0xff00_0000;
+/// Twin of `REFINE_ROUNDS`.
+const REFINE_ROUNDS: u32 = 8;
+/// Twin of `FINE_SAMPLES`.
+const FINE_SAMPLES: u32 = 8;
 
 /// Twin of `nearest_slot()`.
 pub fn nearest_slot(map: MapRef<'_>, d: &VolumeDesc, p_world: [f32; 3]) -> u32 {
@@ -135,68 +139,99 @@ pub fn raycast(
                 continue;
             }
             let min_step = 0.5 * d.voxel_size_m;
-            let mut prev_t = t;
-            let mut prev = TsdfSample { tsdf: 0.0, valid: false };
-            let mut prev_nearest = false;
-            let mut hit = false;
-            let mut t_hit = 0.0;
+            let nearest_margin = 0.5 * 3f32.sqrt() * d.voxel_size_m / d.truncation_m;
+            let t_start = t;
             let at = |t: f32| std::array::from_fn(|i| origin[i] + dir[i] * t);
             let mut i = 0;
-            while i < params.max_steps && t < t_end {
-                let p = at(t);
-                let slot = nearest_slot(map, d, p);
-                if slot == NO_SLOT && d.kind == MAP_SPARSE {
-                    // A block a sparse map never allocated: crossed in one step.
-                    prev = TsdfSample { tsdf: 0.0, valid: false };
-                    prev_nearest = false;
-                    prev_t = t;
-                    t = (block_exit_t(d, origin, inv_dir, p) + 0.01 * d.voxel_size_m).max(t + min_step);
+            let mut hit = false;
+            let mut t_hit = 0.0;
+            let mut prev_positive = false;
+            let mut prev_t = t;
+            for _round in 0..REFINE_ROUNDS {
+                // Coarse: the nearest voxel only.
+                let mut candidate = false;
+                while i < params.max_steps && t < t_end {
                     i += 1;
-                    continue;
-                }
-                let word = if slot == NO_SLOT { 0 } else { tsdf_volume[slot as usize] };
-                if voxel_weight(word) == 0 {
-                    prev = TsdfSample { tsdf: 0.0, valid: false };
-                    prev_nearest = false;
-                    prev_t = t;
-                    t += max_step;
-                    i += 1;
-                    continue;
-                }
-                if voxel_tsdf(word) >= FAR_TSDF {
-                    prev = TsdfSample { tsdf: 1.0, valid: true };
-                    prev_nearest = true;
-                    prev_t = t;
-                    t += max_step;
-                    i += 1;
-                    continue;
-                }
-                let s = sample_tsdf(map, d, at(t));
-                if s.valid && s.tsdf <= 0.0 {
-                    // A crossing from + to -, or (no positive sample before it) a ray that
-                    // starts inside an object or enters it from unobserved space: it ends.
-                    if prev.valid && prev.tsdf > 0.0 {
-                        let mut before = prev;
-                        if prev_nearest {
-                            let exact = sample_tsdf(map, d, at(prev_t));
-                            if exact.valid && exact.tsdf > 0.0 {
-                                before = exact;
-                            }
-                        }
-                        t_hit = prev_t + (t - prev_t) * before.tsdf / (before.tsdf - s.tsdf);
-                        hit = true;
+                    let p = at(t);
+                    let slot = nearest_slot(map, d, p);
+                    if slot == NO_SLOT && d.kind == MAP_SPARSE {
+                        // A block a sparse map never allocated: crossed in one step.
+                        prev_positive = false;
+                        prev_t = t;
+                        t = (block_exit_t(d, origin, inv_dir, p) + 0.01 * d.voxel_size_m).max(t + min_step);
+                        continue;
                     }
+                    let word = if slot == NO_SLOT { 0 } else { tsdf_volume[slot as usize] };
+                    if voxel_weight(word) == 0 {
+                        prev_positive = false;
+                        prev_t = t;
+                        t += max_step;
+                        continue;
+                    }
+                    let n = voxel_tsdf(word);
+                    if n > nearest_margin || (n > 0.0 && !prev_positive) {
+                        prev_positive = true;
+                        prev_t = t;
+                        if n >= FAR_TSDF {
+                            t += max_step;
+                        } else {
+                            t += ((n - nearest_margin) * d.truncation_m * params.step_factor).clamp(min_step, max_step);
+                        }
+                        continue;
+                    }
+                    // Within the margin of a surface or behind one: a candidate crossing, or
+                    // (behind one with no positive sample before it) the end of the ray.
+                    candidate = prev_positive;
                     break;
                 }
-                prev = s;
-                prev_nearest = false;
-                prev_t = t;
-                let mut step = max_step;
-                if s.valid {
-                    step = (s.tsdf * d.truncation_m * params.step_factor).clamp(min_step, max_step);
+                if !candidate {
+                    break;
                 }
-                t += step;
-                i += 1;
+                // Fine: trilinear samples at probes chosen one after another.
+                let (mut a_t, mut a, mut have_a) = (0.0f32, TsdfSample { tsdf: 0.0, valid: false }, false);
+                let (mut b_t, mut b, mut have_b) = (0.0f32, TsdfSample { tsdf: 0.0, valid: false }, false);
+                let mut probe_t = t;
+                let mut back = min_step;
+                for _k in 0..FINE_SAMPLES {
+                    let s = sample_tsdf(map, d, at(probe_t));
+                    if !s.valid {
+                        break;
+                    }
+                    if s.tsdf > 0.0 {
+                        (a, a_t, have_a) = (s, probe_t, true);
+                    } else {
+                        (b, b_t, have_b) = (s, probe_t, true);
+                    }
+                    if !have_a {
+                        if probe_t > prev_t {
+                            probe_t = prev_t;
+                        } else if probe_t > t_start {
+                            probe_t = (probe_t - back).max(t_start);
+                            back *= 2.0;
+                        } else {
+                            break;
+                        }
+                    } else if !have_b {
+                        probe_t = a_t + (a.tsdf * d.truncation_m + min_step).min(max_step);
+                        if !(probe_t < t_end) {
+                            break;
+                        }
+                    } else if b_t - a_t > 4.0 * min_step {
+                        probe_t = 0.5 * (a_t + b_t);
+                    } else {
+                        break;
+                    }
+                }
+                if have_a && have_b {
+                    t_hit = a_t + (b_t - a_t) * a.tsdf / (a.tsdf - b.tsdf);
+                    hit = true;
+                    break;
+                }
+                // No bracket: march on coarsely from the farthest positive sample, or past
+                // the candidate.
+                prev_positive = have_a;
+                prev_t = if have_a { a_t } else { t };
+                t = (if have_a { a_t } else { t }) + min_step;
             }
             if !hit {
                 miss();
