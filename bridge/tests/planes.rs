@@ -115,6 +115,18 @@ fn read_glb(path: &Path) -> (serde_json::Value, Vec<u8>) {
 /// A room corner seen from six poses, with the poses given: `planes.json` holds its three
 /// planes in the poses' frame; `scene.glb` is valid glTF with a textured mesh per plane whose
 /// vertices lie on it, and the OBJ scene references textures that exist.
+/// One world plane (`planes.json`) per true plane, each within 1° and 1 cm of the true plane
+/// its normal is nearest.
+fn assert_world_planes_are_true(what: &str, planes: &[serde_json::Value], truth: &[webfusion_core::sim::plane_scenes::ScenePlane]) {
+    assert_eq!(planes.len(), truth.len(), "{what}: {planes:?}");
+    for p in planes {
+        let n = vec3(&p["normal"]);
+        let cos_to = |t: &webfusion_core::sim::plane_scenes::ScenePlane| t.normal.x * n[0] + t.normal.y * n[1] + t.normal.z * n[2];
+        let t = truth.iter().max_by(|a, b| cos_to(a).total_cmp(&cos_to(b))).expect("truth");
+        assert!(cos_to(t) > 1f64.to_radians().cos() && (p["offset_m"].as_f64().expect("offset") - t.offset_m).abs() < 0.01, "{what}: {p} is not {t:?}");
+    }
+}
+
 #[test]
 fn a_posed_room_corner_becomes_three_textured_world_planes() {
     use glam::{DQuat, DVec3};
@@ -147,12 +159,8 @@ fn a_posed_room_corner_becomes_three_textured_world_planes() {
     let planes = json["planes"].as_array().expect("planes");
     // In the world frame: the scene's planes as the first camera sees them, moved back.
     let truth: Vec<_> = base.planes_in_camera().into_iter().flatten().map(|p| p.in_frame(&base.world_from_camera.inverse())).collect();
-    assert_eq!(planes.len(), truth.len(), "{planes:?}");
+    assert_world_planes_are_true("frames", planes, &truth);
     for p in planes {
-        let n = vec3(&p["normal"]);
-        let t = truth.iter().max_by(|a, b| (a.normal.x * n[0] + a.normal.y * n[1] + a.normal.z * n[2]).total_cmp(&(b.normal.x * n[0] + b.normal.y * n[1] + b.normal.z * n[2]))).expect("truth");
-        let cos = t.normal.x * n[0] + t.normal.y * n[1] + t.normal.z * n[2];
-        assert!(cos > 1f64.to_radians().cos() && (p["offset_m"].as_f64().expect("offset") - t.offset_m).abs() < 0.01, "{p} is not {t:?}");
         assert!(p["triangles"].as_u64().expect("triangles") > 0 && p["area_m2"].as_f64().expect("area") > 0.5, "{p}");
     }
     // The poses used, one per frame, as given.
@@ -213,13 +221,7 @@ fn a_posed_room_corner_becomes_three_textured_world_planes() {
     let model_json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(model_out.join("planes.json")).expect("planes.json")).expect("json");
     assert_eq!((&model_json["depth"], &json["depth"]), (&serde_json::json!("model"), &serde_json::json!("sensor")));
     let model_planes = model_json["planes"].as_array().expect("planes");
-    assert_eq!(model_planes.len(), truth.len(), "{model_planes:?}");
-    for p in model_planes {
-        let n = vec3(&p["normal"]);
-        let t = truth.iter().max_by(|a, b| (a.normal.x * n[0] + a.normal.y * n[1] + a.normal.z * n[2]).total_cmp(&(b.normal.x * n[0] + b.normal.y * n[1] + b.normal.z * n[2]))).expect("truth");
-        let cos = t.normal.x * n[0] + t.normal.y * n[1] + t.normal.z * n[2];
-        assert!(cos > 1f64.to_radians().cos() && (p["offset_m"].as_f64().expect("offset") - t.offset_m).abs() < 0.01, "model: {p} is not {t:?}");
-    }
+    assert_world_planes_are_true("model", model_planes, &truth);
     let model_frames = frames_json(&model_out);
     assert_eq!((&model_frames["depth"], &model_frames["frames_without_pose"]), (&serde_json::json!("model"), &serde_json::json!(0)));
     let median_rms = |frames: &serde_json::Value| {
