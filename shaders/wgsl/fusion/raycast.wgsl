@@ -14,9 +14,9 @@
 //! interpolation of that bracket. A ray that reaches
 //! negative space any other way (from unobserved space, or starting inside an object) ends
 //! there: only a back face could follow. A bracket that does not close (an unobserved corner,
-//! a thin edge) marches on coarsely. Trilinear samples cost most on CPU adapters, which run
-//! invocations in lockstep: the coarse march reads one word a step, and the two to four
-//! trilinear samples of the fine step come after it. Writes the world-frame vertex, the depth
+//! a ray grazing a surface within the margin) marches on coarsely. Trilinear samples cost
+//! most on CPU adapters, which run invocations in lockstep: the coarse march reads one word a
+//! step, and the fine step's samples (two for most rays) come after it from one call site. Writes the world-frame vertex, the depth
 //! (camera z) a virtual sensor at this pose would see and the model colour (nearest voxel);
 //! `surface_normals` then derives the
 //! normals from the vertices. Misses, back faces and unobserved space give NaN / 0. A prediction rendered at the pose a depth image was just fused at may
@@ -191,7 +191,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var prev_positive = false;
     var prev_t = t;
     for (var round = 0u; round < REFINE_ROUNDS; round++) {
-        // Coarse: the nearest voxel only, until it lies behind a surface.
+        // Coarse: the nearest voxel only, until it lies within the margin of a surface or
+        // behind one.
         var candidate = false;
         loop {
             if i >= params.max_steps || !(t < t_end) {
@@ -240,9 +241,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if !candidate {
             break;
         }
-        // Fine: the trilinear TSDF at both ends of the coarse step, moved back (half a voxel
-        // at a time) until the first is positive and on (by the sampled distance) until the
-        // second is not, so that they bracket the crossing as a trilinear march would.
         // Fine: trilinear samples at probes chosen one after another, one sample call per
         // step whatever the probe (lanes run in lockstep, so a lane's extra probe costs every
         // lane one sample, not a loop of its own): first the candidate; then, lacking a

@@ -148,7 +148,8 @@ pub fn raycast(
             let mut prev_positive = false;
             let mut prev_t = t;
             for _round in 0..REFINE_ROUNDS {
-                // Coarse: the nearest voxel only.
+                // Coarse: the nearest voxel only, until it lies within the margin of a
+                // surface or behind one.
                 let mut candidate = false;
                 while i < params.max_steps && t < t_end {
                     i += 1;
