@@ -224,8 +224,8 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         _ => None,
     };
     // With --from-model, the fused map's depth at each frame's pose (exact: no noise).
-    let mut model_sensor = match (&gpu, world_input.as_ref().and_then(|w| w.map.as_ref())) {
-        (Some(gpu), Some(map)) => Some(VirtualSensor::new(gpu, map.store(), k, SensorOptions { units_per_metre: calibration.depth_units_per_metre, ..SensorOptions::default() })?),
+    let mut model_view = match (&gpu, world_input.as_ref().and_then(|w| w.map.as_ref().map(|m| (m, &w.poses)))) {
+        (Some(gpu), Some((map, poses))) => Some((VirtualSensor::new(gpu, map.store(), k, SensorOptions { units_per_metre: calibration.depth_units_per_metre, ..SensorOptions::default() })?, gpu, map.store(), poses)),
         _ => None,
     };
     let mut without_pose = 0usize;
@@ -242,19 +242,18 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         let read_ms = sw.ms();
         let mut model_ms = None;
-        let frame = match (&mut model_sensor, &gpu, &world_input) {
-            (Some(sensor), Some(gpu), Some(input)) => {
-                let Some(pose) = input.poses.get(&frame.index) else {
+        let frame = match &mut model_view {
+            Some((sensor, gpu, store, poses)) => {
+                let Some(pose) = poses.get(&frame.index) else {
                     without_pose += 1;
                     continue;
                 };
                 let sw = Stopwatch::start();
-                let map = input.map.as_ref().expect("the map is kept for --from-model");
-                let model = pollster::block_on(sensor.render(gpu, map.store(), pose, index as u32)).with_context(|| format!("rendering the model at frame {index}"))?;
+                let model = pollster::block_on(sensor.render(gpu, *store, pose, index as u32)).with_context(|| format!("rendering the model at frame {index}"))?;
                 model_ms = Some(sw.ms());
                 RgbdFrame { depth: DepthImage::new(k.width_px, k.height_px, model.depth_units)?, ..frame }
             }
-            _ => frame,
+            None => frame,
         };
         let mut kernels_ms: Vec<(&str, f64)> = Vec::new();
         let (seg, raw_depth_m, preprocess_ms, segment_ms) = match &on_gpu {

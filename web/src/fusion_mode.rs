@@ -86,8 +86,8 @@ struct FreeView {
     canvas: GpuCanvas,
     /// The world model's textured planes, drawn over the raycast (`plane_overlay`).
     overlay: PlaneOverlay,
-    /// The world model's version the overlay holds, and what it left out.
-    overlay_of: Option<(u64, usize, usize)>,
+    /// The world model's version the overlay holds, and what it draws of it.
+    overlay_of: Option<(u64, Drawn)>,
 }
 
 impl FreeView {
@@ -801,10 +801,10 @@ impl FusionMode {
             && let Some(planes) = &p.planes
         {
             let version = planes.world.version();
-            if p.free.overlay_of.is_none_or(|(v, _, _)| v != version) {
+            if p.free.overlay_of.is_none_or(|(v, _)| v != version) {
                 let model = planes.world.overlay_model();
                 p.free.overlay.upload(gpu, &model).map_err(|e| format!("the free view's planes: {e}"))?;
-                p.free.overlay_of = Some((version, model.texels.len(), model.left_out));
+                p.free.overlay_of = Some((version, Drawn { planes: p.free.overlay.plane_count(), texels: model.texels.len(), left_out: model.left_out }));
             }
         }
         let occlusion_m = (2.0 * self.config.tsdf.voxel_size_m).max(PlaneConfig::default().label_min_distance_m);
@@ -826,10 +826,10 @@ impl FusionMode {
         // lies on them (within two voxels, or the plane's labelling distance).
         let (image, row_stride_px) = if self.free_colour { (&free.target.color_rgba8, FREE_VIEW.width_px) } else { (&free.shading.image.rgba8, free.shading.image.row_stride_px) };
         let drawn = match free.overlay_of {
-            Some((_, texels, left_out)) if planes_shown => {
+            Some((_, drawn)) if planes_shown => {
                 let target = OverlayTarget { intrinsics: FREE_VIEW, depth_m: &free.target.depth_m, rgba8: image, row_stride_px };
                 free.overlay.draw(gpu, &mut encoder, &target, &map_from_viewer, FREE_VIEW_RANGE_M, occlusion_m);
-                Drawn { planes: free.overlay.plane_count(), texels, left_out }
+                drawn
             }
             _ => Drawn::default(),
         };
