@@ -12,17 +12,15 @@
 //! distance peak), `plane_list` merge; then `plane_label` at full resolution, sums and fits of
 //! the labelled raw points, `plane_list` keep (size, bend, incidence), `plane_label` again, sums
 //! and fits, `plane_list` keep (fittable) with `plane_relabel`. At the end `plane_list` sort,
-//! `plane_relabel` and `plane_extent`.
-//!
-//! One difference from the reference: a round whose histogram has no peak left still relabels
-//! and refits (the reference stops), which can move a border pixel's label; the tests hold
-//! both to the same planes.
+//! `plane_relabel` and `plane_extent`. The full-resolution kernels of a round are dispatched
+//! indirectly, sized by `plane_list`: a round whose merge took no newcomer ends there, with no
+//! full-resolution pass, as the reference's does (most frames' second round).
 
 use super::{MAX_DISTANCE_PEAKS, MAX_NORMAL_PEAKS, MAX_PLANES, NO_LABEL, DISTANCE_BINS, NORMAL_BINS, Plane, PlaneConfig, Segmentation};
 use crate::cpu::planes::moments::PLANE_MOMENT_VEC4S;
 use crate::cpu::planes::plane_extent::decode_extent;
 use crate::cpu::planes::plane_fit::PLANE_FIT_VEC4S;
-use crate::cpu::planes::plane_list::{MODE_KEEP, MODE_MERGE, MODE_SORT, PLANE_LIST_DISPATCH, PLANE_LIST_STATE, PLANE_LIST_VEC4S, PLANE_RECORD_VEC4S};
+use crate::cpu::planes::plane_list::{DISPATCH_FIT, DISPATCH_KEYS, DISPATCH_LABEL, DISPATCH_REDUCE, DISPATCH_RELABEL, DISPATCH_SUMS, MODE_KEEP, MODE_MERGE, MODE_SORT, PLANE_LIST_DISPATCH, PLANE_LIST_STATE, PLANE_LIST_VEC4S, PLANE_RECORD_VEC4S};
 use crate::cpu::planes::plane_sums::{CHUNK_MASK_WORDS, plane_sums_chunks};
 use crate::kernels::{
     Kernels, KernelPipeline, distance_histogram, distance_peaks, normal_histogram, normal_peaks, peak_realign, plane_extent, plane_fit, plane_keys, plane_label, plane_list, plane_relabel, plane_sums,
@@ -183,6 +181,8 @@ impl GpuPlaneSegmenter {
         let p_reduce_inner = uniform("plane_sums_reduce.inner", bytemuck::bytes_of(&plane_sums_reduce::PlaneSumsReduceParams { chunks: chunks_inner as u32, ..Default::default() }));
         let p_reduce_full = uniform("plane_sums_reduce.full", bytemuck::bytes_of(&plane_sums_reduce::PlaneSumsReduceParams { chunks: chunks_full as u32, ..Default::default() }));
         let p_fit = uniform("plane_fit", bytemuck::bytes_of(&plane_fit::PlaneFitParams { plane_count: SLOTS.max(MAX_PLANES) as u32, ..Default::default() }));
+        let kernels = &gpu.kernels;
+        let [keys_groups_x, keys_groups_y, _] = kernels.plane_keys.workgroup_count([full.width_px, full.height_px, 1]);
         let list_params = |mode: u32, min_count: f32, max_bend_deg: f32, cos_incidence: f32| plane_list::PlaneListParams {
             mode,
             slot_count: SLOTS as u32,
@@ -192,6 +192,10 @@ impl GpuPlaneSegmenter {
             merge_sigmas: config.merge_sigmas,
             cos_incidence,
             chunks: chunks_full as u32,
+            label_groups: kernels.plane_label.workgroup_count([n_full as u32, 1, 1])[0],
+            relabel_groups: kernels.plane_relabel.workgroup_count([n_full as u32, 1, 1])[0],
+            keys_groups_x,
+            keys_groups_y,
         };
         let p_merge = uniform("plane_list.merge", bytemuck::bytes_of(&list_params(MODE_MERGE, min_inner, config.max_bend_deg, -1.0)));
         let p_keep = uniform("plane_list.keep", bytemuck::bytes_of(&list_params(MODE_KEEP, min_full, config.max_bend_deg, config.max_incidence_deg.to_radians().cos())));
@@ -248,13 +252,15 @@ impl GpuPlaneSegmenter {
         let mut steps = vec![Step::Clear(state.clone())];
         // With no planes yet, labelling marks every pixel free.
         steps.push(Step::Direct(|k| &k.plane_label, bg_label.clone(), [n_full as u32, 1, 1]));
+        // Labels, keys, sums and fits at full resolution, sized by the plane list (nothing once
+        // a round's merge took no newcomer).
         let full_sums = |steps: &mut Vec<Step>| {
-            steps.push(Step::Direct(|k| &k.plane_label, bg_label.clone(), [n_full as u32, 1, 1]));
+            steps.push(Step::Indirect(|k| &k.plane_label, bg_label.clone(), DISPATCH_LABEL));
             steps.push(Step::Clear(masks_full.clone()));
-            steps.push(Step::Direct(|k| &k.plane_keys, bg_keys_full.clone(), [full.width_px, full.height_px, 1]));
-            steps.push(Step::Indirect(|k| &k.plane_sums, bg_sums_full.clone(), 0));
-            steps.push(Step::Indirect(|k| &k.plane_sums_reduce, bg_reduce_full.clone(), 12));
-            steps.push(Step::Indirect(|k| &k.plane_fit, bg_fit.clone(), 24));
+            steps.push(Step::Indirect(|k| &k.plane_keys, bg_keys_full.clone(), DISPATCH_KEYS));
+            steps.push(Step::Indirect(|k| &k.plane_sums, bg_sums_full.clone(), DISPATCH_SUMS));
+            steps.push(Step::Indirect(|k| &k.plane_sums_reduce, bg_reduce_full.clone(), DISPATCH_REDUCE));
+            steps.push(Step::Indirect(|k| &k.plane_fit, bg_fit.clone(), DISPATCH_FIT));
         };
         for _ in 0..config.rounds {
             steps.push(Step::Clear(normal_hist.clone()));
@@ -279,7 +285,7 @@ impl GpuPlaneSegmenter {
             steps.push(Step::Direct(|k| &k.plane_list, bg_keep.clone(), [1, 1, 1]));
             full_sums(&mut steps);
             steps.push(Step::Direct(|k| &k.plane_list, bg_fittable.clone(), [1, 1, 1]));
-            steps.push(Step::Direct(|k| &k.plane_relabel, bg_relabel.clone(), [n_full as u32, 1, 1]));
+            steps.push(Step::Indirect(|k| &k.plane_relabel, bg_relabel.clone(), DISPATCH_RELABEL));
         }
         steps.push(Step::Direct(|k| &k.plane_list, bg_sort, [1, 1, 1]));
         steps.push(Step::Direct(|k| &k.plane_relabel, bg_relabel, [n_full as u32, 1, 1]));

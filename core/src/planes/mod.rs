@@ -30,7 +30,8 @@
 //!    sofa's back) cut into a strip by the angle window, and is dropped; 003 has no such test
 //!    and turns a cylinder into planes.
 //! 6. A second **round** (003's) on the pixels no plane took, for planes the first round's
-//!    peaks hid.
+//!    peaks hid; a round that finds no new plane ends the segmentation (labelling and fitting
+//!    again would only iterate on the same planes).
 //!
 //! [`reference`] computes it on the CPU; every plane is reported as `n·p + d = 0` in the camera
 //! frame with the unit normal facing the camera (d > 0).

@@ -436,10 +436,15 @@ pub fn segment(levels: &[CpuPyramidLevel], raw_depth_m: Option<&[f32]>, config: 
         // 003's realignment, with the mean normal of each peak's pixels (003 took its largest
         // plane's fitted normal, which a parallel plane a few cm away tilts); then again.
         let realigned = assign(inner, &peaks, free_inner, config).mean_normals;
-        planes.extend(inner_pass(inner, &realigned, free_inner, config, min_inner, &mut curved));
+        let newcomers = inner_pass(inner, &realigned, free_inner, config, min_inner, &mut curved);
+        if newcomers.is_empty() {
+            // Nothing new: labelling and fitting again would only iterate on the same planes.
+            break;
+        }
+        planes.extend(newcomers);
         planes = merge(planes, config);
         // Final labelling with every plane so far; drop the small and the bent, then relabel.
-        let (_, sums) = label(full, &planes, config, raw_depth_m);
+        let (l1, sums) = label(full, &planes, config, raw_depth_m);
         let refit: Vec<Option<PlaneFit>> = sums.iter().map(fit).collect();
         let keep: Vec<bool> = refit
             .iter()
@@ -452,6 +457,13 @@ pub fn segment(levels: &[CpuPyramidLevel], raw_depth_m: Option<&[f32]>, config: 
                 None => false,
             })
             .collect();
+        if keep.iter().all(|&k| k) {
+            // Nothing dropped: labelling again with the refits would only iterate on the same
+            // planes.
+            planes = refit.into_iter().flatten().collect();
+            labels = l1;
+            continue;
+        }
         planes = refit.into_iter().zip(&keep).filter_map(|(f, &k)| f.filter(|_| k)).collect();
         let (l2, sums2) = label(full, &planes, config, raw_depth_m);
         labels = l2;

@@ -36,6 +36,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     labels[ix] = NO_LABEL;
+    let count = plane_count[0];
+    if count == 0u {
+        return;
+    }
     let p = vertex_in_camera[ix];
     let n = normal_in_camera[ix];
     if !is_valid_f32(p.z) || !(p.z > 0.0) || !is_valid_f32(n.x) {
@@ -44,7 +48,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let tolerance = max(params.min_distance_m, 3.0 * kinect_sigma_m(p.z));
     var best = NO_LABEL;
     var best_r = tolerance;
-    for (var k = 0u; k < plane_count[0]; k++) {
+    for (var k = 0u; k < count; k++) {
         let plane = planes[k];
         let r = abs(dot(plane.xyz, p.xyz) + plane.w);
         if abs(dot(n.xyz, plane.xyz)) >= params.cos_label && r < best_r {

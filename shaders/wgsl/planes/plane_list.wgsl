@@ -16,8 +16,13 @@
 //!   (NO_LABEL: dropped).
 //! - 2, **sort**: most pixels first (stable); `renumber` maps old to new indices.
 //! Every mode writes each plane's (normal, offset) to `planes` (plane_label's input and
-//! normal_peaks' known normals) and the indirect dispatch sizes of the next sums: plane_sums
-//! (`chunks`, planes, 1), plane_sums_reduce (planes, 1, 1), plane_fit (⌈planes / 64⌉, 1, 1).
+//! normal_peaks' known normals) and the indirect dispatch sizes of the round's full-resolution
+//! work that follows: plane_sums (`chunks`, planes, 1), plane_sums_reduce (planes, 1, 1),
+//! plane_fit (⌈planes / 64⌉, 1, 1), plane_label (`label_groups`, 1, 1), plane_keys
+//! (`keys_groups_x`, `keys_groups_y`, 1) and plane_relabel (`relabel_groups`, 1, 1). A round
+//! whose merge took no newcomer is over (state[3] = 0, as the reference stops there): merge and
+//! keep then leave the list as it is (the labels index it), and those sizes are all zero; so
+//! are they after a keep that dropped no plane.
 //! Mirrors core/src/cpu/planes/plane_list.rs.
 #import kinect
 #import planes
@@ -46,6 +51,12 @@ struct PlaneListParams {
     cos_incidence: f32,
     // Chunks of the full-resolution maps (plane_sums' first dispatch dimension).
     chunks: u32,
+    // Workgroups of plane_label and plane_relabel over the full-resolution pixels, and of
+    // plane_keys over the full-resolution image.
+    label_groups: u32,
+    relabel_groups: u32,
+    keys_groups_x: u32,
+    keys_groups_y: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: PlaneListParams;
@@ -58,11 +69,13 @@ struct PlaneListParams {
 @group(0) @binding(3) var<storage, read_write> list: array<vec4<f32>>;
 // Out: per plane (normal, offset).
 @group(0) @binding(4) var<storage, read_write> planes: array<vec4<f32>>;
-// [0] planes, [1] curved rejected, [2] planes that did not fit in the list.
+// [0] planes, [1] curved rejected, [2] planes that did not fit in the list, [3] 1 while the
+// round's merge took a newcomer.
 @group(0) @binding(5) var<storage, read_write> state: array<u32>;
 // Out (modes 1, 2): per old plane its new index, or NO_LABEL.
 @group(0) @binding(6) var<storage, read_write> renumber: array<u32>;
-// Out: indirect dispatch sizes (x, y, z) of plane_sums, plane_sums_reduce and plane_fit.
+// Out: indirect dispatch sizes (x, y, z) of plane_sums, plane_sums_reduce, plane_fit,
+// plane_label, plane_keys and plane_relabel.
 @group(0) @binding(7) var<storage, read_write> dispatch: array<u32>;
 
 fn count_of(record: u32) -> f32 {
@@ -116,6 +129,7 @@ fn merge_mode(n: u32) -> u32 {
         copy_record(SCRATCH + m, i);
         m += 1u;
     }
+    var newcomers = 0u;
     for (var s = 0u; s < params.slot_count; s++) {
         let f = fits[s * PLANE_FIT_VEC4S + 4u];
         let count = fits[s * PLANE_FIT_VEC4S + 1u].w;
@@ -126,12 +140,18 @@ fn merge_mode(n: u32) -> u32 {
             state[1] += 1u;
             continue;
         }
+        newcomers += 1u;
         if m < 2u * MAX_PLANES {
             store_slot(SCRATCH + m, s);
             m += 1u;
         } else {
             state[2] += 1u;
         }
+    }
+    state[3] = select(0u, 1u, newcomers > 0u);
+    if newcomers == 0u {
+        // The round is over, the list (and the labels that index it) as they were.
+        return n;
     }
     let order = sorted_order(SCRATCH, m);
     var out = 0u;
@@ -175,6 +195,13 @@ fn merge_mode(n: u32) -> u32 {
 }
 
 fn keep_mode(n: u32) -> u32 {
+    if state[3] == 0u {
+        // A round with no newcomer fitted nothing: the list stays.
+        for (var i = 0u; i < n; i++) {
+            renumber[i] = i;
+        }
+        return n;
+    }
     var out = 0u;
     for (var i = 0u; i < n; i++) {
         let f = fits[i * PLANE_FIT_VEC4S + 4u];
@@ -222,13 +249,24 @@ fn main() {
     for (var i = 0u; i < out; i++) {
         planes[i] = list[i * PLANE_RECORD_VEC4S + PLANE_MOMENT_VEC4S];
     }
-    dispatch[0] = params.chunks;
-    dispatch[1] = out;
-    dispatch[2] = 1u;
-    dispatch[3] = out;
-    dispatch[4] = 1u;
-    dispatch[5] = 1u;
-    dispatch[6] = (out + 63u) / 64u;
-    dispatch[7] = 1u;
-    dispatch[8] = 1u;
+    // The round's full-resolution work: none once the round is over, nor after a keep that
+    // dropped no plane (labelling again with the refits would only iterate on the same
+    // planes; the next keep then finds the same fits and the same list).
+    var on = state[3];
+    if params.mode == MODE_KEEP && out == n {
+        on = 0u;
+    }
+    let sizes = array<vec3<u32>, 6>(
+        vec3<u32>(params.chunks, out, 1u),
+        vec3<u32>(out, 1u, 1u),
+        vec3<u32>((out + 63u) / 64u, 1u, 1u),
+        vec3<u32>(params.label_groups, 1u, 1u),
+        vec3<u32>(params.keys_groups_x, params.keys_groups_y, 1u),
+        vec3<u32>(params.relabel_groups, 1u, 1u),
+    );
+    for (var i = 0u; i < 6u; i++) {
+        dispatch[3u * i] = sizes[i].x * on;
+        dispatch[3u * i + 1u] = sizes[i].y;
+        dispatch[3u * i + 2u] = sizes[i].z;
+    }
 }

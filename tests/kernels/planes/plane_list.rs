@@ -2,8 +2,10 @@
 //! `plane_list`: the GPU's plane list against the CPU twin in its three modes. Merge: the box
 //! scene's inner-loop fits into an empty list (one plane per surface), then the same fits again
 //! into that list (each newcomer joins its twin: pixels double, planes stay), plus crafted
-//! newcomers (a bent one counted as curved, a small one ignored). Keep: crafted refits (kept,
-//! too small, bent, edge-on, unfittable) with the renumbering. Sort: most pixels first, stable.
+//! newcomers (a bent one counted as curved, a small one ignored), then a merge with no newcomer
+//! (the round ends: no full-resolution dispatch, and keep leaves the list). Keep: crafted refits
+//! (kept, too small, bent, edge-on, unfittable) with the renumbering, and a keep that drops
+//! nothing (no full-resolution work follows). Sort: most pixels first, stable.
 //! Tolerances: counts, state, renumbering and dispatch sizes exact; records and planes 1e-4
 //! relative + 1e-6 (merged fits run the same f32 code). Negative controls on each output.
 
@@ -53,7 +55,16 @@ fn params(mode: u32, min_count: f32) -> PlaneListParams {
         merge_sigmas: c.merge_sigmas,
         cos_incidence: c.max_incidence_deg.to_radians().cos(),
         chunks: 75,
+        label_groups: 1200,
+        relabel_groups: 1199,
+        keys_groups_x: 40,
+        keys_groups_y: 30,
     }
+}
+
+/// The dispatch sizes plane_list writes for `planes` planes in a round that goes on.
+fn sizes(planes: u32) -> Vec<u32> {
+    vec![75, planes, 1, planes, 1, 1, planes.div_ceil(64), 1, 1, 1200, 1, 1, 40, 30, 1, 1199, 1, 1]
 }
 
 /// One run's outputs: list, planes, state, renumber, dispatch.
@@ -165,7 +176,8 @@ fn merging_the_inner_loops_fits() {
     let planes = c.state[0];
     eprintln!("box: {planes} planes from the inner loop, state {:?}", c.state);
     assert!((3..=4).contains(&planes), "the box's visible faces and the floor");
-    assert_eq!(c.dispatch, vec![75, planes, 1, planes, 1, 1, 1, 1, 1]);
+    assert_eq!(c.dispatch, sizes(planes));
+    assert_eq!(c.state[3], 1, "the round goes on");
     // The same fits again: each joins its twin.
     let (g2, c2) = run(&p, &fits, &moments, &g.list, &g.state);
     assert_with_controls("box, again", &g2, &c2, 0);
@@ -178,8 +190,24 @@ fn merging_the_inner_loops_fits() {
     let (fits, moments) = slots(&[patch(20, 0.0, 1.0, 0.0), patch(20, 0.0, 1.001, 0.0), patch(20, 0.5, 1.0, 3.0), patch(5, -0.5, 1.0, 0.0)]);
     let (g, c) = run(&params(MODE_MERGE, 100.0), &fits, &moments, &empty, &[0; PLANE_LIST_STATE]);
     assert_with_controls("crafted", &g, &c, 0);
-    assert_eq!(c.state, vec![1, 1, 0], "one plane, one curved");
+    assert_eq!(c.state, vec![1, 1, 0, 1], "one plane, one curved");
     assert_eq!(c.list[0][0], 800.0, "both flat patches");
+    // No newcomer (only a small and a bent fit): the round ends, its full-resolution kernels get
+    // no workgroup, and keep then leaves the list (stale fits in its slots) as it is.
+    let (fits_none, moments_none) = slots(&[patch(5, -0.5, 1.0, 0.0), patch(20, 0.5, 1.0, 3.0)]);
+    let (g2, c2) = run(&params(MODE_MERGE, 100.0), &fits_none, &moments_none, &g.list, &g.state);
+    assert_with_controls("no newcomer", &g2, &c2, 0);
+    assert_eq!(c2.state, vec![1, 2, 0, 0], "the plane stays, one more curved, the round over");
+    let mut over = sizes(1);
+    for i in 0..6 {
+        over[3 * i] = 0;
+    }
+    assert_eq!(c2.dispatch, over);
+    let (g3, c3) = run(&params(MODE_KEEP, 1e9), &fits_none, &moments_none, &g2.list, &g2.state);
+    assert_with_controls("keep after no newcomer", &g3, &c3, 1);
+    assert_eq!(c3.state, c2.state, "nothing dropped, though the slots' fits would fail");
+    assert_eq!(c3.list[..PLANE_RECORD_VEC4S], c2.list[..PLANE_RECORD_VEC4S]);
+    assert_eq!(c3.renumber[0], 0);
 }
 
 #[test]
@@ -196,18 +224,25 @@ fn keeping_and_sorting() {
     // Keep: [kept, too small, bent, unfittable, kept]; an edge-on plane fails the incidence test.
     let sets = [patch(20, 0.0, 1.0, 0.0), patch(5, 0.3, 1.0, 0.0), patch(20, 0.5, 1.0, 3.0), plane_moments_zero().to_vec(), patch(15, -0.5, 2.0, 0.0)];
     let (fits, moments, list) = list_of(&sets);
-    let (g, c) = run(&params(MODE_KEEP, 100.0), &fits, &moments, &list, &[5, 0, 0]);
+    let (g, c) = run(&params(MODE_KEEP, 100.0), &fits, &moments, &list, &[5, 0, 0, 1]);
     assert_with_controls("keep", &g, &c, 5);
-    assert_eq!(c.state, vec![2, 1, 0]);
+    assert_eq!(c.state, vec![2, 1, 0, 1]);
     assert_eq!(&c.renumber[..5], &[0, NO_LABEL, NO_LABEL, NO_LABEL, 1]);
+    assert_eq!(c.dispatch, sizes(2), "planes dropped: the round labels again");
+    // A keep that drops nothing: no full-resolution work follows.
+    let (fits2, moments2, list2) = list_of(&[patch(20, 0.0, 1.0, 0.0), patch(15, -0.5, 2.0, 0.0)]);
+    let (g, c) = run(&params(MODE_KEEP, 100.0), &fits2, &moments2, &list2, &[2, 0, 0, 1]);
+    assert_with_controls("keep, nothing dropped", &g, &c, 2);
+    assert_eq!((c.state.clone(), &c.renumber[..2]), (vec![2, 0, 0, 1], &[0, 1][..]));
+    assert!((0..6).all(|i| c.dispatch[3 * i] == 0), "no full-resolution work: {:?}", c.dispatch);
     let mut edge_on = params(MODE_KEEP, 100.0);
     edge_on.cos_incidence = 0.9999;
-    let (g, c) = run(&edge_on, &fits, &moments, &list, &[5, 0, 0]);
+    let (g, c) = run(&edge_on, &fits, &moments, &list, &[5, 0, 0, 1]);
     compare("keep, strict incidence", &g, &c, 5).unwrap();
     assert_eq!(&c.renumber[..5], &[0, NO_LABEL, NO_LABEL, NO_LABEL, NO_LABEL], "the patch 0.5 m aside is seen at 14°");
     // Sort: 400, 25, 225 pixels -> 400, 225, 25.
     let (fits, moments, list) = list_of(&[patch(20, 0.0, 1.0, 0.0), patch(5, 0.3, 1.0, 0.0), patch(15, -0.5, 2.0, 0.0)]);
-    let (g, c) = run(&params(MODE_SORT, 0.0), &fits, &moments, &list, &[3, 0, 0]);
+    let (g, c) = run(&params(MODE_SORT, 0.0), &fits, &moments, &list, &[3, 0, 0, 1]);
     assert_with_controls("sort", &g, &c, 3);
     assert_eq!(&c.renumber[..3], &[0, 2, 1]);
     assert_eq!([0, 1, 2].map(|i| c.list[i * PLANE_RECORD_VEC4S][0]), [400.0, 225.0, 25.0]);

@@ -17,10 +17,24 @@ pub const MODE_MERGE: u32 = 0;
 pub const MODE_KEEP: u32 = 1;
 /// Mode 2: most pixels first.
 pub const MODE_SORT: u32 = 2;
-/// `state` entries: planes, curved rejected, overflow.
-pub const PLANE_LIST_STATE: usize = 3;
-/// `dispatch` entries: three indirect (x, y, z) sizes.
-pub const PLANE_LIST_DISPATCH: usize = 9;
+/// `state` entries: planes, curved rejected, overflow, and whether the round's merge took a
+/// newcomer (0: the round is over).
+pub const PLANE_LIST_STATE: usize = 4;
+/// `dispatch` entries: six indirect (x, y, z) sizes, of plane_sums, plane_sums_reduce,
+/// plane_fit, plane_label, plane_keys and plane_relabel.
+pub const PLANE_LIST_DISPATCH: usize = 18;
+/// Byte offsets in `dispatch` of each kernel's indirect size.
+pub const DISPATCH_SUMS: u64 = 0;
+/// See [`DISPATCH_SUMS`].
+pub const DISPATCH_REDUCE: u64 = 12;
+/// See [`DISPATCH_SUMS`].
+pub const DISPATCH_FIT: u64 = 24;
+/// See [`DISPATCH_SUMS`].
+pub const DISPATCH_LABEL: u64 = 36;
+/// See [`DISPATCH_SUMS`].
+pub const DISPATCH_KEYS: u64 = 48;
+/// See [`DISPATCH_SUMS`].
+pub const DISPATCH_RELABEL: u64 = 60;
 const SCRATCH: usize = MAX_PLANES;
 const R: usize = PLANE_RECORD_VEC4S;
 const F: usize = PLANE_MOMENT_VEC4S;
@@ -66,6 +80,7 @@ fn merge_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]],
         copy_record(list, SCRATCH + m, i);
         m += 1;
     }
+    let mut newcomers = 0;
     for s in 0..params.slot_count as usize {
         let f = fits[s * PLANE_FIT_VEC4S + 4];
         let count = fits[s * PLANE_FIT_VEC4S + 1][3];
@@ -76,12 +91,17 @@ fn merge_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]],
             state[1] += 1;
             continue;
         }
+        newcomers += 1;
         if m < 2 * MAX_PLANES {
             store_slot(list, fits, moments, SCRATCH + m, s);
             m += 1;
         } else {
             state[2] += 1;
         }
+    }
+    state[3] = u32::from(newcomers > 0);
+    if newcomers == 0 {
+        return n;
     }
     let order = sorted_order(list, SCRATCH, m);
     let mut out = 0;
@@ -118,6 +138,12 @@ fn merge_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]],
 }
 
 fn keep_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]], list: &mut [[f32; 4]], state: &mut [u32], renumber: &mut [u32], n: usize) -> usize {
+    if state[3] == 0 {
+        for (i, r) in renumber[..n].iter_mut().enumerate() {
+            *r = i as u32;
+        }
+        return n;
+    }
     let mut out = 0;
     for i in 0..n {
         let (f, normal, centroid) = (fits[i * PLANE_FIT_VEC4S + 4], fits[i * PLANE_FIT_VEC4S], fits[i * PLANE_FIT_VEC4S + 1]);
@@ -162,6 +188,10 @@ pub fn plane_list(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 
     for i in 0..out {
         planes[i] = list[i * R + F];
     }
+    let on = u32::from(state[3] != 0 && !(params.mode == MODE_KEEP && out == n));
     let out = out as u32;
-    dispatch.copy_from_slice(&[params.chunks, out, 1, out, 1, 1, out.div_ceil(64), 1, 1]);
+    let sizes = [[params.chunks, out, 1], [out, 1, 1], [out.div_ceil(64), 1, 1], [params.label_groups, 1, 1], [params.keys_groups_x, params.keys_groups_y, 1], [params.relabel_groups, 1, 1]];
+    for (i, [x, y, z]) in sizes.into_iter().enumerate() {
+        dispatch[3 * i..3 * i + 3].copy_from_slice(&[x * on, y, z]);
+    }
 }
