@@ -87,9 +87,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) 
         if ix >= pixel_count || keys[ix] != k {
             continue;
         }
-        var p = vertex_in_camera[ix].xyz;
+        var p: vec3<f32>;
         var noise_scale = 0.0;
-        if params.use_raw != 0u {
+        if params.use_raw == 0u {
+            p = vertex_in_camera[ix].xyz;
+        } else {
             let z = raw_depth_m[ix];
             let x = f32(ix % params.width_px);
             let y = f32(ix / params.width_px);
