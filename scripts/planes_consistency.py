@@ -7,8 +7,8 @@ Each frame's planes (camera frame, n.p + d = 0) are moved to the world with the 
 pose of that frame (a TUM trajectory, e.g. `reconstruct`'s trajectory.txt or the ground truth,
 matched by timestamp within 20 ms), then grouped greedily (largest first) into world planes:
 normals within 5 degrees and offsets within 5 cm. For each world plane seen in at least N frames
-it prints the frames, the mean pixels, and the drift: the largest angle of a frame's normal from
-the group's mean normal, and the spread (std) and range of its offsets. Plain Python (no numpy).
+it prints the frames, the mean pixels, and the drift: the median and the largest angle of a
+frame's normal from the group's mean normal, and the spread (std) and range of its offsets. Plain Python (no numpy).
 """
 import json
 import math
@@ -77,7 +77,7 @@ def main():
     counts = [len(f["planes"]) for f in frames]
     counts.sort()
     print(f"{len(frames)} frames ({matched} with a pose): planes per frame median {counts[len(counts) // 2]}, min {counts[0]}, max {counts[-1]}")
-    print(f"{'world plane normal':>28} {'offset m':>9} {'frames':>6} {'pixels':>7} {'max angle °':>11} {'offset std mm':>13} {'offset range mm':>15}")
+    print(f"{'world plane normal':>28} {'offset m':>9} {'frames':>6} {'pixels':>7} {'median angle °':>14} {'max angle °':>11} {'offset std mm':>13} {'offset range mm':>15}")
     for g in sorted(groups, key=lambda g: -len(g["members"])):
         m = g["members"]
         if len(m) < min_frames:
@@ -89,7 +89,7 @@ def main():
         std = math.sqrt(sum((d - mean) ** 2 for d in offs) / len(offs))
         pix = sum(p for *_, p in m) / len(m)
         normal = "(" + ", ".join(f"{v:+.3f}" for v in mn) + ")"
-        print(f"{normal:>28} {mean:9.3f} {len(m):6d} {pix:7.0f} {max(angles):11.2f} {std * 1e3:13.1f} {(max(offs) - min(offs)) * 1e3:15.1f}")
+        print(f"{normal:>28} {mean:9.3f} {len(m):6d} {pix:7.0f} {sorted(angles)[len(angles) // 2]:14.2f} {max(angles):11.2f} {std * 1e3:13.1f} {(max(offs) - min(offs)) * 1e3:15.1f}")
 
 
 if __name__ == "__main__":
