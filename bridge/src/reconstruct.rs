@@ -254,6 +254,11 @@ fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfi
     };
     write_map_file(path, &header, &blocks).with_context(|| format!("saving the map to {}", path.display()))?;
     println!("map: {} blocks -> {} ({:.1} MiB)", blocks.len(), path.display(), std::fs::metadata(path).map_or(0, |m| m.len()) as f64 / 1048576.0);
+    if t.kind == MapKind::Sparse {
+        let sizes = webfusion_core::map::BlockSizeComparison::of(&blocks);
+        let (f8, f16) = sizes.observed_fractions();
+        println!("block size: {} blocks of 8³ hold the band; blocks of 16³ would be {} ({:.2}x the voxels); observed voxels {:.0} % of those allocated at 8³, {:.0} % at 16³", sizes.blocks_8, sizes.blocks_16, sizes.voxel_ratio(), 100.0 * f8, 100.0 * f16);
+    }
     Ok(())
 }
 

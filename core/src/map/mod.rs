@@ -200,6 +200,42 @@ pub struct MapBlock {
     pub colors: Vec<u32>,
 }
 
+/// What a map's surface costs at two block sizes: its blocks of 8³ as allocated, and the
+/// blocks of 16³ (the parents of those) a map of 16³ blocks would have allocated for the same
+/// band, with the voxels any frame observed (weight > 0). Allocation along the ±μ band marks a
+/// 16³ block wherever it marks one of its 8³ children, so the 16³ count is exact for the same
+/// samples; what it leaves out is speed (a 16³ block lets the raycast skip further, and costs
+/// a workgroup four times larger or a loop per invocation to integrate).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BlockSizeComparison {
+    /// Blocks of 8³.
+    pub blocks_8: usize,
+    /// Blocks of 16³ covering the same blocks of 8³.
+    pub blocks_16: usize,
+    /// Voxels with a weight.
+    pub observed_voxels: u64,
+}
+
+impl BlockSizeComparison {
+    /// From a map's downloaded blocks.
+    pub fn of(blocks: &[MapBlock]) -> Self {
+        let parents: std::collections::HashSet<[u32; 3]> = blocks.iter().map(|b| b.coords.map(|c| c >> 1)).collect();
+        let observed_voxels = blocks.iter().map(|b| b.voxels.iter().filter(|&&w| voxel_weight(w) > 0).count() as u64).sum();
+        Self { blocks_8: blocks.len(), blocks_16: parents.len(), observed_voxels }
+    }
+
+    /// Voxels allocated with blocks of 16³ over those with blocks of 8³ (1 to 8).
+    pub fn voxel_ratio(&self) -> f64 {
+        (8 * self.blocks_16) as f64 / self.blocks_8.max(1) as f64
+    }
+
+    /// Fraction of the allocated voxels that were observed, with blocks of 8³ and of 16³.
+    pub fn observed_fractions(&self) -> (f64, f64) {
+        let allocated = |blocks: usize, voxels: u64| (blocks as u64 * voxels).max(1) as f64;
+        (self.observed_voxels as f64 / allocated(self.blocks_8, u64::from(BLOCK_VOXELS)), self.observed_voxels as f64 / allocated(self.blocks_16, 8 * u64::from(BLOCK_VOXELS)))
+    }
+}
+
 /// A sparse voxel-block map on the GPU.
 #[derive(Debug)]
 pub struct SparseMap {
@@ -694,6 +730,22 @@ impl TsdfStore for Map {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn block_sizes_compare_by_the_parents_the_blocks_share() {
+        let block = |coords: [u32; 3], observed: usize| MapBlock { coords, voxels: (0..BLOCK_VOXELS as usize).map(|i| if i < observed { 1 << 16 } else { 0 }).collect(), colors: Vec::new() };
+        // A wall one block thick along x at z = 0: pairs of 8³ blocks share a 16³ parent in x
+        // and y; the odd block out at x = 4 has one of its own.
+        let mut blocks: Vec<MapBlock> = (0..5).flat_map(|x| (0..2).map(move |y| block([x, y, 0], 64))).collect();
+        blocks.push(block([9, 9, 9], 512));
+        let c = BlockSizeComparison::of(&blocks);
+        assert_eq!((c.blocks_8, c.blocks_16, c.observed_voxels), (11, 4, 10 * 64 + 512));
+        assert!((c.voxel_ratio() - 32.0 / 11.0).abs() < 1e-12);
+        let (f8, f16) = c.observed_fractions();
+        assert!((f8 - 1152.0 / (11.0 * 512.0)).abs() < 1e-12 && (f16 - 1152.0 / (4.0 * 4096.0)).abs() < 1e-12, "{f8} {f16}");
+        let none = BlockSizeComparison::of(&[]);
+        assert_eq!((none.blocks_16, none.observed_fractions()), (0, (0.0, 0.0)), "an empty map divides by nothing");
+    }
 
     #[test]
     fn a_memory_budget_in_mib_buys_its_pool_and_bad_ones_are_named() {
