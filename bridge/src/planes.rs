@@ -29,7 +29,7 @@ use anyhow::Context as _;
 use webfusion_core::cpu::preprocess::chain::preprocess;
 use webfusion_core::io::format_timestamp_s;
 use webfusion_core::planes::{NO_LABEL, PlaneConfig, reference};
-use webfusion_core::cpu::shared::{pack_u16_pairs, plane_colour};
+use webfusion_core::cpu::shared::plane_colour;
 use webfusion_core::planes::gpu::GpuPlaneSegmenter;
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
 use webfusion_core::map::Map;
@@ -256,14 +256,21 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
             None => frame,
         };
         let mut kernels_ms: Vec<(&str, f64)> = Vec::new();
-        let (seg, raw_depth_m, preprocess_ms, segment_ms) = match &on_gpu {
+        // For the world model, the labels completed for meshing (kernel `plane_complete`, or
+        // its twin with the CPU reference).
+        let mut complete_ms = None;
+        let (seg, completed, preprocess_ms, segment_ms) = match &on_gpu {
             None => {
                 let sw = Stopwatch::start();
                 let pre = preprocess(&calibration, &pre_config, &frame);
                 let preprocess_ms = sw.ms();
                 let sw = Stopwatch::start();
                 let seg = reference::segment(&pre.levels, Some(&pre.depth_unfiltered_m), &config);
-                (seg, Some(pre.depth_unfiltered_m), preprocess_ms, sw.ms())
+                let segment_ms = sw.ms();
+                let sw = Stopwatch::start();
+                let completed = world_input.is_some().then(|| complete_labels(&seg, &pre.depth_unfiltered_m, &k, &config, blend_reach_px(&pre_config)));
+                complete_ms = completed.as_ref().map(|_| sw.ms());
+                (seg, completed, preprocess_ms, segment_ms)
             }
             Some((gpu, pre, segmenter)) => {
                 // Two submissions, so that each stage's time is its own.
@@ -279,15 +286,28 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
                 } else {
                     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("planes.segment") });
                     segmenter.encode(gpu, &mut encoder);
-                    gpu.submit(Some(encoder.finish()));
+                    pollster::block_on(gpu.submit_and_wait(encoder))?;
                 }
-                let (seg, stats) = if read_labels { pollster::block_on(segmenter.read(gpu)) } else { pollster::block_on(segmenter.read_table(gpu)) }?;
+                let (seg, completed, stats, segment_ms) = if world_input.is_some() {
+                    // The completion (and the readback of both label images) as a stage of its own.
+                    let segment_ms = sw.ms();
+                    let sw = Stopwatch::start();
+                    let (seg, completed, stats) = pollster::block_on(segmenter.read_with_completed(gpu))?;
+                    complete_ms = Some(sw.ms());
+                    (seg, Some(completed), stats, segment_ms)
+                } else {
+                    let (seg, stats) = if read_labels { pollster::block_on(segmenter.read(gpu)) } else { pollster::block_on(segmenter.read_table(gpu)) }?;
+                    (seg, None, stats, sw.ms())
+                };
                 overflow += stats.overflow;
-                (seg, None, preprocess_ms, sw.ms())
+                (seg, completed, preprocess_ms, segment_ms)
             }
         };
         for (stage, ms) in [("read+decode", read_ms), ("preprocess", preprocess_ms), ("segment", segment_ms)] {
             times.record(stage, ms);
+        }
+        if let Some(ms) = complete_ms {
+            times.record("complete labels", ms);
         }
         if let Some(ms) = model_ms {
             times.record("model depth", ms);
@@ -295,17 +315,12 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         counts.push(seg.planes.len());
         let mut world_ids = None;
         let mut world_ms = None;
-        if let Some(pose) = world_input.as_ref().and_then(|w| w.poses.get(&frame.index)) {
+        if let Some(pose) = world_input.as_ref().and_then(|w| w.poses.get(&frame.index))
+            && let Some(labels) = &completed
+        {
             trajectory.push(TimedPose { timestamp_ns: frame.depth_timestamp_ns, world_from_camera: *pose });
             let sw = Stopwatch::start();
-            // The depth before filtering, by the first kernel's twin when the GPU kept its own.
-            let raw_depth_m = raw_depth_m.unwrap_or_else(|| {
-                let mut raw = vec![0.0; k.pixel_count()];
-                webfusion_core::cpu::depth_to_metres(&pre_config.depth_to_metres_params(&calibration), &pack_u16_pairs(&frame.depth.units), &mut raw);
-                raw
-            });
-            let labels = complete_labels(&seg, &raw_depth_m, &k, &config, blend_reach_px(&pre_config));
-            let view = PlaneView { index: frame.index, world_from_camera: *pose, segmentation: &seg, labels: &labels, colour: &frame.color, intrinsics: k };
+            let view = PlaneView { index: frame.index, world_from_camera: *pose, segmentation: &seg, labels, colour: &frame.color, intrinsics: k };
             let association = world.add_frame(&view, &config);
             clipped_texels += association.clipped_texels;
             merged_planes += association.merged;
@@ -343,7 +358,7 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
             "timestamp": frame.depth_timestamp_ns as f64 * 1e-9,
             "planes": planes,
             "curved_rejected": seg.curved_rejected,
-            "stages_ms": {"model_depth": model_ms, "preprocess": preprocess_ms, "segment": segment_ms, "world": world_ms},
+            "stages_ms": {"model_depth": model_ms, "preprocess": preprocess_ms, "segment": segment_ms, "complete_labels": complete_ms, "world": world_ms},
             "kernels_ms": (!kernels_ms.is_empty()).then(|| kernels_ms.iter().map(|(k, ms)| ((*k).to_owned(), serde_json::json!(ms))).collect::<serde_json::Map<_, _>>()),
         }));
         eprint!("\rframe {index}: {} planes", seg.planes.len());

@@ -166,7 +166,7 @@ impl Pipeline {
         let planes = if planes {
             let segmenter = GpuPlaneSegmenter::new(gpu, pre, &PlaneConfig::default()).map_err(|e| format!("cannot build plane segmentation: {e}"))?;
             let view = LabelView::new(gpu, "web.view.planes", &segmenter.labels, &pre.color, size);
-            let world = PlaneWorldModel::new(PlaneConfig::default(), config.preprocess);
+            let world = PlaneWorldModel::new(PlaneConfig::default());
             Some(PlaneViews { segmenter, view, canvas: GpuCanvas::new(gpu, "view-planes", size)?, world })
         } else {
             ui::set_text("planes-caption", "off");
@@ -534,8 +534,7 @@ impl FusionMode {
             draw_frame_views(gpu, p, frame)?;
         }
         let views_ms = t_views.elapsed().as_secs_f64() * 1e3;
-        // Kept for the virtual sensor's comparison (and, for a frame the world of planes
-        // takes, its label completion).
+        // Kept for the virtual sensor's comparison.
         let depth_units = Rc::new(frame.depth.units.clone());
         // The plane kernels compile once the first frame is fused (they would hold it up).
         if draw_views
@@ -547,7 +546,7 @@ impl FusionMode {
             if segment_planes(gpu, planes, frame.index, with_labels).map_err(|e| format!("frame {}: planes: {e}", frame.index))? {
                 self.planes_sent.push_back((frame.index, Instant::now()));
                 if with_labels {
-                    planes.world.asked(frame.index, &frame.color, Rc::clone(&depth_units), calibration);
+                    planes.world.asked(frame.index, &frame.color, calibration);
                 }
             }
         }
@@ -940,7 +939,7 @@ fn segment_planes(gpu: &Gpu, planes: &mut PlaneViews, index: u64, with_labels: b
         planes.view.dispatch_in(gpu, &mut pass);
     }
     let texture = planes.canvas.draw(&mut encoder, &planes.view.image)?;
-    let slot = planes.segmenter.encode_table_copy(&mut encoder, with_labels);
+    let slot = planes.segmenter.encode_table_copy(gpu, &mut encoder, with_labels);
     let submission = gpu.submit([encoder.finish()]);
     GpuCanvas::present(gpu, [texture]);
     if let Some(slot) = slot {

@@ -3,27 +3,23 @@
 //! persist across frames, with one texture each, and the scene as one `.glb` (the textured
 //! planar quadtree meshes plus the fused mesh less what they cover).
 //!
-//! At most once every [`WORLD_INTERVAL_MS`], a frame that is segmented anyway has its labels
-//! read back with its plane table (4 bytes a pixel, once a second instead of every frame); when
-//! they and the frame's tracked pose (its report) have both arrived, the labels are completed
-//! against the frame's raw depth and its planes join the world on the CPU
+//! At most once every [`WORLD_INTERVAL_MS`], a frame that is segmented anyway has its labels,
+//! completed for meshing on the GPU (kernel `plane_complete`), read back with its plane table
+//! (4 bytes a pixel, once a second instead of every frame); when they and the frame's tracked
+//! pose (its report) have both arrived, its planes join the world on the CPU
 //! (`PlaneWorld::add_frame`: association, texel accumulation, merging). A frame whose tracking
 //! was lost is left out. Poses are the pipeline's own (the fused mesh's frame); a rebuilt
 //! pipeline starts a new world.
 
 use std::collections::VecDeque;
-use std::rc::Rc;
 
 use web_time::Instant;
-use webfusion_core::cpu::depth_to_metres;
-use webfusion_core::cpu::shared::pack_u16_pairs;
 use webfusion_core::mesh::Mesh;
 use webfusion_core::planes::export::{mesh_remainder, write_scene_glb};
-use webfusion_core::planes::mesh::{PlaneMesh, blend_reach_px, complete_labels};
+use webfusion_core::planes::mesh::PlaneMesh;
 use webfusion_core::planes::overlay::{DEFAULT_MAX_OVERLAY_TEXELS, OverlayModel};
 use webfusion_core::planes::world::{PlaneView, PlaneWorld, WorldConfig};
 use webfusion_core::planes::{PlaneConfig, Segmentation};
-use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_core::{ColorImage, RgbdCalibration, Se3};
 
 use crate::status::Window;
@@ -35,8 +31,6 @@ pub(crate) const WORLD_INTERVAL_MS: f64 = 1000.0;
 struct Waiting {
     index: u64,
     colour: ColorImage,
-    /// The frame's raw depth, shared with its in-flight record.
-    depth_units: Rc<Vec<u16>>,
     calibration: RgbdCalibration,
     segmentation: Option<Segmentation>,
     /// `Some(None)`: its tracking was lost (it is left out).
@@ -47,7 +41,6 @@ struct Waiting {
 pub(crate) struct PlaneWorldModel {
     world: PlaneWorld,
     plane_config: PlaneConfig,
-    preprocess: PreprocessConfig,
     waiting: VecDeque<Waiting>,
     last_asked: Option<Instant>,
     frames: usize,
@@ -84,15 +77,15 @@ pub(crate) struct WorldStatus {
     pub(crate) clipped_texels: u64,
     /// Frames waiting for their labels or pose.
     pub(crate) waiting: usize,
-    /// Median milliseconds of adding a frame (label completion and the world's update).
+    /// Median milliseconds of adding a frame to the world (association, texels, merging).
     pub(crate) median_ms: f64,
     /// What the free view's last draw showed of the world's textured planes.
     pub(crate) drawn: Drawn,
 }
 
 impl PlaneWorldModel {
-    pub(crate) fn new(plane_config: PlaneConfig, preprocess: PreprocessConfig) -> Self {
-        Self { world: PlaneWorld::new(WorldConfig::default()), plane_config, preprocess, waiting: VecDeque::new(), last_asked: None, frames: 0, merged: 0, clipped_texels: 0, add_ms: Window::default(), version: 0, drawn: Drawn::default() }
+    pub(crate) fn new(plane_config: PlaneConfig) -> Self {
+        Self { world: PlaneWorld::new(WorldConfig::default()), plane_config, waiting: VecDeque::new(), last_asked: None, frames: 0, merged: 0, clipped_texels: 0, add_ms: Window::default(), version: 0, drawn: Drawn::default() }
     }
 
     /// Whether the next segmented frame should bring its labels back: none is waiting and the
@@ -102,12 +95,12 @@ impl PlaneWorldModel {
     }
 
     /// Frame `index`'s labels were asked for: keeps what the world needs of it.
-    pub(crate) fn asked(&mut self, index: u64, colour: &ColorImage, depth_units: Rc<Vec<u16>>, calibration: RgbdCalibration) {
+    pub(crate) fn asked(&mut self, index: u64, colour: &ColorImage, calibration: RgbdCalibration) {
         self.last_asked = Some(Instant::now());
-        self.waiting.push_back(Waiting { index, colour: colour.clone(), depth_units, calibration, segmentation: None, pose: None });
+        self.waiting.push_back(Waiting { index, colour: colour.clone(), calibration, segmentation: None, pose: None });
     }
 
-    /// A segmentation with labels came back for frame `index`.
+    /// A segmentation came back for frame `index`, its labels completed for meshing.
     pub(crate) fn labels_arrived(&mut self, index: u64, segmentation: Segmentation) {
         if let Some(w) = self.waiting.iter_mut().find(|w| w.index == index) {
             w.segmentation = Some(segmentation);
@@ -134,19 +127,14 @@ impl PlaneWorldModel {
             }
             let w = self.waiting.pop_front().expect("front exists");
             if let (Some(seg), Some(Some(pose))) = (w.segmentation, w.pose) {
-                self.add(w.index, &seg, &w.colour, &w.depth_units, w.calibration, pose);
+                self.add(w.index, &seg, &w.colour, w.calibration, pose);
             }
         }
     }
 
-    fn add(&mut self, index: u64, seg: &Segmentation, colour: &ColorImage, depth_units: &[u16], calibration: RgbdCalibration, world_from_camera: Se3) {
+    fn add(&mut self, index: u64, seg: &Segmentation, colour: &ColorImage, calibration: RgbdCalibration, world_from_camera: Se3) {
         let started = Instant::now();
-        let k = calibration.intrinsics;
-        // The raw depth, as the first preprocessing kernel's twin gives it.
-        let mut raw_depth_m = vec![0.0; k.pixel_count()];
-        depth_to_metres(&self.preprocess.depth_to_metres_params(&calibration), &pack_u16_pairs(depth_units), &mut raw_depth_m);
-        let labels = complete_labels(seg, &raw_depth_m, &k, &self.plane_config, blend_reach_px(&self.preprocess));
-        let view = PlaneView { index, world_from_camera, segmentation: seg, labels: &labels, colour, intrinsics: k };
+        let view = PlaneView { index, world_from_camera, segmentation: seg, labels: &seg.labels, colour, intrinsics: calibration.intrinsics };
         let association = self.world.add_frame(&view, &self.plane_config);
         self.frames += 1;
         self.merged += association.merged;
@@ -158,7 +146,7 @@ impl PlaneWorldModel {
     /// Forgets the world and the frames on their way (a new run).
     pub(crate) fn reset(&mut self) {
         let version = self.version + 1;
-        *self = Self::new(self.plane_config, self.preprocess);
+        *self = Self::new(self.plane_config);
         self.version = version;
     }
 
@@ -209,29 +197,34 @@ impl PlaneWorldModel {
 mod tests {
     use super::*;
     use wasm_bindgen_test::wasm_bindgen_test;
+    use webfusion_core::planes::mesh::{blend_reach_px, complete_labels};
     use webfusion_core::planes::reference;
+    use webfusion_core::preprocess::PreprocessConfig;
     use webfusion_core::sim::plane_scenes::{PlaneScene, UNITS_PER_METRE};
     use webfusion_core::PinholeIntrinsics;
 
     const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 131.25, fy_px: 131.25, cx_px: 79.5, cy_px: 59.5, width_px: 160, height_px: 120 };
 
-    /// A synthetic scene's frame, segmented by the CPU reference, as the page would have it.
-    fn frame(scene: &PlaneScene) -> (Segmentation, ColorImage, Rc<Vec<u16>>, RgbdCalibration) {
+    /// A synthetic scene's frame, segmented by the CPU reference with its labels completed
+    /// (the GPU's `plane_complete` twin), as the page would have it.
+    fn frame(scene: &PlaneScene) -> (Segmentation, ColorImage, RgbdCalibration) {
         let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_METRE as f32 };
         let r = scene.render(&K, None);
-        let pre = webfusion_core::cpu::preprocess::chain::preprocess(&calibration, &PreprocessConfig::default(), &r.frame);
-        let seg = reference::segment(&pre.levels, Some(&pre.depth_unfiltered_m), &PlaneConfig::default());
-        (seg, r.frame.color.clone(), Rc::new(r.frame.depth.units.clone()), calibration)
+        let preprocess = PreprocessConfig::default();
+        let pre = webfusion_core::cpu::preprocess::chain::preprocess(&calibration, &preprocess, &r.frame);
+        let mut seg = reference::segment(&pre.levels, Some(&pre.depth_unfiltered_m), &PlaneConfig::default());
+        seg.labels = complete_labels(&seg, &pre.depth_unfiltered_m, &K, &PlaneConfig::default(), blend_reach_px(&preprocess));
+        (seg, r.frame.color.clone(), calibration)
     }
 
     #[wasm_bindgen_test]
     fn frames_join_the_world_once_labels_and_pose_are_both_here() {
         let scene = &PlaneScene::all()[0];
-        let (seg, colour, depth, calibration) = frame(scene);
+        let (seg, colour, calibration) = frame(scene);
         assert!(seg.planes.len() >= 2, "{}: planes to add", scene.name);
-        let mut model = PlaneWorldModel::new(PlaneConfig::default(), PreprocessConfig::default());
+        let mut model = PlaneWorldModel::new(PlaneConfig::default());
         assert!(model.wants_frame(), "the first frame is wanted");
-        model.asked(3, &colour, Rc::clone(&depth), calibration);
+        model.asked(3, &colour, calibration);
         assert!(!model.wants_frame(), "one frame at a time");
         // Labels first, pose later (or the other way round): added only with both.
         model.labels_arrived(3, seg.clone());
@@ -242,14 +235,14 @@ mod tests {
         assert_eq!(s.planes, seg.planes.len(), "each frame plane starts a world plane");
         // The same view again from the same pose: the planes are associated, not duplicated.
         model.last_asked = None;
-        model.asked(4, &colour, Rc::clone(&depth), calibration);
+        model.asked(4, &colour, calibration);
         model.pose_reported(4, Some(Se3::IDENTITY));
         model.labels_arrived(4, seg.clone());
         assert_eq!((model.status().frames, model.status().planes), (2, seg.planes.len()), "associated with the world's planes");
         // A lost frame is left out; a frame overtaken by a complete later one is dropped.
         model.last_asked = None;
-        model.asked(5, &colour, Rc::clone(&depth), calibration);
-        model.asked(6, &colour, Rc::clone(&depth), calibration);
+        model.asked(5, &colour, calibration);
+        model.asked(6, &colour, calibration);
         model.pose_reported(5, None);
         model.labels_arrived(5, seg.clone());
         model.labels_arrived(6, seg.clone());
@@ -270,7 +263,7 @@ mod tests {
         assert_eq!((model.status().frames, model.status().planes), (0, 0), "a new run starts a new world");
         assert_ne!(model.version(), before, "a reset changes the version (the overlay is rebuilt)");
         // Negative control: frames never reported stay waiting and add nothing.
-        model.asked(7, &colour, Rc::clone(&depth), calibration);
+        model.asked(7, &colour, calibration);
         model.labels_arrived(7, seg);
         assert_eq!((model.status().frames, model.status().waiting), (0, 1));
     }

@@ -23,8 +23,8 @@ use crate::cpu::planes::plane_fit::PLANE_FIT_VEC4S;
 use crate::cpu::planes::plane_list::{DISPATCH_FIT, DISPATCH_KEYS, DISPATCH_LABEL, DISPATCH_REDUCE, DISPATCH_RELABEL, DISPATCH_SUMS, MODE_KEEP, MODE_MERGE, MODE_SORT, PLANE_LIST_DISPATCH, PLANE_LIST_STATE, PLANE_LIST_VEC4S, PLANE_RECORD_VEC4S};
 use crate::cpu::planes::plane_sums::{CHUNK_MASK_WORDS, plane_sums_chunks};
 use crate::kernels::{
-    Kernels, KernelPipeline, distance_histogram, distance_peaks, normal_histogram, normal_peaks, peak_realign, plane_extent, plane_fit, plane_keys, plane_label, plane_list, plane_relabel, plane_sums,
-    plane_sums_reduce,
+    Kernels, KernelPipeline, distance_histogram, distance_peaks, normal_histogram, normal_peaks, peak_realign, plane_complete, plane_extent, plane_fit, plane_keys, plane_label, plane_list, plane_relabel,
+    plane_sums, plane_sums_reduce, plane_window,
 };
 use crate::engine::ReadbackRing;
 use crate::preprocess::DepthPreprocessor;
@@ -33,14 +33,17 @@ use crate::{Error, Gpu, PinholeIntrinsics, Result};
 /// Candidate slots of the inner loop: a plane per (normal peak, distance peak).
 const SLOTS: usize = MAX_NORMAL_PEAKS * MAX_DISTANCE_PEAKS;
 
+/// Picks a kernel's pipeline from the registry (a step holds it, not the pipeline itself).
+type KernelOf = fn(&Kernels) -> &KernelPipeline;
+
 /// One recorded step of the chain.
 enum Step {
     /// Zero a buffer.
     Clear(wgpu::Buffer),
     /// A kernel over this many invocations.
-    Direct(fn(&Kernels) -> &KernelPipeline, wgpu::BindGroup, [u32; 3]),
+    Direct(KernelOf, wgpu::BindGroup, [u32; 3]),
     /// A kernel sized by the plane list's dispatch buffer at this byte offset.
-    Indirect(fn(&Kernels) -> &KernelPipeline, wgpu::BindGroup, u64),
+    Indirect(KernelOf, wgpu::BindGroup, u64),
 }
 
 /// `plane_keys`' parameters for maps of intrinsics `k` in `mode` (0: the inner loop's
@@ -74,6 +77,11 @@ pub struct GpuPlaneSegmenter {
     steps: Vec<Step>,
     /// Per full-resolution pixel its plane in the last segmentation's table, or [`NO_LABEL`].
     pub labels: wgpu::Buffer,
+    /// [`Self::labels`] completed for meshing and texturing (kernel `plane_complete`, the
+    /// twin of [`super::mesh::complete_labels`]), by [`Self::encode_completion`].
+    pub completed: wgpu::Buffer,
+    /// The completion's kernels: `plane_window` along rows and along columns, `plane_complete`.
+    completion: [(KernelOf, wgpu::BindGroup); 3],
     list: wgpu::Buffer,
     state: wgpu::Buffer,
     extents: wgpu::Buffer,
@@ -117,6 +125,7 @@ impl GpuPlaneSegmenter {
 
         let buffer = |name: &str, bytes: usize| gpu.storage_buffer::<u8>(&format!("core.planes.{name}"), bytes);
         let labels = buffer("labels", 4 * n_full);
+        let completed = buffer("completed", 4 * n_full);
         let normal_hist = buffer("normal_histogram", 4 * NORMAL_BINS * NORMAL_BINS);
         let peaks = buffer("peaks", 16 * MAX_NORMAL_PEAKS);
         let peak_count = buffer("peak_count", 4);
@@ -204,6 +213,10 @@ impl GpuPlaneSegmenter {
         let p_label = uniform("plane_label", bytemuck::bytes_of(&plane_label::PlaneLabelParams { pixel_count: n_full as u32, cos_label: config.label_angle_deg.to_radians().cos(), min_distance_m: config.label_min_distance_m, ..Default::default() }));
         let p_relabel = uniform("plane_relabel", bytemuck::bytes_of(&plane_relabel::PlaneRelabelParams { pixel_count: n_full as u32, ..Default::default() }));
         let p_extent = uniform("plane_extent", bytemuck::bytes_of(&plane_extent::PlaneExtentParams { pixel_count: n_full as u32, ..Default::default() }));
+        let reach_px = super::mesh::blend_reach_px(pre.config());
+        let p_rows = uniform("plane_window.rows", bytemuck::bytes_of(&super::mesh::plane_window_params(&full, reach_px, 0)));
+        let p_columns = uniform("plane_window.columns", bytemuck::bytes_of(&super::mesh::plane_window_params(&full, reach_px, 1)));
+        let p_complete = uniform("plane_complete", bytemuck::bytes_of(&super::mesh::plane_complete_params(&full, config)));
 
         // Bind groups.
         let bg_hist = normal_histogram::Bindings { params: &p_hist, normal_in_camera: &full_level.normal_in_camera, labels: &labels, histogram: &normal_hist }.bind_group(gpu);
@@ -247,6 +260,12 @@ impl GpuPlaneSegmenter {
         let bg_label = plane_label::Bindings { params: &p_label, vertex_in_camera: &full_level.vertex_in_camera, normal_in_camera: &full_level.normal_in_camera, planes: &planes, plane_count: &state, labels: &labels }.bind_group(gpu);
         let bg_relabel = plane_relabel::Bindings { params: &p_relabel, renumber: &renumber, labels: &labels }.bind_group(gpu);
         let bg_extent = plane_extent::Bindings { params: &p_extent, vertex_in_camera: &full_level.vertex_in_camera, labels: &labels, list: &list, extents: &extents }.bind_group(gpu);
+        let (row_masks, window_masks) = (buffer("row_masks", 8 * n_full), buffer("window_masks", 8 * n_full));
+        let completion: [(KernelOf, wgpu::BindGroup); 3] = [
+            (|k| &k.plane_window, plane_window::Bindings { params: &p_rows, labels: &labels, plane_count: &state, masks_in: &dummy, masks_out: &row_masks }.bind_group(gpu)),
+            (|k| &k.plane_window, plane_window::Bindings { params: &p_columns, labels: &labels, plane_count: &state, masks_in: &row_masks, masks_out: &window_masks }.bind_group(gpu)),
+            (|k| &k.plane_complete, plane_complete::Bindings { params: &p_complete, depth_m: raw, labels_in: &labels, window: &window_masks, planes: &planes, labels_out: &completed }.bind_group(gpu)),
+        ];
 
         // The chain.
         let mut steps = vec![Step::Clear(state.clone())];
@@ -292,16 +311,25 @@ impl GpuPlaneSegmenter {
         steps.push(Step::Clear(extents.clone()));
         steps.push(Step::Direct(|k| &k.plane_extent, bg_extent, [n_full as u32, 1, 1]));
 
-        let keep_alive = [normal_hist, peaks, peak_count, realigned, assignment, distance_hist, normal_sums, intervals, interval_count, keys_inner, keys_full, masks_inner, masks_full, partials, moments, fits, planes, renumber, dummy];
+        let keep_alive = [normal_hist, peaks, peak_count, realigned, assignment, distance_hist, normal_sums, intervals, interval_count, keys_inner, keys_full, masks_inner, masks_full, partials, moments, fits, planes, renumber, dummy, row_masks, window_masks];
         params_buffers.extend(keep_alive);
         let tables = ReadbackRing::new(gpu, "core.planes.table", TABLE_BYTES + 4 * full.pixel_count() as u64, 2);
-        Ok(Self { full, steps, labels, list, state, extents, dispatch, tables, _keep_alive: params_buffers })
+        Ok(Self { full, steps, labels, completed, completion, list, state, extents, dispatch, tables, _keep_alive: params_buffers })
     }
 
     /// Records the whole segmentation of the preprocessor's current frame into `encoder`:
     /// each run of kernels between two clears in one compute pass.
     pub fn encode(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder) {
         self.encode_steps(gpu, encoder, &self.steps);
+    }
+
+    /// Records the completion of the last segmentation's labels for meshing (after
+    /// [`Self::encode`]): [`Self::completed`] from the labels, the plane table and the raw depth.
+    pub fn encode_completion(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.planes.complete"), timestamp_writes: None });
+        for (kernel, bind_group) in &self.completion {
+            kernel(&gpu.kernels).dispatch_in(&mut pass, bind_group, [self.full.width_px, self.full.height_px, 1]);
+        }
     }
 
     /// Records `steps`: clears as they come, each run of kernels between them in one pass.
@@ -375,6 +403,24 @@ impl GpuPlaneSegmenter {
         self.read_parts(gpu, false).await
     }
 
+    /// [`Self::read`] and the labels completed for meshing: completes them first (one
+    /// submission), then reads the table and both label images; the completed labels come back
+    /// beside the segmentation, clamped to its table as its own labels are.
+    ///
+    /// # Errors
+    /// A failed readback.
+    pub async fn read_with_completed(&self, gpu: &Gpu) -> Result<(Segmentation, Vec<u32>, GpuSegmentationStats)> {
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.planes.complete") });
+        self.encode_completion(gpu, &mut encoder);
+        gpu.submit(Some(encoder.finish()));
+        let n = self.full.pixel_count();
+        let words: Vec<u32> = gpu.read_buffers(&[(&self.state, PLANE_LIST_STATE), (&self.list, 4 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 4 * MAX_PLANES), (&self.labels, n), (&self.completed, n)]).await?;
+        let (table, completed) = words.split_at(words.len() - n);
+        let (seg, stats) = parse_table(table);
+        let completed = completed.iter().map(|&l| clamp_label(l, seg.planes.len())).collect();
+        Ok((seg, completed, stats))
+    }
+
     async fn read_parts(&self, gpu: &Gpu, with_labels: bool) -> Result<(Segmentation, GpuSegmentationStats)> {
         let n = if with_labels { self.full.pixel_count() } else { 0 };
         let mut parts = vec![(&self.state, PLANE_LIST_STATE), (&self.list, 4 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 4 * MAX_PLANES)];
@@ -386,13 +432,17 @@ impl GpuPlaneSegmenter {
     }
 
     /// Records a copy of the plane table into a free readback slot (after [`Self::encode`], in
-    /// the same encoder), and of the labels after it when `with_labels` (4 bytes a pixel, for
-    /// a frame the world model takes); `None` when both slots are still in flight (this frame
-    /// is then not read).
-    pub fn encode_table_copy(&self, encoder: &mut wgpu::CommandEncoder, with_labels: bool) -> Option<usize> {
+    /// the same encoder), and when `with_labels` the labels completed for meshing after it
+    /// ([`Self::encode_completion`], recorded here; 4 bytes a pixel, for a frame the world
+    /// model takes: the table it brings back carries those as its labels); `None` when both
+    /// slots are still in flight (this frame is then not read).
+    pub fn encode_table_copy(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, with_labels: bool) -> Option<usize> {
         let (slot, buffer) = self.tables.free_slot()?;
         let mut offset = 0;
-        let labels = if with_labels { Some((&self.labels, 4 * self.full.pixel_count())) } else { None };
+        if with_labels {
+            self.encode_completion(gpu, encoder);
+        }
+        let labels = if with_labels { Some((&self.completed, 4 * self.full.pixel_count())) } else { None };
         for (source, bytes) in [(&self.state, 4 * PLANE_LIST_STATE), (&self.list, 16 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 16 * MAX_PLANES)].into_iter().chain(labels) {
             encoder.copy_buffer_to_buffer(source, 0, buffer, offset, bytes as u64);
             offset += bytes as u64;
@@ -409,7 +459,7 @@ impl GpuPlaneSegmenter {
     }
 
     /// The plane tables whose readback completed (oldest first, without waiting): frame, the
-    /// planes (with the labels where they were copied, else none) and the stats.
+    /// planes (with the completed labels where they were copied, else none) and the stats.
     ///
     /// # Errors
     /// A failed mapping or a lost device.
@@ -431,6 +481,12 @@ impl GpuPlaneSegmenter {
     pub fn tables_in_flight(&self) -> usize {
         self.tables.in_flight()
     }
+}
+
+/// Labels past the table cannot occur (the last relabelling maps every dropped plane to
+/// none); clamped so a reader can index the table of `count` planes with any label.
+fn clamp_label(l: u32, count: usize) -> u32 {
+    if l == NO_LABEL || (l as usize) < count { l } else { NO_LABEL }
 }
 
 /// A segmentation from the words of the state, the list's first MAX_PLANES records, the
@@ -459,8 +515,6 @@ fn parse_table(words: &[u32]) -> (Segmentation, GpuSegmentationStats) {
             }
         })
         .collect();
-    // Labels past the table cannot occur (the last relabelling maps every dropped plane to
-    // none); clamped so a reader can index the table with any label.
-    let labels = labels.iter().map(|&l| if l == NO_LABEL || (l as usize) < count { l } else { NO_LABEL }).collect();
+    let labels = labels.iter().map(|&l| clamp_label(l, count)).collect();
     (Segmentation { labels, planes, curved_rejected: state[1] }, GpuSegmentationStats { overflow: state[2] })
 }

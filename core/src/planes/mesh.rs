@@ -476,21 +476,41 @@ pub fn blend_reach_px(preprocess: &crate::preprocess::PreprocessConfig) -> u32 {
 /// needs less depth error to be on the riser that faces the camera. Farther out, and for
 /// pixels off every plane, nothing changes.
 pub fn complete_labels(seg: &Segmentation, raw_depth_m: &[f32], k: &PinholeIntrinsics, config: &PlaneConfig, reach_px: u32) -> Vec<u32> {
-    // Kernel `plane_complete`.
-    let params = crate::kernels::plane_complete::PlaneCompleteParams {
+    // Kernels `plane_window` (both axes), then `plane_complete`.
+    let window = window_masks(&seg.labels, seg.planes.len() as u32, k, reach_px);
+    let planes: Vec<[f32; 4]> = seg.planes.iter().map(|p| [p.normal[0], p.normal[1], p.normal[2], p.offset_m]).collect();
+    let mut out = vec![NO_LABEL; seg.labels.len()];
+    crate::cpu::plane_complete(&plane_complete_params(k, config), raw_depth_m, &seg.labels, &window, &planes, &mut out);
+    out
+}
+
+/// Per pixel of `labels` (planes `0..plane_count`), the planes labelling a pixel within the
+/// (2 `reach_px` + 1)² window around it, a bit each: kernel `plane_window`'s two passes.
+pub fn window_masks(labels: &[u32], plane_count: u32, k: &PinholeIntrinsics, reach_px: u32) -> Vec<[u32; 2]> {
+    let mut rows = vec![[0u32; 2]; labels.len()];
+    crate::cpu::plane_window(&plane_window_params(k, reach_px, 0), labels, &[plane_count], &[], &mut rows);
+    let mut window = vec![[0u32; 2]; labels.len()];
+    crate::cpu::plane_window(&plane_window_params(k, reach_px, 1), labels, &[plane_count], &rows, &mut window);
+    window
+}
+
+/// Kernel `plane_window`'s parameters for images of intrinsics `k` along `axis` (0: rows).
+pub fn plane_window_params(k: &PinholeIntrinsics, reach_px: u32, axis: u32) -> crate::kernels::plane_window::PlaneWindowParams {
+    crate::kernels::plane_window::PlaneWindowParams { width_px: k.width_px, height_px: k.height_px, reach_px, axis }
+}
+
+/// Kernel `plane_complete`'s parameters for images of intrinsics `k`.
+pub fn plane_complete_params(k: &PinholeIntrinsics, config: &PlaneConfig) -> crate::kernels::plane_complete::PlaneCompleteParams {
+    crate::kernels::plane_complete::PlaneCompleteParams {
         width_px: k.width_px,
         height_px: k.height_px,
-        reach_px,
         min_distance_m: config.label_min_distance_m,
         fx_px: k.fx_px,
         fy_px: k.fy_px,
         cx_px: k.cx_px,
         cy_px: k.cy_px,
-    };
-    let planes: Vec<[f32; 4]> = seg.planes.iter().map(|p| [p.normal[0], p.normal[1], p.normal[2], p.offset_m]).collect();
-    let mut out = vec![NO_LABEL; seg.labels.len()];
-    crate::cpu::plane_complete(&params, raw_depth_m, &seg.labels, &planes, &[planes.len() as u32], &mut out);
-    out
+        ..Default::default()
+    }
 }
 
 /// 003's texture rectification, per destination texel (kernel `plane_rectify`): the texel's

@@ -11,6 +11,7 @@
 //! agreeing on 98 %.
 
 use webfusion_core::planes::gpu::GpuPlaneSegmenter;
+use webfusion_core::planes::mesh::{blend_reach_px, complete_labels};
 use webfusion_core::planes::{NO_LABEL, PlaneConfig, Segmentation, reference};
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
 use webfusion_core::sim::plane_scenes::{NO_PLANE, PlaneScene, UNITS_PER_METRE};
@@ -105,8 +106,10 @@ fn a_real_frame_segments_like_the_reference() {
 }
 
 /// The per-frame readback the browser uses (`encode_table_copy` into a ring slot, collected
-/// without waiting) gives what the blocking `read` does: the table alone, or the table and the
-/// labels for a frame the world model takes.
+/// without waiting) gives what the blocking reads do: the table alone, or the table and the
+/// labels completed for meshing for a frame the world model takes; and those completed labels
+/// are the CPU's completion (`complete_labels`, the twins of plane_window and plane_complete)
+/// of the GPU's segmentation, at least 99.9 % of them.
 #[test]
 fn the_per_frame_table_readback_equals_the_blocking_read() {
     let gpu = gpu();
@@ -119,13 +122,13 @@ fn the_per_frame_table_readback_equals_the_blocking_read() {
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.planes.table") });
     pre.encode(&gpu, &mut encoder);
     segmenter.encode(&gpu, &mut encoder);
-    let table_slot = segmenter.encode_table_copy(&mut encoder, false).expect("a free slot");
+    let table_slot = segmenter.encode_table_copy(&gpu, &mut encoder, false).expect("a free slot");
     let submission = gpu.submit(Some(encoder.finish()));
     let before = gpu.counters.snapshot();
     segmenter.start_table_read(&gpu, table_slot, submission, 7, false);
     let table_bytes = gpu.counters.snapshot().readback_bytes - before.readback_bytes;
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.planes.labels") });
-    let labels_slot = segmenter.encode_table_copy(&mut encoder, true).expect("the second slot");
+    let labels_slot = segmenter.encode_table_copy(&gpu, &mut encoder, true).expect("the second slot");
     let submission = gpu.submit(Some(encoder.finish()));
     let before = gpu.counters.snapshot();
     segmenter.start_table_read(&gpu, labels_slot, submission, 8, true);
@@ -135,7 +138,7 @@ fn the_per_frame_table_readback_equals_the_blocking_read() {
     assert!(table_bytes < 64 * 1024, "the table alone is small: {table_bytes} bytes");
     // Both slots in flight: a third frame is not read.
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.planes.full") });
-    assert!(segmenter.encode_table_copy(&mut encoder, false).is_none(), "no free slot while two are in flight");
+    assert!(segmenter.encode_table_copy(&gpu, &mut encoder, false).is_none(), "no free slot while two are in flight");
     drop(encoder);
     let mut got = Vec::new();
     for _ in 0..2000 {
@@ -148,11 +151,23 @@ fn the_per_frame_table_readback_equals_the_blocking_read() {
     assert_eq!(segmenter.tables_in_flight(), 0, "both readbacks completed");
     let (blocking, _) = pollster::block_on(segmenter.read(&gpu)).expect("readback");
     assert!(blocking.planes.len() >= 2 && blocking.labels.iter().any(|&l| l != NO_LABEL), "{}: planes and labels", scene.name);
+    let (with_completed, completed, _) = pollster::block_on(segmenter.read_with_completed(&gpu)).expect("readback");
+    assert_eq!(with_completed, blocking, "the segmentation beside its completion");
     let [(f7, table, _), (f8, labelled, _)] = <[_; 2]>::try_from(got).expect("two readbacks");
     assert_eq!((f7, f8), (7, 8), "tagged with their frames, in order");
     assert_eq!(table.planes, blocking.planes, "the table alone");
     assert!(table.labels.is_empty(), "no labels unless asked");
     assert_eq!(labelled.planes, blocking.planes, "the table with the labels");
-    assert_eq!(labelled.labels, blocking.labels, "the labels");
+    assert_eq!(labelled.labels, completed, "the labels, completed");
+    let raw_depth_m = webfusion_core::cpu::preprocess::chain::preprocess(&calibration, &PreprocessConfig::default(), &frame).depth_unfiltered_m;
+    let on_cpu = complete_labels(&blocking, &raw_depth_m, &K, &PlaneConfig::default(), blend_reach_px(&PreprocessConfig::default()));
+    let differ = webfusion_tests::compare_u32_mostly("completion", &completed, &on_cpu, 1).unwrap();
+    let added = |labels: &[u32]| labels.iter().filter(|&&l| l != NO_LABEL).count();
+    eprintln!("completion: {} labels added, {differ} differ from the CPU's", added(&completed) - added(&blocking.labels));
+    assert!(added(&completed) > added(&blocking.labels) + 100, "the completion labels border pixels");
+    let mut shifted = completed[K.width_px as usize..].to_vec();
+    shifted.extend_from_slice(&completed[..K.width_px as usize]);
+    assert!(webfusion_tests::compare_u32_mostly("completion", &shifted, &on_cpu, 1).is_err(), "a shifted completion is refused");
+    assert!(webfusion_tests::compare_u32_mostly("completion", &blocking.labels, &on_cpu, 1).is_err(), "the labels before completion are refused");
     finish(&gpu);
 }

@@ -3,13 +3,13 @@
 //! synthetic stairs with the reference's segmentation (where most completions happen: the
 //! borders between treads and risers) and on a real frame. Tolerance: at least 99.9 % of the
 //! labels identical (a pixel at the tolerance or between two planes of equal depth error may
-//! fall either way: WGSL's dot may fuse). The completion must add labels, and four in five added
-//! ones at least must be the pixel's true surface.
+//! fall either way: WGSL's dot may fuse). The candidates (`window`) come from plane_window's twin.
+//! The completion must add labels, and four in five added ones at least must be the pixel's
+//! true surface.
 
 use webfusion_core::cpu;
 use webfusion_core::cpu::preprocess::chain::preprocess;
-use webfusion_core::kernels::plane_complete::PlaneCompleteParams;
-use webfusion_core::planes::mesh::blend_reach_px;
+use webfusion_core::planes::mesh::{blend_reach_px, plane_complete_params, window_masks};
 use webfusion_core::planes::{NO_LABEL, PlaneConfig, Segmentation, reference};
 use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_core::sim::plane_scenes::{NO_PLANE, PlaneScene, UNITS_PER_METRE};
@@ -20,30 +20,22 @@ const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 262.5, fy_px: 262.5, cx_
 
 fn run(k: &PinholeIntrinsics, seg: &Segmentation, depth_m: &[f32]) -> (Vec<u32>, Vec<u32>) {
     let gpu = gpu();
-    let p = PlaneCompleteParams {
-        width_px: k.width_px,
-        height_px: k.height_px,
-        reach_px: blend_reach_px(&PreprocessConfig::default()),
-        min_distance_m: PlaneConfig::default().label_min_distance_m,
-        fx_px: k.fx_px,
-        fy_px: k.fy_px,
-        cx_px: k.cx_px,
-        cy_px: k.cy_px,
-    };
+    let p = plane_complete_params(k, &PlaneConfig::default());
     let planes: Vec<[f32; 4]> = seg.planes.iter().map(|p| [p.normal[0], p.normal[1], p.normal[2], p.offset_m]).collect();
-    let count = planes.len() as u32;
     let planes_buf = if planes.is_empty() { vec![[0.0; 4]] } else { planes };
+    // The candidates, by plane_window's twin (its own test holds the kernel to it).
+    let window = window_masks(&seg.labels, seg.planes.len() as u32, k, blend_reach_px(&PreprocessConfig::default()));
     let n = seg.labels.len();
     let out = run_kernel_slots(
         &gpu,
         &gpu.kernels.plane_complete,
         &p,
-        &[Slot::In(bytemuck::cast_slice(depth_m)), Slot::In(bytemuck::cast_slice(&seg.labels)), Slot::In(bytemuck::cast_slice(&planes_buf)), Slot::In(bytemuck::bytes_of(&count)), Slot::Out(4 * n)],
+        &[Slot::In(bytemuck::cast_slice(depth_m)), Slot::In(bytemuck::cast_slice(&seg.labels)), Slot::In(bytemuck::cast_slice(&window)), Slot::In(bytemuck::cast_slice(&planes_buf)), Slot::Out(4 * n)],
         [k.width_px, k.height_px, 1],
     );
     finish(&gpu);
     let mut c = vec![0u32; n];
-    cpu::plane_complete(&p, depth_m, &seg.labels, &planes_buf, &[count], &mut c);
+    cpu::plane_complete(&p, depth_m, &seg.labels, &window, &planes_buf, &mut c);
     (cast(&out[0]), c)
 }
 
