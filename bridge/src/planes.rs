@@ -229,8 +229,9 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         _ => None,
     };
     let mut without_pose = 0usize;
-    // The labels leave the GPU only for the label images and the world model.
-    let read_labels = args.labels || world_input.is_some();
+    // Without the world model, the labels leave the GPU only for the label images (with it,
+    // they come back beside their completion).
+    let read_labels = args.labels;
     let mut overflow = 0u32;
     let mut times = StageTimes::default();
     let mut frames = Vec::with_capacity(range.len());

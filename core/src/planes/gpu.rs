@@ -14,7 +14,8 @@
 //! and fits, `plane_list` keep (fittable) with `plane_relabel`. At the end `plane_list` sort,
 //! `plane_relabel` and `plane_extent`. The full-resolution kernels of a round are dispatched
 //! indirectly, sized by `plane_list`: a round whose merge took no newcomer ends there, with no
-//! full-resolution pass, as the reference's does (most frames' second round).
+//! full-resolution pass, as the reference's does (most frames' second round), and a keep that
+//! dropped no plane skips the second labelling, sums and fits.
 
 use super::{MAX_DISTANCE_PEAKS, MAX_NORMAL_PEAKS, MAX_PLANES, NO_LABEL, DISTANCE_BINS, NORMAL_BINS, Plane, PlaneConfig, Segmentation};
 use crate::cpu::planes::moments::PLANE_MOMENT_VEC4S;
@@ -272,7 +273,7 @@ impl GpuPlaneSegmenter {
         // With no planes yet, labelling marks every pixel free.
         steps.push(Step::Direct(|k| &k.plane_label, bg_label.clone(), [n_full as u32, 1, 1]));
         // Labels, keys, sums and fits at full resolution, sized by the plane list (nothing once
-        // a round's merge took no newcomer).
+        // a round's merge took no newcomer, nor after a keep that dropped no plane).
         let full_sums = |steps: &mut Vec<Step>| {
             steps.push(Step::Indirect(|k| &k.plane_label, bg_label.clone(), DISPATCH_LABEL));
             steps.push(Step::Clear(masks_full.clone()));
