@@ -16,6 +16,8 @@
 //! (`core::sim::VirtualSensor`, exact) sees it from the frame's pose after the whole sequence
 //! was fused: the planes of the model (noise averaged over every view, holes filled from
 //! other views) rather than of one noisy frame; the frame's colour textures them as before.
+//! The sensor's raw depth is copied into the preprocessor on the GPU (no readback); the CPU
+//! reference reads it back.
 //!
 //! Preprocessing and segmentation run on the GPU (`core::planes::gpu`: one submission per
 //! frame and one readback), or with `--cpu-reference` the CPU reference
@@ -243,16 +245,24 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
         let Some(frame) = crate::read_or_skip(source.as_mut(), index, args.skip_corrupt, &mut skipped)? else { continue };
         let read_ms = sw.ms();
         let mut model_ms = None;
+        // With the GPU chain, the pose the map's depth is rendered at, into the preprocessor.
+        let mut model_pose = None;
         let frame = match &mut model_view {
             Some((sensor, gpu, store, poses)) => {
                 let Some(pose) = poses.get(&frame.index) else {
                     without_pose += 1;
                     continue;
                 };
-                let sw = Stopwatch::start();
-                let model = pollster::block_on(sensor.render(gpu, *store, pose, index as u32)).with_context(|| format!("rendering the model at frame {index}"))?;
-                model_ms = Some(sw.ms());
-                RgbdFrame { depth: DepthImage::new(k.width_px, k.height_px, model.depth_units)?, ..frame }
+                if on_gpu.is_some() {
+                    model_pose = Some(*pose);
+                    frame
+                } else {
+                    // The CPU reference reads the map's depth back.
+                    let sw = Stopwatch::start();
+                    let model = pollster::block_on(sensor.render(gpu, *store, pose, index as u32)).with_context(|| format!("rendering the model at frame {index}"))?;
+                    model_ms = Some(sw.ms());
+                    RgbdFrame { depth: DepthImage::new(k.width_px, k.height_px, model.depth_units)?, ..frame }
+                }
             }
             None => frame,
         };
@@ -274,9 +284,23 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
                 (seg, completed, preprocess_ms, segment_ms)
             }
             Some((gpu, pre, segmenter)) => {
+                if let (Some(pose), Some((sensor, _, store, _))) = (&model_pose, &mut model_view) {
+                    // The map's depth at the frame's pose replaces the frame's on the GPU (the
+                    // sensor's raw depth has the preprocessor's layout: two u16 a word), with
+                    // no readback; the frame's colour stays.
+                    let sw = Stopwatch::start();
+                    pre.upload(gpu, &frame)?;
+                    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("planes.model_depth") });
+                    sensor.encode(gpu, &mut encoder, *store, pose, index as u32).with_context(|| format!("rendering the model at frame {index}"))?;
+                    encoder.copy_buffer_to_buffer(sensor.depth_raw(), 0, &pre.depth_raw, 0, sensor.depth_raw().size().min(pre.depth_raw.size()));
+                    pollster::block_on(gpu.submit_and_wait(encoder))?;
+                    model_ms = Some(sw.ms());
+                }
                 // Two submissions, so that each stage's time is its own.
                 let sw = Stopwatch::start();
-                pre.upload(gpu, &frame)?;
+                if model_pose.is_none() {
+                    pre.upload(gpu, &frame)?;
+                }
                 let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("planes.preprocess") });
                 pre.encode(gpu, &mut encoder);
                 pollster::block_on(gpu.submit_and_wait(encoder))?;
