@@ -4,9 +4,9 @@
 //! planar quadtree meshes plus the fused mesh less what they cover).
 //!
 //! At most once every [`WORLD_INTERVAL_MS`], a frame that is segmented anyway has its labels,
-//! completed for meshing on the GPU (kernel `plane_complete`), read back with its plane table
-//! (4 bytes a pixel, once a second instead of every frame); when they and the frame's tracked
-//! pose (its report) have both arrived, its planes join the world on the CPU
+//! completed for meshing on the GPU (`plane_window`, `plane_complete`), read back with its
+//! plane table (4 bytes a pixel, once a second instead of every frame); when they and the
+//! frame's tracked pose (its report) have both arrived, its planes join the world on the CPU
 //! (`PlaneWorld::add_frame`: association, texel accumulation, merging). A frame whose tracking
 //! was lost is left out. Poses are the pipeline's own (the fused mesh's frame); a rebuilt
 //! pipeline starts a new world.
