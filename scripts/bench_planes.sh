@@ -73,8 +73,10 @@ import json, statistics, sys
 wf = json.load(open(sys.argv[1]))["frames"]
 w = json.load(open(sys.argv[2]))
 world = [f["stages_ms"]["world"] for f in wf if f["stages_ms"].get("world") is not None]
+complete = [f["stages_ms"]["complete_labels"] for f in wf if f["stages_ms"].get("complete_labels") is not None]
+med = lambda v: statistics.median(v) if v else float("nan")
 c = w["compactness"]
-print(f"world model ({w['poses']} poses, {w['frames_with_pose']} frames): {statistics.median(world) if world else float('nan'):.1f} ms per frame (label completion, association, texels)")
+print(f"world model ({w['poses']} poses, {w['frames_with_pose']} frames): label completion on the GPU {med(complete):.1f} ms, then association and texels on the CPU {med(world):.1f} ms per frame")
 print(f"  {len(w['planes'])} world planes, {sum(p['area_m2'] for p in w['planes']):.2f} m2 meshed")
 print(f"  compactness: {c['planar_triangles']} planar quadtree triangles replace {c['marching_cubes_triangles_replaced']} marching-cubes triangles "
       f"({c['marching_cubes_triangles_replaced'] / max(c['planar_triangles'], 1):.1f}x fewer; voxel {w['remainder']['voxel_m'] * 100:.2f} cm); textures {c['texture_bytes'] / 1e6:.1f} MB")
