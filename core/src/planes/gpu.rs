@@ -415,18 +415,24 @@ impl GpuPlaneSegmenter {
         self.encode_completion(gpu, &mut encoder);
         gpu.submit(Some(encoder.finish()));
         let n = self.full.pixel_count();
-        let words: Vec<u32> = gpu.read_buffers(&[(&self.state, PLANE_LIST_STATE), (&self.list, 4 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 4 * MAX_PLANES), (&self.labels, n), (&self.completed, n)]).await?;
+        let parts: Vec<(&wgpu::Buffer, usize)> = self.table_parts().into_iter().chain([(&self.labels, n), (&self.completed, n)]).collect();
+        let words: Vec<u32> = gpu.read_buffers(&parts).await?;
         let (table, completed) = words.split_at(words.len() - n);
         let (seg, stats) = parse_table(table);
         let completed = completed.iter().map(|&l| clamp_label(l, seg.planes.len())).collect();
         Ok((seg, completed, stats))
     }
 
+    /// The plane table's buffers and their words, in the order [`parse_table`] reads them: the
+    /// state, the list's first MAX_PLANES records, the extents.
+    fn table_parts(&self) -> [(&wgpu::Buffer, usize); 3] {
+        [(&self.state, PLANE_LIST_STATE), (&self.list, 4 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 4 * MAX_PLANES)]
+    }
+
     async fn read_parts(&self, gpu: &Gpu, with_labels: bool) -> Result<(Segmentation, GpuSegmentationStats)> {
-        let n = if with_labels { self.full.pixel_count() } else { 0 };
-        let mut parts = vec![(&self.state, PLANE_LIST_STATE), (&self.list, 4 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 4 * MAX_PLANES)];
+        let mut parts = self.table_parts().to_vec();
         if with_labels {
-            parts.push((&self.labels, n));
+            parts.push((&self.labels, self.full.pixel_count()));
         }
         let words: Vec<u32> = gpu.read_buffers(&parts).await?;
         Ok(parse_table(&words))
@@ -443,10 +449,11 @@ impl GpuPlaneSegmenter {
         if with_labels {
             self.encode_completion(gpu, encoder);
         }
-        let labels = if with_labels { Some((&self.completed, 4 * self.full.pixel_count())) } else { None };
-        for (source, bytes) in [(&self.state, 4 * PLANE_LIST_STATE), (&self.list, 16 * MAX_PLANES * PLANE_RECORD_VEC4S), (&self.extents, 16 * MAX_PLANES)].into_iter().chain(labels) {
-            encoder.copy_buffer_to_buffer(source, 0, buffer, offset, bytes as u64);
-            offset += bytes as u64;
+        let labels = if with_labels { Some((&self.completed, self.full.pixel_count())) } else { None };
+        for (source, words) in self.table_parts().into_iter().chain(labels) {
+            let bytes = 4 * words as u64;
+            encoder.copy_buffer_to_buffer(source, 0, buffer, offset, bytes);
+            offset += bytes;
         }
         Some(slot)
     }
