@@ -289,10 +289,9 @@ pub(crate) fn run(options: &GpuOptions, args: &PlanesArgs) -> anyhow::Result<()>
                     // sensor's raw depth has the preprocessor's layout: two u16 a word), with
                     // no readback; the frame's colour stays.
                     let sw = Stopwatch::start();
-                    pre.upload(gpu, &frame)?;
+                    pre.upload_color(gpu, &frame.color)?;
                     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("planes.model_depth") });
-                    sensor.encode(gpu, &mut encoder, *store, pose, index as u32).with_context(|| format!("rendering the model at frame {index}"))?;
-                    encoder.copy_buffer_to_buffer(sensor.depth_raw(), 0, &pre.depth_raw, 0, sensor.depth_raw().size().min(pre.depth_raw.size()));
+                    sensor.encode_into(gpu, &mut encoder, *store, pose, index as u32, pre).with_context(|| format!("rendering the model at frame {index}"))?;
                     pollster::block_on(gpu.submit_and_wait(encoder))?;
                     model_ms = Some(sw.ms());
                 }

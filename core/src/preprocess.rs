@@ -12,7 +12,7 @@ use crate::kernels::{
     depth_pyramid_down::DepthPyramidDownParams, depth_to_metres::DepthToMetresParams, gradient_smooth::GradientSmoothParams,
     intensity_pyramid_down::IntensityPyramidDownParams, normal_map::NormalMapParams, vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams,
 };
-use crate::{Error, Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Result};
+use crate::{ColorImage, Error, Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Result};
 
 /// Nearest depth kept, metres (Kinect v1 reads nothing reliable closer than about 0.4 m).
 pub const DEFAULT_MIN_DEPTH_M: f32 = 0.3;
@@ -354,19 +354,28 @@ impl DepthPreprocessor {
 
     /// Uploads a frame's depth and colour, checking their sizes.
     pub fn upload(&self, gpu: &Gpu, frame: &RgbdFrame) -> Result<()> {
-        let k = self.calibration.intrinsics;
-        let check = |what, w, h| {
-            if (w, h) != (k.width_px, k.height_px) {
-                Err(Error::FrameSize { what, got_width: w, got_height: h, want_width: k.width_px, want_height: k.height_px })
-            } else {
-                Ok(())
-            }
-        };
-        check("depth image", frame.depth.width_px, frame.depth.height_px)?;
-        check("colour image", frame.color.width_px, frame.color.height_px)?;
+        self.check_size("depth image", frame.depth.width_px, frame.depth.height_px)?;
+        self.check_size("colour image", frame.color.width_px, frame.color.height_px)?;
         gpu.write_buffer(&self.depth_raw, &frame.depth.units);
         gpu.write_buffer(&self.rgb8, &frame.color.rgb8);
         Ok(())
+    }
+
+    /// Uploads a colour image alone, checking its size: the depth comes from elsewhere on the
+    /// GPU (a virtual sensor's render of the fused map copied into [`Self::depth_raw`]).
+    pub fn upload_color(&self, gpu: &Gpu, color: &ColorImage) -> Result<()> {
+        self.check_size("colour image", color.width_px, color.height_px)?;
+        gpu.write_buffer(&self.rgb8, &color.rgb8);
+        Ok(())
+    }
+
+    fn check_size(&self, what: &'static str, width_px: u32, height_px: u32) -> Result<()> {
+        let k = self.calibration.intrinsics;
+        if (width_px, height_px) == (k.width_px, k.height_px) {
+            Ok(())
+        } else {
+            Err(Error::FrameSize { what, got_width: width_px, got_height: height_px, want_width: k.width_px, want_height: k.height_px })
+        }
     }
 
     /// Records the whole chain, each kernel in a compute pass of its own.

@@ -485,6 +485,11 @@ impl GpuPlaneSegmenter {
             .collect())
     }
 
+    /// Whether a table can be copied now ([`Self::encode_table_copy`] would not return `None`).
+    pub fn table_slot_free(&self) -> bool {
+        self.tables.free_slot().is_some()
+    }
+
     /// Plane tables still on their way back.
     pub fn tables_in_flight(&self) -> usize {
         self.tables.in_flight()

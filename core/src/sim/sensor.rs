@@ -10,6 +10,7 @@ use crate::fusion::predictor::RaycastTarget;
 use crate::kernels::GpuIntrinsics;
 use crate::kernels::depth_sensor::{self, DepthSensorParams};
 use crate::kernels::projector_shadow::{self, ProjectorShadowParams};
+use crate::preprocess::DepthPreprocessor;
 use crate::tsdf::TsdfStore;
 use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
 
@@ -225,6 +226,28 @@ impl VirtualSensor {
         }
         let words = self.target.intrinsics.pixel_count().div_ceil(2) as u32;
         gpu.kernels.depth_sensor.dispatch_in(&mut pass, &self.bind_group, [words, 1, 1]);
+        Ok(())
+    }
+
+    /// Records the render at `world_from_camera` and copies its raw depth into `pre`'s (the
+    /// same two-u16-a-word layout): the fused map's depth in place of a frame's, preprocessed
+    /// and segmented with no readback (`webfusion planes --from-model`, the page's planes of
+    /// the fused map). `pre`'s colour is the caller's to upload. Errors when the preprocessor's
+    /// image size or depth scale is not the sensor's.
+    pub fn encode_into(&mut self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, store: &dyn TsdfStore, world_from_camera: &Se3, frame_index: u32, pre: &DepthPreprocessor) -> Result<()> {
+        let (k, calibration) = (self.target.intrinsics, pre.calibration());
+        let want = calibration.intrinsics;
+        if (want.width_px, want.height_px) != (k.width_px, k.height_px) {
+            return Err(Error::FrameSize { what: "rendered model depth", got_width: k.width_px, got_height: k.height_px, want_width: want.width_px, want_height: want.height_px });
+        }
+        if calibration.depth_units_per_metre != self.options.units_per_metre {
+            return Err(Error::InvalidConfig(format!(
+                "the sensor renders {} depth units per metre, the preprocessor reads {}",
+                self.options.units_per_metre, calibration.depth_units_per_metre
+            )));
+        }
+        self.encode(gpu, encoder, store, world_from_camera, frame_index)?;
+        encoder.copy_buffer_to_buffer(&self.depth_raw, 0, &pre.depth_raw, 0, self.depth_raw.size());
         Ok(())
     }
 

@@ -82,6 +82,12 @@ fn wrong_frame_size_is_a_typed_error() {
     let err = pre.upload(&gpu, &frame).unwrap_err();
     assert!(matches!(err, webfusion_core::Error::FrameSize { got_width: 320, want_width: 640, .. }), "{err}");
     assert!(err.to_string().contains("320x480"), "message names the size: {err}");
+    // The colour alone (the depth rendered on the GPU) is checked the same way.
+    frame.color.width_px = 320;
+    let err = pre.upload_color(&gpu, &frame.color).unwrap_err();
+    assert!(matches!(err, webfusion_core::Error::FrameSize { what: "colour image", got_width: 320, want_width: 640, .. }), "{err}");
+    frame.color.width_px = 640;
+    pre.upload_color(&gpu, &frame.color).expect("the right size uploads");
     finish(&gpu);
 }
 
