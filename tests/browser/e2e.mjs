@@ -272,6 +272,26 @@ try {
   check('virtual sensor at a trajectory pose', Math.hypot(picked.pose[0] - p0[0], picked.pose[1] - p0[1], picked.pose[2] - p0[2]) < 1e-4 && picked.compare === null && picked.valid_pixels > 0.3 * picked.width_px * picked.height_px && noPose.sensor.rendered === before + 1,
     `pose ${JSON.stringify(picked.pose.map((v) => +v.toFixed(4)))} (trajectory pose 0 at ${JSON.stringify(p0.map((v) => +v.toFixed(4)))}); ${picked.valid_pixels} valid pixels; index 100000: "${noPose.message}"`);
 
+  // 6e. Planes of the fused map (`?planes_model=1`): a fresh page replays the log segmenting
+  // the map's depth at each tracked pose instead of the frame's (a virtual sensor rendering
+  // straight into a preprocessor of its own). At the last frame the map's planes are the
+  // frame's planes: each large one (a tenth of the image or more) lies within 5° and 5 cm
+  // of a plane the first page found in the same frame's own depth.
+  stage = 'the planes of the fused map';
+  const modelPage = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+  const modelErrors = [];
+  modelPage.on('pageerror', (e) => modelErrors.push(String(e)));
+  await modelPage.goto(`http://${bridge.addr}/?map=${map}&volume=${volume}&voxel_mm=${voxelMm}&centred=1&features=0&planes_model=1&autoplay=1`);
+  const modelDone = await waitFor(modelPage, 'every frame, planes of the fused map', (s) => s.frames_done >= total && s.state === 'ended' && s.planes?.frame === s.last_index, FRAME_TIMEOUT_MS * total);
+  const mp = modelDone.planes;
+  const pixels = 640 * 480;
+  const matched = (p) => pv.planes.some((q) => Math.acos(Math.min(1, p.normal[0] * q.normal[0] + p.normal[1] * q.normal[1] + p.normal[2] * q.normal[2])) < 5 * Math.PI / 180 && Math.abs(p.offset_m - q.offset_m) < 0.05);
+  const large = mp ? mp.planes.filter((p) => p.pixels >= pixels / 10) : [];
+  check('planes of the fused map', mp && mp.source === 'fused_map' && pv.source === 'frames' && mp.frame === pv.frame && mp.count >= 2 && large.length >= 1 && large.every(matched)
+    && modelDone.world.frames >= 2 && modelDone.world.planes >= 2 && modelErrors.length === 0 && modelDone.message === '',
+    `frame ${mp?.frame}: ${JSON.stringify(mp && mp.planes.map((p) => ({ n: p.normal.map((v) => +v.toFixed(3)), d: +p.offset_m.toFixed(3), px: p.pixels })))} against the frame's ${JSON.stringify(pv.planes.map((p) => ({ n: p.normal.map((v) => +v.toFixed(3)), d: +p.offset_m.toFixed(3), px: p.pixels })))}; world ${JSON.stringify(modelDone.world)}; ${mp?.median_ms.toFixed(0)} ms/frame${modelErrors.length ? '; page errors: ' + modelErrors.join(' | ') : ''}`);
+  await within(modelPage.close(), 30_000);
+
   // 7. Bad settings in the URL, then a lost device, in a browser of their own (a fresh GPU
   // process, as a new visitor would have).
   stage = 'the second browser';

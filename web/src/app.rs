@@ -21,7 +21,7 @@ use webfusion_core::tsdf::{DEFAULT_TRUNCATION_VOXELS, TsdfConfig, VolumePlacemen
 use webfusion_core::source::DepthNoise;
 use webfusion_core::{Gpu, GpuOptions, RgbdCalibration};
 
-use crate::fusion_mode::{FREE_VIEW, FusionMode, Received, SensorPose};
+use crate::fusion_mode::{FREE_VIEW, FusionMode, PlanesFrom, Received, SensorPose};
 use crate::sim::OpenedMap;
 use crate::link::{Event, Inbox, Link, Ui, js_text, push_later};
 use crate::status::Status;
@@ -53,8 +53,9 @@ struct Settings {
     config: FusionConfig,
     /// Feature odometry beside ICP (seed 002): initial guesses and relocalisation.
     features: bool,
-    /// Plane segmentation of every frame (seed 003).
-    planes: bool,
+    /// Plane segmentation (seed 003): off, of every frame, or of the fused map at each
+    /// frame's pose.
+    planes: Option<PlanesFrom>,
 }
 
 impl Settings {
@@ -84,7 +85,12 @@ impl Settings {
         config.icp.angle_thresh_rad = number("set-icp-angle-deg", "ICP angle")?.to_radians();
         config.icp.rgb_weight = number("set-rgb-weight", "photometric weight")?;
         config.validate().map_err(|e| e.to_string())?;
-        Ok(Self { config, features: !ui::value("set-features").is_empty(), planes: !ui::value("set-planes").is_empty() })
+        let planes = match (ui::value("set-planes").is_empty(), ui::value("set-planes-model").is_empty()) {
+            (true, _) => None,
+            (false, true) => Some(PlanesFrom::Frames),
+            (false, false) => Some(PlanesFrom::FusedMap),
+        };
+        Ok(Self { config, features: !ui::value("set-features").is_empty(), planes })
     }
 }
 
@@ -109,6 +115,7 @@ fn fill_settings_form(query: &std::collections::HashMap<String, String>) -> (Set
         ("set-rgb-weight", "rgb_weight", icp.rgb_weight.to_string()),
         ("set-features", "features", "1".to_owned()),
         ("set-planes", "planes", "1".to_owned()),
+        ("set-planes-model", "planes_model", String::new()),
     ];
     for (id, _, value) in &fields {
         ui::set_value(id, value);
@@ -125,7 +132,7 @@ fn fill_settings_form(query: &std::collections::HashMap<String, String>) -> (Set
     // The defaults always validate; should they not, say so rather than start half-configured.
     let settings = Settings::from_form().unwrap_or_else(|message| {
         warnings.push(format!("the default settings are invalid: {message}"));
-        Settings { config: defaults, features: true, planes: true }
+        Settings { config: defaults, features: true, planes: Some(PlanesFrom::Frames) }
     });
     (settings, warnings)
 }
@@ -895,7 +902,10 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         None => "feature odometry off".to_owned(),
     });
     lines.push(match &f.planes {
-        Some(p) => format!("planes: {} in frame {} ({} curved surfaces rejected) · {:.0} ms/frame", p.count, p.frame, p.curved_rejected, p.median_ms),
+        Some(p) => {
+            let seen = if p.source == PlanesFrom::FusedMap { "in the fused map at frame" } else { "in frame" };
+            format!("planes: {} {seen} {} ({} curved surfaces rejected) · {:.0} ms/frame", p.count, p.frame, p.curved_rejected, p.median_ms)
+        }
         None => "plane segmentation off".to_owned(),
     });
     if let Some(line) = s.sensor.line() {

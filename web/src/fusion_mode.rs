@@ -18,6 +18,10 @@
 //! in the plane view, and the plane table (a few kilobytes, not the labels) read back for the
 //! status a frame or so later, without waiting; about once a second the labels come back too,
 //! for the world model of planes (`planes_world.rs`) that the scene export draws on.
+//! With planes of the fused map ([`PlanesFrom::FusedMap`]) the depth segmented is instead the
+//! map's, rendered by a virtual sensor at each frame's tracked pose once its report is back
+//! (`core::sim::sensor::VirtualSensor::encode_into`: straight into a preprocessor of its own,
+//! no readback), textured by that frame's colour: `webfusion planes --from-model`, live.
 
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -36,8 +40,10 @@ use webfusion_core::source::TimedPose;
 use webfusion_core::planes::PlaneConfig;
 use webfusion_core::planes::gpu::GpuPlaneSegmenter;
 use webfusion_core::planes::overlay::{OverlayTarget, PlaneOverlay};
+use webfusion_core::preprocess::DepthPreprocessor;
+use webfusion_core::sim::sensor::{SensorOptions, VirtualSensor};
 use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView, LabelView, NormalView};
-use webfusion_core::{Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
+use webfusion_core::{ColorImage, Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Se3};
 
 use crate::canvas::GpuCanvas;
 use crate::planes_world::{Drawn, PlaneWorldModel, WorldStatus};
@@ -66,6 +72,36 @@ struct InFlight {
     views_ms: f64,
     /// The frame's depth and calibration, for the virtual sensor's comparison at its pose.
     depth_units: Rc<Vec<u16>>,
+    calibration: RgbdCalibration,
+    /// The frame's colour, kept when the fused map's planes are segmented at its pose (they
+    /// wait for its report).
+    colour: Option<Rc<ColorImage>>,
+}
+
+/// What plane segmentation segments.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub(crate) enum PlanesFrom {
+    /// Each frame's own depth, as it is fused.
+    Frames,
+    /// The fused map's depth at each frame's tracked pose, once its report is back: the noise
+    /// averaged over every view, holes filled from other views.
+    FusedMap,
+}
+
+/// The fused map's depth at a tracked pose in place of a frame's: a virtual sensor (exact)
+/// whose render goes straight into a preprocessor of its own, which the segmenter reads.
+struct ModelDepth {
+    sensor: VirtualSensor,
+    pre: DepthPreprocessor,
+}
+
+/// A tracked frame whose fused-map planes are segmented at the next chance (the newest wins).
+struct ModelDue {
+    index: u64,
+    /// The frame's tracked pose in the pipeline's world (the fused map's frame).
+    map_from_camera: Se3,
+    colour: Rc<ColorImage>,
     calibration: RgbdCalibration,
 }
 
@@ -114,9 +150,13 @@ pub(crate) enum SensorPose {
     Again,
 }
 
-/// Plane segmentation of each frame, its view and the world model of planes.
+/// Plane segmentation of each frame (or of the fused map at its pose), its view and the world
+/// model of planes.
 struct PlaneViews {
+    /// Reads the fusion's preprocessor, or with planes of the fused map `model`'s.
     segmenter: GpuPlaneSegmenter,
+    /// With planes of the fused map: where its depth is rendered and preprocessed.
+    model: Option<ModelDepth>,
     view: LabelView,
     canvas: GpuCanvas,
     world: PlaneWorldModel,
@@ -134,7 +174,7 @@ struct Pipeline {
 }
 
 impl Pipeline {
-    fn new(gpu: &Gpu, calibration: RgbdCalibration, config: &FusionConfig, features: bool, planes: bool) -> Result<Self, String> {
+    fn new(gpu: &Gpu, calibration: RgbdCalibration, config: &FusionConfig, features: bool, planes: Option<PlanesFrom>) -> Result<Self, String> {
         let fusion = KinectFusion::new(gpu, calibration, config.clone()).map_err(|e| format!("cannot build the pipeline: {e}"))?;
         let assist = if features {
             match FeatureAssist::new(gpu, fusion.preprocessor(), OdometryConfig::default()) {
@@ -163,14 +203,27 @@ impl Pipeline {
             model_canvas: GpuCanvas::new(gpu, "view-model", size)?,
         };
         let free = FreeView::new(gpu, fusion.volume())?;
-        let planes = if planes {
-            let segmenter = GpuPlaneSegmenter::new(gpu, pre, &PlaneConfig::default()).map_err(|e| format!("cannot build plane segmentation: {e}"))?;
-            let view = LabelView::new(gpu, "web.view.planes", &segmenter.labels, &pre.color, size);
-            let world = PlaneWorldModel::new(PlaneConfig::default());
-            Some(PlaneViews { segmenter, view, canvas: GpuCanvas::new(gpu, "view-planes", size)?, world })
-        } else {
-            ui::set_text("planes-caption", "off");
-            None
+        let planes = match planes {
+            Some(from) => {
+                let model = match from {
+                    PlanesFrom::Frames => None,
+                    PlanesFrom::FusedMap => {
+                        let options = SensorOptions { units_per_metre: calibration.depth_units_per_metre, ..SensorOptions::default() };
+                        let sensor = VirtualSensor::new(gpu, fusion.volume(), k, options).map_err(|e| format!("cannot build the fused map's sensor: {e}"))?;
+                        let pre = DepthPreprocessor::new(gpu, calibration, *pre.config()).map_err(|e| format!("cannot build the fused map's preprocessing: {e}"))?;
+                        Some(ModelDepth { sensor, pre })
+                    }
+                };
+                let segmented = model.as_ref().map_or(pre, |m| &m.pre);
+                let segmenter = GpuPlaneSegmenter::new(gpu, segmented, &PlaneConfig::default()).map_err(|e| format!("cannot build plane segmentation: {e}"))?;
+                let view = LabelView::new(gpu, "web.view.planes", &segmenter.labels, &segmented.color, size);
+                let world = PlaneWorldModel::new(PlaneConfig::default());
+                Some(PlaneViews { segmenter, model, view, canvas: GpuCanvas::new(gpu, "view-planes", size)?, world })
+            }
+            None => {
+                ui::set_text("planes-caption", "off");
+                None
+            }
         };
         Ok(Self { fusion, assist, planes, views, free })
     }
@@ -181,8 +234,8 @@ pub(crate) struct FusionMode {
     config: FusionConfig,
     /// Feature odometry beside ICP.
     features: bool,
-    /// Plane segmentation of every frame.
-    planes: bool,
+    /// Plane segmentation (off: `None`) and what it segments.
+    planes: Option<PlanesFrom>,
     pipeline: Option<Pipeline>,
     in_flight: VecDeque<InFlight>,
     /// Index of the last frame submitted.
@@ -234,6 +287,8 @@ pub(crate) struct FusionMode {
     reported: bool,
     /// Frames segmented and when, until their plane table comes back.
     planes_sent: VecDeque<(u64, Instant)>,
+    /// With planes of the fused map: the last tracked frame, not segmented yet.
+    model_due: Option<ModelDue>,
     /// The virtual sensor (seed 000), in the fused map or the opened one.
     sensor: SensorPanel,
     /// A real frame arrived while the sensor follows frames: render at it at the next poll.
@@ -281,6 +336,8 @@ pub(crate) struct FusionStatus {
 #[derive(Clone, Debug, serde::Serialize)]
 pub(crate) struct PlaneStatus {
     pub(crate) frame: u64,
+    /// The frame's own depth, or the fused map's at its pose.
+    pub(crate) source: PlanesFrom,
     pub(crate) count: usize,
     pub(crate) curved_rejected: u32,
     pub(crate) overflow: u32,
@@ -331,7 +388,7 @@ pub(crate) struct PairStatus {
 }
 
 impl FusionMode {
-    pub(crate) fn new(config: FusionConfig, features: bool, planes: bool) -> Self {
+    pub(crate) fn new(config: FusionConfig, features: bool, planes: Option<PlanesFrom>) -> Self {
         Self {
             config,
             features,
@@ -368,6 +425,7 @@ impl FusionMode {
             plane_ms: Window::default(),
             reported: false,
             planes_sent: VecDeque::new(),
+            model_due: None,
             sensor: SensorPanel::default(),
             sensor_due: false,
             opened: None,
@@ -375,12 +433,13 @@ impl FusionMode {
     }
 
     /// Replaces the settings: the pipeline is rebuilt at the next frame.
-    pub(crate) fn set_config(&mut self, config: FusionConfig, features: bool, planes: bool) {
+    pub(crate) fn set_config(&mut self, config: FusionConfig, features: bool, planes: Option<PlanesFrom>) {
         self.config = config;
         self.features = features;
         self.planes = planes;
         self.drop_fused_map();
         self.planes_sent.clear();
+        self.model_due = None;
     }
 
     /// Drops the pipeline (and the fused map the sensor may be bound to).
@@ -398,6 +457,7 @@ impl FusionMode {
         self.drop_fused_map();
         self.in_flight.clear();
         self.planes_sent.clear();
+        self.model_due = None;
         if keep_trajectory {
             self.run_origin = self.trajectory.last().map_or(Se3::IDENTITY, |p| p.world_from_camera);
         } else {
@@ -418,6 +478,7 @@ impl FusionMode {
         }
         self.in_flight.clear();
         self.planes_sent.clear();
+        self.model_due = None;
         self.reset_run_state();
         if let Some((o, _)) = &self.opened {
             self.orbit = Some(first_look(o));
@@ -454,7 +515,7 @@ impl FusionMode {
 
     /// Whether anything submitted is still to come back (frame reports, plane tables).
     pub(crate) fn awaiting_gpu(&self) -> bool {
-        !self.in_flight.is_empty() || !self.planes_sent.is_empty() || self.sensor.awaiting_gpu() || self.sensor_due
+        !self.in_flight.is_empty() || !self.planes_sent.is_empty() || self.model_due.is_some() || self.sensor.awaiting_gpu() || self.sensor_due
     }
 
     /// The trajectory so far, TUM text (kept current as reports arrive).
@@ -537,13 +598,17 @@ impl FusionMode {
         // Kept for the virtual sensor's comparison.
         let depth_units = Rc::new(frame.depth.units.clone());
         // The plane kernels compile once the first frame is fused (they would hold it up).
-        if draw_views
-            && gpu.kernels.deferred_compiled()
+        let segment = draw_views && gpu.kernels.deferred_compiled();
+        // The fused map's planes at this frame's pose wait for its report.
+        let colour = (segment && self.planes == Some(PlanesFrom::FusedMap)).then(|| Rc::new(frame.color.clone()));
+        if segment
             && let Some(planes) = &mut p.planes
+            && planes.model.is_none()
         {
             // About once a second the labels come back too, for the world model.
             let with_labels = planes.world.wants_frame();
-            if segment_planes(gpu, planes, frame.index, with_labels).map_err(|e| format!("frame {}: planes: {e}", frame.index))? {
+            let encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.planes") });
+            if segment_planes(gpu, planes, encoder, frame.index, with_labels).map_err(|e| format!("frame {}: planes: {e}", frame.index))? {
                 self.planes_sent.push_back((frame.index, Instant::now()));
                 if with_labels {
                     planes.world.asked(frame.index, &frame.color, calibration);
@@ -559,6 +624,7 @@ impl FusionMode {
             views_ms,
             depth_units,
             calibration,
+            colour,
         });
         self.last_submitted = Some(frame.index);
         if let Some(report) = assisted {
@@ -568,7 +634,43 @@ impl FusionMode {
             }
             self.apply(report);
         }
-        self.collect_planes(gpu)
+        self.collect_planes(gpu)?;
+        self.segment_model_due(gpu)
+    }
+
+    /// With planes of the fused map: segments the map's depth at the last tracked frame's pose
+    /// (if one is due), textured by that frame's colour; its table comes back like a frame's.
+    fn segment_model_due(&mut self, gpu: &Gpu) -> Result<(), String> {
+        let Some(Pipeline { fusion, planes: Some(planes), .. }) = self.pipeline.as_mut() else {
+            self.model_due = None;
+            return Ok(());
+        };
+        let Some(model) = planes.model.as_mut() else {
+            self.model_due = None;
+            return Ok(());
+        };
+        // Both table slots in flight: it stays due until one comes back (the last frame of a
+        // log must not go unread).
+        if !planes.segmenter.table_slot_free() {
+            return Ok(());
+        }
+        let Some(due) = self.model_due.take() else { return Ok(()) };
+        let with_labels = planes.world.wants_frame();
+        let failed = |e: webfusion_core::Error| format!("frame {}: the fused map's planes: {e}", due.index);
+        model.pre.upload_color(gpu, &due.colour).map_err(failed)?;
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.planes.model") });
+        // The noise stream's frame index is unused: the sensor is exact.
+        model.sensor.encode_into(gpu, &mut encoder, fusion.volume(), &due.map_from_camera, due.index as u32, &model.pre).map_err(failed)?;
+        model.pre.encode(gpu, &mut encoder);
+        if segment_planes(gpu, planes, encoder, due.index, with_labels).map_err(|e| format!("frame {}: planes: {e}", due.index))? {
+            self.planes_sent.push_back((due.index, Instant::now()));
+            if with_labels {
+                planes.world.asked(due.index, &due.colour, due.calibration);
+                // Its report came before it was asked for.
+                planes.world.pose_reported(due.index, Some(due.map_from_camera));
+            }
+        }
+        Ok(())
     }
 
     /// Shows the odometry view's next stage; past the last one it starts again from the first
@@ -589,6 +691,7 @@ impl FusionMode {
                 self.apply(report);
             }
             self.collect_planes(gpu)?;
+            self.segment_model_due(gpu)?;
         }
         if std::mem::take(&mut self.sensor_due) {
             self.render_sensor(gpu, SensorPose::LastFrame)?;
@@ -678,6 +781,7 @@ impl FusionMode {
     fn collect_planes(&mut self, gpu: &Gpu) -> Result<(), String> {
         let Some(planes) = self.pipeline.as_mut().and_then(|p| p.planes.as_mut()) else { return Ok(()) };
         let version = planes.world.version();
+        let (source, seen) = if planes.model.is_some() { (PlanesFrom::FusedMap, "in the fused map at frame") } else { (PlanesFrom::Frames, "in frame") };
         for (frame, seg, stats) in planes.segmenter.collect_tables(gpu).map_err(|e| format!("planes: {e}"))? {
             while self.planes_sent.front().is_some_and(|(f, _)| *f != frame) {
                 self.planes_sent.pop_front();
@@ -686,9 +790,10 @@ impl FusionMode {
                 self.plane_ms.push(sent.elapsed().as_secs_f64() * 1e3);
             }
             let world = planes.world.status();
-            ui::set_text("planes-caption", &format!("{} in frame {frame} · world: {} planes from {} frames", seg.planes.len(), world.planes, world.frames));
+            ui::set_text("planes-caption", &format!("{} {seen} {frame} · world: {} planes from {} frames", seg.planes.len(), world.planes, world.frames));
             self.plane_status = Some(PlaneStatus {
                 frame,
+                source,
                 count: seg.planes.len(),
                 curved_rejected: seg.curved_rejected,
                 overflow: stats.overflow,
@@ -730,6 +835,9 @@ impl FusionMode {
         }
         if !report.state.is_lost() {
             self.sensor_due |= self.sensor.observe(real_frame(meta.index, Rc::clone(&meta.depth_units), meta.calibration, report.world_from_camera));
+            if let Some(colour) = meta.colour {
+                self.model_due = Some(ModelDue { index: report.index, map_from_camera: report.world_from_camera, colour, calibration: meta.calibration });
+            }
         }
         match report.state {
             TrackingState::Lost(_) => self.lost_frames += 1,
@@ -927,12 +1035,12 @@ impl FusionMode {
     }
 }
 
-/// Segments the frame the pipeline just submitted (its preprocessed maps) into planes, colours
-/// its labels into the plane view and copies the plane table for reading, in one submission;
+/// Segments the frame the pipeline just submitted (its preprocessed maps), or the fused map's
+/// depth `encoder` rendered and preprocessed, into planes, colours its labels into the plane
+/// view and copies the plane table for reading, in one submission;
 /// the table comes back a frame or so later ([`FusionMode::collect_planes`]): nothing waits.
 /// False when both table slots were still in flight (this frame's table is not read).
-fn segment_planes(gpu: &Gpu, planes: &mut PlaneViews, index: u64, with_labels: bool) -> Result<bool, String> {
-    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.planes") });
+fn segment_planes(gpu: &Gpu, planes: &mut PlaneViews, mut encoder: wgpu::CommandEncoder, index: u64, with_labels: bool) -> Result<bool, String> {
     planes.segmenter.encode(gpu, &mut encoder);
     {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("web.planes.view"), timestamp_writes: None });
