@@ -408,6 +408,17 @@ pub fn label(level: &CpuPyramidLevel, planes: &[PlaneFit], config: &PlaneConfig,
     (labels, sums)
 }
 
+/// Whether `new`, the refit of `old` from its labelled pixels, moved the plane by at most σ(z)
+/// at its centroid over its points: `old`'s distance at `new`'s centroid plus the tilt between
+/// them times the points' RMS radius from the centroid (the GPU's `plane_list` tests the same).
+fn refit_settled(old: &PlaneFit, new: &PlaneFit) -> bool {
+    let shift = (dot(old.normal, new.centroid) + old.offset_m).abs();
+    let (a, b) = (old.normal, new.normal);
+    let cross = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let radius = (new.tangent_variance_m2[0] + new.tangent_variance_m2[1]).sqrt();
+    shift + dot(cross, cross).sqrt() * radius <= f64::from(kinect_sigma_m(new.centroid[2] as f32))
+}
+
 /// Segments one preprocessed frame (its pyramid, level 0 at full resolution; `raw_depth_m` the
 /// full-resolution depth before filtering, for the final fits, see [`label`]).
 ///
@@ -457,9 +468,9 @@ pub fn segment(levels: &[CpuPyramidLevel], raw_depth_m: Option<&[f32]>, config: 
                 None => false,
             })
             .collect();
-        if keep.iter().all(|&k| k) {
-            // Nothing dropped: labelling again with the refits would only iterate on the same
-            // planes.
+        if keep.iter().all(|&k| k) && planes.iter().zip(&refit).all(|(old, new)| new.as_ref().is_some_and(|new| refit_settled(old, new))) {
+            // Nothing dropped, nothing moved beyond the noise: labelling again with the refits
+            // would only iterate on the same planes.
             planes = refit.into_iter().flatten().collect();
             labels = l1;
             continue;

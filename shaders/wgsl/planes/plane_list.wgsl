@@ -22,7 +22,10 @@
 //! (`keys_groups_x`, `keys_groups_y`, 1) and plane_relabel (`relabel_groups`, 1, 1). A round
 //! whose merge took no newcomer is over (state[3] = 0, as the reference stops there): merge and
 //! keep then leave the list as it is (the labels index it), and those sizes are all zero; so
-//! are they after a keep that dropped no plane.
+//! are they after a keep that dropped no plane and whose refits all settled (each plane moved
+//! by its refit, over its points, by at most σ(z) at its centroid: the old plane's distance at
+//! the refit's centroid plus the tilt times the points' RMS radius; labelling again would then
+//! give the same labels).
 //! Mirrors core/src/cpu/planes/plane_list.rs.
 #import kinect
 #import planes
@@ -194,6 +197,19 @@ fn merge_mode(n: u32) -> u32 {
     return out;
 }
 
+// Whether every plane the keep kept settled (see the header); keep_mode sets it.
+var<private> settled: bool = true;
+
+// Whether the refit `fit` (PLANE_FIT_VEC4S from `at`) moved the plane (normal, offset) `old`
+// by at most σ(z) over its points.
+fn refit_settled(old: vec4<f32>, at: u32) -> bool {
+    let normal = fits[at].xyz;
+    let centroid = fits[at + 1u].xyz;
+    let radius = sqrt(fits[at + 2u].w + fits[at + 3u].w);
+    let moved = abs(dot(old.xyz, centroid) + old.w) + length(cross(old.xyz, normal)) * radius;
+    return moved <= kinect_sigma_m(centroid.z);
+}
+
 fn keep_mode(n: u32) -> u32 {
     if state[3] == 0u {
         // A round with no newcomer fitted nothing: the list stays.
@@ -212,6 +228,8 @@ fn keep_mode(n: u32) -> u32 {
             continue;
         }
         if centroid.w >= params.min_count && f.y <= params.max_bend_deg && normal.w >= length(centroid.xyz) * params.cos_incidence {
+            // Record i is read before any store reaches it (out <= i).
+            settled = settled && refit_settled(list[i * PLANE_RECORD_VEC4S + PLANE_MOMENT_VEC4S], i * PLANE_FIT_VEC4S);
             store_slot(out, i);
             renumber[i] = out;
             out += 1u;
@@ -250,10 +268,10 @@ fn main() {
         planes[i] = list[i * PLANE_RECORD_VEC4S + PLANE_MOMENT_VEC4S];
     }
     // The round's full-resolution work: none once the round is over, nor after a keep that
-    // dropped no plane (labelling again with the refits would only iterate on the same
-    // planes; the next keep then finds the same fits and the same list).
+    // dropped no plane and whose refits settled (labelling again with the refits would only
+    // iterate on the same planes; the next keep then finds the same fits and the same list).
     var on = state[3];
-    if params.mode == MODE_KEEP && out == n {
+    if params.mode == MODE_KEEP && out == n && settled {
         on = 0u;
     }
     let sizes = array<vec3<u32>, 6>(

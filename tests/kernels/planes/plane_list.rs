@@ -5,7 +5,8 @@
 //! newcomers (a bent one counted as curved, a small one ignored), then a merge with no newcomer
 //! (the round ends: no full-resolution dispatch, and keep leaves the list). Keep: crafted refits
 //! (kept, too small, bent, edge-on, unfittable) with the renumbering, and a keep that drops
-//! nothing (no full-resolution work follows). Sort: most pixels first, stable.
+//! nothing (no full-resolution work follows, unless a refit moved its plane by more than σ(z)).
+//! Sort: most pixels first, stable.
 //! Tolerances: counts, state, renumbering and dispatch sizes exact; records and planes 1e-4
 //! relative + 1e-6 (merged fits run the same f32 code). Negative controls on each output.
 
@@ -235,6 +236,17 @@ fn keeping_and_sorting() {
     assert_with_controls("keep, nothing dropped", &g, &c, 2);
     assert_eq!((c.state.clone(), &c.renumber[..2]), (vec![2, 0, 0, 1], &[0, 1][..]));
     assert!((0..6).all(|i| c.dispatch[3 * i] == 0), "no full-resolution work: {:?}", c.dispatch);
+    // A keep that drops nothing but whose refit moved a plane by more than σ(z) (1 cm at 1 m,
+    // σ = 1.9 mm) labels again; a move within it (1 mm) does not.
+    let moved_list = |z_m: f32| {
+        let (_, _, list) = list_of(&[patch(20, 0.0, z_m, 0.0), patch(15, -0.5, 2.0, 0.0)]);
+        let (g, c) = run(&params(MODE_KEEP, 100.0), &fits2, &moments2, &list, &[2, 0, 0, 1]);
+        compare("keep, a plane moved", &g, &c, 2).unwrap();
+        assert_eq!(g.dispatch, c.dispatch, "the GPU decides as the twin does");
+        c.dispatch
+    };
+    assert_eq!(moved_list(1.01), sizes(2), "a refit 1 cm off its plane: the round labels again");
+    assert!(moved_list(1.001)[..].chunks(3).all(|d| d[0] == 0), "a refit 1 mm off settles");
     let mut edge_on = params(MODE_KEEP, 100.0);
     edge_on.cos_incidence = 0.9999;
     let (g, c) = run(&edge_on, &fits, &moments, &list, &[5, 0, 0, 1]);

@@ -137,7 +137,21 @@ fn merge_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]],
     out
 }
 
-fn keep_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]], list: &mut [[f32; 4]], state: &mut [u32], renumber: &mut [u32], n: usize) -> usize {
+/// Whether the refit at `fits[at..]` moved the plane (normal, offset) `old` by at most σ(z) at
+/// its centroid over its points: the old plane's distance at the refit's centroid plus the tilt
+/// times the points' RMS radius from it.
+fn refit_settled(old: [f32; 4], fits: &[[f32; 4]], at: usize) -> bool {
+    let (normal, centroid) = (fits[at], fits[at + 1]);
+    let radius = (fits[at + 2][3] + fits[at + 3][3]).sqrt();
+    let shift = (old[0] * centroid[0] + old[1] * centroid[1] + old[2] * centroid[2] + old[3]).abs();
+    let cross = [old[1] * normal[2] - old[2] * normal[1], old[2] * normal[0] - old[0] * normal[2], old[0] * normal[1] - old[1] * normal[0]];
+    let tilt = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
+    shift + tilt * radius <= kinect_sigma_m(centroid[2])
+}
+
+/// Keeps the refits that pass; also whether every kept refit settled ([`refit_settled`]).
+#[expect(clippy::too_many_arguments, reason = "the kernel's bindings it reads and writes")]
+fn keep_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]], list: &mut [[f32; 4]], state: &mut [u32], renumber: &mut [u32], n: usize, settled: &mut bool) -> usize {
     if state[3] == 0 {
         for (i, r) in renumber[..n].iter_mut().enumerate() {
             *r = i as u32;
@@ -153,6 +167,8 @@ fn keep_mode(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]], 
         }
         let length = (centroid[0] * centroid[0] + centroid[1] * centroid[1] + centroid[2] * centroid[2]).sqrt();
         if centroid[3] >= params.min_count && f[1] <= params.max_bend_deg && normal[3] >= length * params.cos_incidence {
+            // Record i is read before any store reaches it (out <= i).
+            *settled = *settled && refit_settled(list[i * R + F], fits, i * PLANE_FIT_VEC4S);
             store_slot(list, fits, moments, out, i);
             renumber[i] = out as u32;
             out += 1;
@@ -179,16 +195,17 @@ fn sort_mode(list: &mut [[f32; 4]], renumber: &mut [u32], n: usize) -> usize {
 #[expect(clippy::too_many_arguments, reason = "one argument per WGSL binding, in binding order")]
 pub fn plane_list(params: &PlaneListParams, fits: &[[f32; 4]], moments: &[[f32; 4]], list: &mut [[f32; 4]], planes: &mut [[f32; 4]], state: &mut [u32], renumber: &mut [u32], dispatch: &mut [u32]) {
     let n = state[0] as usize;
+    let mut settled = true;
     let out = match params.mode {
         MODE_MERGE => merge_mode(params, fits, moments, list, state, n),
-        MODE_KEEP => keep_mode(params, fits, moments, list, state, renumber, n),
+        MODE_KEEP => keep_mode(params, fits, moments, list, state, renumber, n, &mut settled),
         _ => sort_mode(list, renumber, n),
     };
     state[0] = out as u32;
     for i in 0..out {
         planes[i] = list[i * R + F];
     }
-    let on = u32::from(state[3] != 0 && !(params.mode == MODE_KEEP && out == n));
+    let on = u32::from(state[3] != 0 && !(params.mode == MODE_KEEP && out == n && settled));
     let out = out as u32;
     let sizes = [[params.chunks, out, 1], [out, 1, 1], [out.div_ceil(64), 1, 1], [params.label_groups, 1, 1], [params.keys_groups_x, params.keys_groups_y, 1], [params.relabel_groups, 1, 1]];
     for (i, [x, y, z]) in sizes.into_iter().enumerate() {
