@@ -16,7 +16,10 @@
 //      then the native run's saved map, offered by `serve --map`, opened in a fresh page without
 //      fusing, shown in the free view, and rendered at a pose of the native trajectory as
 //      `webfusion simulate` renders it there; finally a map fused at the ground-truth poses,
-//      opened, and the streamed frames compared with it at their ground truth.
+//      opened, and the streamed frames compared with it at their ground truth;
+//   8. plane segmentation (seed 003): the plane view, the world model of planes and its scene
+//      .glb, its textured planes in the free view; then a fresh page segmenting the fused map
+//      at each tracked pose (?planes_model=1), whose planes must be the frame's own.
 // Prints one line per check and a closing "e2e: N passed, M failed"; exits non-zero on failure.
 //
 // usage: node tests/browser/e2e.mjs [--webfusion target/release/webfusion] [--dist dist]
