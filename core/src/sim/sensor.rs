@@ -233,12 +233,15 @@ impl VirtualSensor {
     /// same two-u16-a-word layout): the fused map's depth in place of a frame's, preprocessed
     /// and segmented with no readback (`webfusion planes --from-model`, the page's planes of
     /// the fused map). `pre`'s colour is the caller's to upload. Errors when the preprocessor's
-    /// image size or depth scale is not the sensor's.
+    /// image size, intrinsics or depth scale are not the sensor's.
     pub fn encode_into(&mut self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, store: &dyn TsdfStore, world_from_camera: &Se3, frame_index: u32, pre: &DepthPreprocessor) -> Result<()> {
         let (k, calibration) = (self.target.intrinsics, pre.calibration());
         let want = calibration.intrinsics;
         if (want.width_px, want.height_px) != (k.width_px, k.height_px) {
             return Err(Error::FrameSize { what: "rendered model depth", got_width: k.width_px, got_height: k.height_px, want_width: want.width_px, want_height: want.height_px });
+        }
+        if want != k {
+            return Err(Error::InvalidConfig(format!("the sensor renders with {k:?}, the preprocessor back-projects with {want:?}")));
         }
         if calibration.depth_units_per_metre != self.options.units_per_metre {
             return Err(Error::InvalidConfig(format!(

@@ -3,7 +3,8 @@
 //! raw depth on the GPU (`webfusion planes --from-model`, the page's planes of the fused map)
 //! is, word for word, the depth a render read back gives; the preprocessor's old depth (a
 //! sentinel) is gone everywhere; another pose gives other words (the comparison can fail); a
-//! preprocessor of another image size or depth scale is refused with a typed error.
+//! preprocessor of another image size, focal length or depth scale is refused with a typed
+//! error.
 
 use glam::DVec3;
 use webfusion_core::preprocess::{DepthPreprocessor, PreprocessConfig};
@@ -62,7 +63,7 @@ fn the_model_depth_lands_in_the_preprocessor_as_a_render_reads_it() {
 }
 
 #[test]
-fn a_preprocessor_of_another_size_or_scale_is_refused() {
+fn a_preprocessor_of_another_size_focal_length_or_scale_is_refused() {
     let gpu = gpu();
     let store = sphere_store(&gpu);
     let mut sensor = VirtualSensor::new(&gpu, &store, K, SensorOptions { units_per_metre: UNITS_PER_METRE, ..SensorOptions::default() }).expect("sensor");
@@ -71,6 +72,10 @@ fn a_preprocessor_of_another_size_or_scale_is_refused() {
     let small = DepthPreprocessor::new(&gpu, RgbdCalibration { intrinsics: half, depth_units_per_metre: UNITS_PER_METRE }, PreprocessConfig::default()).expect("preprocessor");
     let err = sensor.encode_into(&gpu, &mut encoder, &store, &Se3::IDENTITY, 0, &small).expect_err("another size");
     assert!(matches!(err, Error::FrameSize { got_width: 160, want_width: 80, .. }), "{err}");
+    let other_focal = webfusion_core::PinholeIntrinsics { fx_px: K.fx_px * 1.1, ..K };
+    let wider = DepthPreprocessor::new(&gpu, RgbdCalibration { intrinsics: other_focal, depth_units_per_metre: UNITS_PER_METRE }, PreprocessConfig::default()).expect("preprocessor");
+    let err = sensor.encode_into(&gpu, &mut encoder, &store, &Se3::IDENTITY, 0, &wider).expect_err("another focal length");
+    assert!(matches!(&err, Error::InvalidConfig(m) if m.contains("back-projects")), "{err}");
     let millimetres = DepthPreprocessor::new(&gpu, RgbdCalibration { intrinsics: K, depth_units_per_metre: 1000.0 }, PreprocessConfig::default()).expect("preprocessor");
     let err = sensor.encode_into(&gpu, &mut encoder, &store, &Se3::IDENTITY, 0, &millimetres).expect_err("another scale");
     assert!(matches!(&err, Error::InvalidConfig(m) if m.contains("5000") && m.contains("1000")), "{err}");
