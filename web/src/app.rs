@@ -902,10 +902,7 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
         None => "feature odometry off".to_owned(),
     });
     lines.push(match &f.planes {
-        Some(p) => {
-            let seen = if p.source == PlanesFrom::FusedMap { "in the fused map at frame" } else { "in frame" };
-            format!("planes: {} {seen} {} ({} curved surfaces rejected) · {:.0} ms/frame", p.count, p.frame, p.curved_rejected, p.median_ms)
-        }
+        Some(p) => format!("planes: {} {} {} ({} curved surfaces rejected) · {:.0} ms/frame", p.count, p.source.seen_in(), p.frame, p.curved_rejected, p.median_ms),
         None => "plane segmentation off".to_owned(),
     });
     if let Some(line) = s.sensor.line() {

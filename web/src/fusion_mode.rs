@@ -89,6 +89,16 @@ pub(crate) enum PlanesFrom {
     FusedMap,
 }
 
+impl PlanesFrom {
+    /// Where a segmentation's planes were seen, before its frame index in the captions.
+    pub(crate) fn seen_in(self) -> &'static str {
+        match self {
+            Self::Frames => "in frame",
+            Self::FusedMap => "in the fused map at frame",
+        }
+    }
+}
+
 /// The fused map's depth at a tracked pose in place of a frame's: a virtual sensor (exact)
 /// whose render goes straight into a preprocessor of its own, which the segmenter reads.
 struct ModelDepth {
@@ -160,6 +170,13 @@ struct PlaneViews {
     view: LabelView,
     canvas: GpuCanvas,
     world: PlaneWorldModel,
+}
+
+impl PlaneViews {
+    /// What the segmenter reads: the frames, or the fused map at their poses.
+    fn source(&self) -> PlanesFrom {
+        if self.model.is_some() { PlanesFrom::FusedMap } else { PlanesFrom::Frames }
+    }
 }
 
 /// The pipeline and everything built on its device.
@@ -600,10 +617,11 @@ impl FusionMode {
         // The plane kernels compile once the first frame is fused (they would hold it up).
         let segment = draw_views && gpu.kernels.deferred_compiled();
         // The fused map's planes at this frame's pose wait for its report.
-        let colour = (segment && self.planes == Some(PlanesFrom::FusedMap)).then(|| Rc::new(frame.color.clone()));
+        let source = p.planes.as_ref().map(PlaneViews::source);
+        let colour = (segment && source == Some(PlanesFrom::FusedMap)).then(|| Rc::new(frame.color.clone()));
         if segment
+            && source == Some(PlanesFrom::Frames)
             && let Some(planes) = &mut p.planes
-            && planes.model.is_none()
         {
             // About once a second the labels come back too, for the world model.
             let with_labels = planes.world.wants_frame();
@@ -781,7 +799,7 @@ impl FusionMode {
     fn collect_planes(&mut self, gpu: &Gpu) -> Result<(), String> {
         let Some(planes) = self.pipeline.as_mut().and_then(|p| p.planes.as_mut()) else { return Ok(()) };
         let version = planes.world.version();
-        let (source, seen) = if planes.model.is_some() { (PlanesFrom::FusedMap, "in the fused map at frame") } else { (PlanesFrom::Frames, "in frame") };
+        let source = planes.source();
         for (frame, seg, stats) in planes.segmenter.collect_tables(gpu).map_err(|e| format!("planes: {e}"))? {
             while self.planes_sent.front().is_some_and(|(f, _)| *f != frame) {
                 self.planes_sent.pop_front();
@@ -790,7 +808,7 @@ impl FusionMode {
                 self.plane_ms.push(sent.elapsed().as_secs_f64() * 1e3);
             }
             let world = planes.world.status();
-            ui::set_text("planes-caption", &format!("{} {seen} {frame} · world: {} planes from {} frames", seg.planes.len(), world.planes, world.frames));
+            ui::set_text("planes-caption", &format!("{} {} {frame} · world: {} planes from {} frames", seg.planes.len(), source.seen_in(), world.planes, world.frames));
             self.plane_status = Some(PlaneStatus {
                 frame,
                 source,
