@@ -410,38 +410,52 @@ pub fn geometry_shift_for(px_per_m: f32, cell_m: f32) -> u32 {
 /// twice the centre's depth); `None` if no labelled pixel's ray meets it in front of the
 /// camera.
 pub fn pixel_box(frame: &PlaneFrame, labels: &[u32], label: u32, k: &PinholeIntrinsics, world_from_camera: &crate::Se3) -> Option<[[f32; 2]; 2]> {
-    // The plane in the camera frame: n_c·p + d_c = 0.
-    let r = world_from_camera.rotation.inverse();
-    let n_w = glam::DVec3::new(f64::from(frame.normal[0]), f64::from(frame.normal[1]), f64::from(frame.normal[2]));
-    let n_c = r * n_w;
+    use glam::DVec3;
+    let f64v = |a: [f32; 3]| DVec3::new(f64::from(a[0]), f64::from(a[1]), f64::from(a[2]));
+    // Everything below is linear in the pixel's homogeneous coordinates X = (x, y, 1) (f64):
+    // the ray r(X) = ((x - cx)/fx, (y - cy)/fy, 1) in the camera frame; with the plane
+    // n_c·p + d_c = 0 in that frame, the ray meets it at depth t = -d_c / (n_c·r); there the
+    // in-plane coordinate along axis a (world axis a_w, origin o_w) is
+    //   s_a = a_w·(R r t + T - o_w) = t (a_c·r) + a_w·(T - o_w),  a_c = Rᵀ a_w,
+    // so each point costs three dot products of X and one division (a homography).
+    let r_inv = world_from_camera.rotation.inverse();
+    let n_w = f64v(frame.normal);
+    let n_c = r_inv * n_w;
     let d_c = f64::from(frame.offset_m()) + n_w.dot(world_from_camera.translation_m);
+    let origin_to_camera = world_from_camera.translation_m - f64v(frame.origin_m);
+    let axes = [f64v(frame.u_axis), f64v(frame.v_axis)];
+    let (a_c, shift) = (axes.map(|a| r_inv * a), axes.map(|a| a.dot(origin_to_camera)));
+    // A camera-frame direction d as coefficients of X: d·r(X) = (dx/fx) x + (dy/fy) y + const.
+    let (fx, fy, cx, cy) = (f64::from(k.fx_px), f64::from(k.fy_px), f64::from(k.cx_px), f64::from(k.cy_px));
+    let linear = |d: DVec3| DVec3::new(d.x / fx, d.y / fy, d.z - d.x * cx / fx - d.y * cy / fy);
+    let (den, num) = (linear(n_c), a_c.map(linear));
     let (mut min, mut max) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
     let w = k.width_px as usize;
-    for (ix, &l) in labels.iter().enumerate() {
-        if l != label || l == NO_LABEL {
+    for (row, line) in labels.chunks_exact(w).enumerate() {
+        if label == NO_LABEL || !line.contains(&label) {
             continue;
         }
-        let (x, y) = ((ix % w) as f64, (ix / w) as f64);
-        let depth_at = |dx: f64, dy: f64| {
-            let ray = glam::DVec3::new((x + dx - f64::from(k.cx_px)) / f64::from(k.fx_px), (y + dy - f64::from(k.cy_px)) / f64::from(k.fy_px), 1.0);
-            (ray, -d_c / n_c.dot(ray))
-        };
-        let (_, t_centre) = depth_at(0.0, 0.0);
-        if !(t_centre.is_finite() && t_centre > 0.0) {
-            continue;
-        }
-        for (dx, dy) in [(0.0, 0.0), (-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
-            let (ray, t) = depth_at(dx, dy);
-            // A pixel seen at a grazing angle reaches far along the plane: its corners are
-            // kept only within twice its centre's depth (or half).
-            if !(t >= 0.5 * t_centre && t <= 2.0 * t_centre) {
+        let y = row as f64;
+        for (col, _) in line.iter().enumerate().filter(|&(_, &l)| l == label) {
+            let x = col as f64;
+            let t_at = |p: DVec3| -d_c / den.dot(p);
+            let t_centre = t_at(DVec3::new(x, y, 1.0));
+            if !(t_centre.is_finite() && t_centre > 0.0) {
                 continue;
             }
-            let p = world_from_camera.transform_point(ray * t);
-            let s = frame.to_plane([p.x as f32, p.y as f32, p.z as f32]);
-            for a in 0..2 {
-                min[a] = min[a].min(s[a]);
-                max[a] = max[a].max(s[a]);
+            for (dx, dy) in [(0.0, 0.0), (-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
+                let p = DVec3::new(x + dx, y + dy, 1.0);
+                let t = t_at(p);
+                // A pixel seen at a grazing angle reaches far along the plane: its corners
+                // are kept only within twice its centre's depth (or half).
+                if !(t >= 0.5 * t_centre && t <= 2.0 * t_centre) {
+                    continue;
+                }
+                for a in 0..2 {
+                    let s = (t * num[a].dot(p) + shift[a]) as f32;
+                    min[a] = min[a].min(s);
+                    max[a] = max[a].max(s);
+                }
             }
         }
     }
@@ -724,5 +738,67 @@ pub(crate) mod tests {
         assert!((dot(f.normal, p) + f.offset_m()).abs() < 1e-6);
         let s = f.to_plane(p);
         assert!((s[0] - 0.4).abs() < 1e-6 && (s[1] + 0.7).abs() < 1e-6);
+    }
+
+    /// The box from the homography equals the box from intersecting each ray with the plane in
+    /// the world and taking its in-plane coordinates (the definition), for a posed camera and a
+    /// tilted plane whose horizon crosses the image (rays above it miss, rays just below it graze);
+    /// a label no pixel carries, and a plane behind the camera, have no box.
+    #[test]
+    fn pixel_box_is_the_box_of_the_rays_meeting_the_plane() {
+        let k = PinholeIntrinsics { fx_px: 60.0, fy_px: 55.0, cx_px: 31.5, cy_px: 23.5, width_px: 64, height_px: 48 };
+        let world_from_camera = Se3::new(glam::DQuat::from_euler(glam::EulerRot::XYZ, -0.35, -0.2, 0.1), glam::DVec3::new(0.4, -0.3, 0.2));
+        // A floor-like plane below and ahead of the camera, tilted so the top rows graze it.
+        let frame = PlaneFrame::new([0.1, -0.9, 0.3], 0.8, [0.0, 0.9, 2.0], [1.0, 0.0, 0.0]);
+        let labels: Vec<u32> = (0..64 * 48).map(|i| if (i / 64) % 3 == 0 || i % 7 == 0 { 2 } else { 1 }).collect();
+        let direct = |label: u32| {
+            let n = glam::DVec3::new(f64::from(frame.normal[0]), f64::from(frame.normal[1]), f64::from(frame.normal[2]));
+            let d = f64::from(frame.offset_m());
+            let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for (i, _) in labels.iter().enumerate().filter(|&(_, &l)| l == label) {
+                let (x, y) = ((i % 64) as f64, (i / 64) as f64);
+                // Depth along the camera's z where the ray through (x, y) meets the plane.
+                let hit = |x: f64, y: f64| {
+                    let ray_c = glam::DVec3::new((x - 31.5) / 60.0, (y - 23.5) / 55.0, 1.0);
+                    let ray_w = world_from_camera.rotation * ray_c;
+                    let t = -(n.dot(world_from_camera.translation_m) + d) / n.dot(ray_w);
+                    (t, world_from_camera.translation_m + ray_w * t)
+                };
+                let (t0, _) = hit(x, y);
+                if !(t0 > 0.0 && t0.is_finite()) {
+                    continue;
+                }
+                for (dx, dy) in [(0.0, 0.0), (-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
+                    let (t, p) = hit(x + dx, y + dy);
+                    if t >= 0.5 * t0 && t <= 2.0 * t0 {
+                        let o = glam::DVec3::new(f64::from(frame.origin_m[0]), f64::from(frame.origin_m[1]), f64::from(frame.origin_m[2]));
+                        let r = p - o;
+                        let s = [r.dot(glam::DVec3::from_array(frame.u_axis.map(f64::from))), r.dot(glam::DVec3::from_array(frame.v_axis.map(f64::from)))];
+                        for a in 0..2 {
+                            min[a] = min[a].min(s[a]);
+                            max[a] = max[a].max(s[a]);
+                        }
+                    }
+                }
+            }
+            [min, max]
+        };
+        for label in [1, 2] {
+            let [min, max] = pixel_box(&frame, &labels, label, &k, &world_from_camera).expect("labelled pixels see the plane");
+            let [dmin, dmax] = direct(label);
+            assert!(dmax[0] - dmin[0] > 1.0 && dmax[1] - dmin[1] > 1.0, "a box of metres: {dmin:?} {dmax:?}");
+            for a in 0..2 {
+                // Within f32's rounding of the result (rows near the horizon reach hundreds of
+                // metres along the plane).
+                let close = |got: f32, want: f64| (f64::from(got) - want).abs() <= 1e-6 * (1.0 + want.abs());
+                assert!(close(min[a], dmin[a]) && close(max[a], dmax[a]), "label {label}: {min:?} {max:?} vs {dmin:?} {dmax:?}");
+            }
+        }
+        assert_eq!(pixel_box(&frame, &labels, 3, &k, &world_from_camera), None);
+        // A plane facing the camera's way 1 m behind it: no ray meets it in front.
+        let forward = world_from_camera.rotation * glam::DVec3::Z;
+        let behind_m = world_from_camera.translation_m - forward;
+        let behind = PlaneFrame::new(forward.as_vec3().to_array(), -forward.dot(behind_m) as f32, behind_m.as_vec3().to_array(), [1.0, 0.0, 0.0]);
+        assert_eq!(pixel_box(&behind, &labels, 1, &k, &world_from_camera), None);
     }
 }
