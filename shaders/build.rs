@@ -728,52 +728,45 @@ fn write_core_files(dir: &Path, kernels: &[KernelInfo], structs: &BTreeMap<Strin
         write(format!("{}.rs", k.name), code);
     }
 
-    // Must match `DEFERRED_CAPABILITIES` in core/src/kernels/mod.rs (checked there by a test).
-    let deferred = |k: &KernelInfo| k.capability == "mesh" || k.capability == "map" || k.capability == "planes";
     let mut code = String::new();
-    writeln!(code, "/// Every kernel's pipeline, compiled once per device (in parallel natively; in the browser").unwrap();
-    writeln!(code, "/// the deferred capabilities' on first use or by `compile_deferred`).").unwrap();
+    writeln!(code, "/// Every kernel's pipeline, compiled once per device: natively all at start-up, in parallel;").unwrap();
+    writeln!(code, "/// in the browser each on first use, the rest by `compile_deferred`.").unwrap();
     writeln!(code, "#[derive(Debug)]\npub struct Kernels {{").unwrap();
     for k in kernels {
         writeln!(code, "    /// `{}` ({}): {}", k.name, k.capability, doc_line(&k.summary)).unwrap();
-        writeln!(code, "    pub {}: {},", k.name, if deferred(k) { "DeferredPipeline" } else { "KernelPipeline" }).unwrap();
+        writeln!(code, "    pub {}: DeferredPipeline,", k.name).unwrap();
     }
     writeln!(code, "}}").unwrap();
     writeln!(code, "impl Kernels {{").unwrap();
-    writeln!(code, "    /// Compiles every kernel for `device` (the deferred ones natively too).").unwrap();
+    writeln!(code, "    /// The kernels of `device`: natively compiled at once; in the browser on first use.").unwrap();
     writeln!(code, "    pub fn new(device: &wgpu::Device) -> Self {{").unwrap();
     writeln!(code, "        let specs: Vec<KernelSpec> = vec![").unwrap();
     for k in kernels {
         writeln!(code, "            (&webfusion_shaders::{}, {}::{}::layout_entries),", k.name.to_uppercase(), k.capability, k.name).unwrap();
     }
     writeln!(code, "        ];").unwrap();
-    writeln!(code, "        let deferred = [{}];", kernels.iter().map(|k| deferred(k).to_string()).collect::<Vec<_>>().join(", ")).unwrap();
-    writeln!(code, "        let mut compiled = compile_eager(device, &specs, &deferred).into_iter();").unwrap();
+    writeln!(code, "        let mut compiled = compile_eager(device, &specs).into_iter();").unwrap();
     writeln!(code, "        Self {{").unwrap();
     for (i, k) in kernels.iter().enumerate() {
-        if deferred(k) {
-            writeln!(code, "            {}: DeferredPipeline::new(device, specs[{i}], compiled.next().flatten()),", k.name).unwrap();
-        } else {
-            writeln!(code, "            {}: compiled.next().flatten().expect(\"one pipeline per kernel\"),", k.name).unwrap();
-        }
+        writeln!(code, "            {}: DeferredPipeline::new(device, specs[{i}], compiled.next().flatten()),", k.name).unwrap();
     }
     writeln!(code, "        }}\n    }}").unwrap();
-    writeln!(code, "    /// Compiles the deferred pipelines that are not yet (the browser calls this once the first").unwrap();
-    writeln!(code, "    /// frame is submitted).").unwrap();
-    let deferred_names: Vec<&str> = kernels.iter().filter(|k| deferred(k)).map(|k| k.name.as_str()).collect();
+    writeln!(code, "    /// Compiles the pipelines that are not yet (the browser calls this once the first frame").unwrap();
+    writeln!(code, "    /// is fused).").unwrap();
     writeln!(code, "    pub fn compile_deferred(&self) {{").unwrap();
-    for name in &deferred_names {
-        writeln!(code, "        let _: &KernelPipeline = &self.{name};").unwrap();
+    for k in kernels {
+        writeln!(code, "        let _: &KernelPipeline = &self.{};", k.name).unwrap();
     }
     writeln!(code, "    }}").unwrap();
-    writeln!(code, "    /// The kernels whose pipelines may be deferred (those of `DEFERRED_CAPABILITIES`).").unwrap();
-    writeln!(code, "    pub const DEFERRED: &'static [&'static str] = &[{}];", deferred_names.iter().map(|n| format!("{n:?}")).collect::<Vec<_>>().join(", ")).unwrap();
-    writeln!(code, "    /// Whether every deferred pipeline is compiled.").unwrap();
-    let all_compiled: Vec<String> = deferred_names.iter().map(|n| format!("self.{n}.is_compiled()")).collect();
-    let all_compiled = if all_compiled.is_empty() { "true".to_owned() } else { all_compiled.join(" && ") };
-    writeln!(code, "    pub fn deferred_compiled(&self) -> bool {{\n        {all_compiled}\n    }}").unwrap();
+    writeln!(code, "    /// Whether every pipeline is compiled.").unwrap();
+    let all_compiled: Vec<String> = kernels.iter().map(|k| format!("self.{}.is_compiled()", k.name)).collect();
+    writeln!(code, "    pub fn all_compiled(&self) -> bool {{\n        {}\n    }}", all_compiled.join(" && ")).unwrap();
+    writeln!(code, "    /// How many kernels there are.").unwrap();
+    writeln!(code, "    pub const COUNT: usize = {};", kernels.len()).unwrap();
+    writeln!(code, "    /// How many pipelines are compiled so far.").unwrap();
+    writeln!(code, "    pub fn compiled_count(&self) -> usize {{\n        [{}].iter().filter(|&&c| c).count()\n    }}", all_compiled.join(", ")).unwrap();
     writeln!(code, "    /// Every pipeline, in `webfusion_shaders::ALL` order (compiling deferred ones).").unwrap();
-    writeln!(code, "    pub fn all(&self) -> Vec<&KernelPipeline> {{\n        vec![{}]\n    }}", kernels.iter().map(|k| if deferred(k) { format!("&*self.{}", k.name) } else { format!("&self.{}", k.name) }).collect::<Vec<_>>().join(", ")).unwrap();
+    writeln!(code, "    pub fn all(&self) -> Vec<&KernelPipeline> {{\n        vec![{}]\n    }}", kernels.iter().map(|k| format!("&*self.{}", k.name)).collect::<Vec<_>>().join(", ")).unwrap();
     writeln!(code, "}}").unwrap();
     write("kernels_struct.rs".to_owned(), code);
 }

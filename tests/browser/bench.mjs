@@ -77,6 +77,6 @@ const [nativeFps, browserFps] = [frames / nativeWallS, (done.frames_done - 1) / 
 row('frames/s (whole run)', nativeFps.toFixed(2), browserFps.toFixed(2));
 console.log(`browser / native frames/s: ${(browserFps / nativeFps).toFixed(2)}${repeat > 1 ? ` (this run); median of ${repeat} runs ${median(runs.map((r) => r.ratio)).toFixed(2)}, first frame median ${median(runs.map((r) => r.done.time_to_first_frame_ms ?? NaN)).toFixed(0)} ms after connecting` : ''}`);
 console.log(`\nwasm: ${(wasmBytes.length / 1024).toFixed(0)} KiB, ${(gzipSync(wasmBytes, { level: 9 }).length / 1024).toFixed(0)} KiB gzip (${wasm[0]})`);
-console.log(`time to first fused frame: ${firstMs} ms from page load (${done.time_to_first_frame_ms?.toFixed(0)} ms from connecting); milestones (ms after start) ${JSON.stringify(done.startup_ms)}`);
+console.log(`time to first fused frame: ${firstMs} ms from page load (${done.time_to_first_frame_ms?.toFixed(0)} ms from connecting; pipelines compiled by then, of all: ${JSON.stringify(done.first_frame_kernels)}); milestones (ms after start) ${JSON.stringify(done.startup_ms)}`);
 console.log(`host per frame (last frame's pipeline): ${JSON.stringify(done.host_per_frame)}`);
 console.log(`native wall time includes start-up and reading; browser frames/s counts from the first frame. ATE vs ground truth: native ${stats.ate ? (stats.ate.rmse_m * 100).toFixed(2) + ' cm' : 'n/a'}, browser ${done.ate_rmse_m === null ? 'n/a' : (done.ate_rmse_m * 100).toFixed(2) + ' cm'}`);

@@ -97,7 +97,7 @@ try {
   const tOpen = Date.now();
   await page.goto(url);
   const first = await waitFor(page, 'the first frame', (s) => s.frames_done >= 1, FRAME_TIMEOUT_MS);
-  console.log(`page: ${first.adapter}; first frame after ${((Date.now() - tOpen) / 1000).toFixed(1)} s (from connect: ${first.time_to_first_frame_ms?.toFixed(0)} ms; milestones ${JSON.stringify(first.startup_ms)})`);
+  console.log(`page: ${first.adapter}; first frame after ${((Date.now() - tOpen) / 1000).toFixed(1)} s (from connect: ${first.time_to_first_frame_ms?.toFixed(0)} ms; pipelines compiled by then: ${JSON.stringify(first.first_frame_kernels)}; milestones ${JSON.stringify(first.startup_ms)})`);
   const total = first.frames_total;
 
   // 3. Kill the bridge midway; start it again on the same port.

@@ -46,14 +46,15 @@ fn the_registry_compiles_one_pipeline_per_kernel_with_its_reflected_bindings() {
     webfusion_tests::finish(&gpu);
 }
 
+/// Natively every pipeline is compiled when the device is made (in the browser each on first
+/// use: web/tests/webgpu.rs), and compiling the rest is then a no-op.
 #[test]
-fn only_the_deferred_capabilities_are_deferred_and_natively_nothing_waits() {
-    use webfusion_core::kernels::{DEFERRED_CAPABILITIES, Kernels};
-    let want: Vec<&str> = shaders::ALL.iter().filter(|k| DEFERRED_CAPABILITIES.contains(&k.capability)).map(|k| k.name).collect();
-    assert_eq!(Kernels::DEFERRED, &want[..], "the generator defers exactly DEFERRED_CAPABILITIES' kernels");
-    assert!(!want.is_empty() && !want.contains(&"raycast"), "mesh and sparse-map kernels may wait, the kernels every frame runs never");
+fn natively_every_pipeline_is_compiled_at_start_up() {
+    use webfusion_core::kernels::Kernels;
+    assert_eq!(Kernels::COUNT, shaders::ALL.len());
     let gpu = webfusion_tests::gpu();
-    assert!(gpu.kernels.deferred_compiled(), "natively every pipeline is compiled at start-up");
+    assert!(gpu.kernels.all_compiled(), "natively every pipeline is compiled at start-up");
+    assert_eq!(gpu.kernels.compiled_count(), Kernels::COUNT);
     gpu.kernels.compile_deferred();
     webfusion_tests::finish(&gpu);
 }

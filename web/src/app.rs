@@ -193,11 +193,11 @@ struct App {
     /// Connecting to the first fused frame.
     connected_at: Option<Instant>,
     first_frame_ms: Option<f64>,
+    /// Pipelines compiled when the first frame was fused (those it ran, in the browser).
+    first_frame_kernels: Option<usize>,
     /// When the page's loop started.
     started_at: Instant,
-    /// Set once the warm-up submission completed (the pipelines are compiled).
-    gpu_ready: std::sync::Arc<std::sync::atomic::AtomicBool>,
-    /// Milestones up to the first fused frame (GPU ready, connected, hello, frame received,
+    /// Milestones up to the first fused frame (connected, hello, frame received,
     /// decoded, submitted, fused), milliseconds after the page started: where the time to the
     /// first frame goes.
     startup_ms: Vec<(&'static str, f64)>,
@@ -238,12 +238,6 @@ async fn run() -> Result<(), String> {
     ui::bind_gestures(&inbox, &overlay);
     let mode = FusionMode::new(settings.config.clone(), settings.features, settings.planes);
     install_hooks(&inbox, &mode);
-    // The browser compiles the pipelines after `Gpu::new` returns; an empty submission
-    // completes once they are ready (a milestone of the status).
-    gpu.submit([gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.warm_up") }).finish()]);
-    let gpu_ready = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let ready = std::sync::Arc::clone(&gpu_ready);
-    gpu.queue.on_submitted_work_done(move || ready.store(true, std::sync::atomic::Ordering::Relaxed));
     let mut app = App {
         inbox: Rc::clone(&inbox),
         gpu,
@@ -271,8 +265,8 @@ async fn run() -> Result<(), String> {
         device_rebuilds: 0,
         connected_at: None,
         first_frame_ms: None,
+        first_frame_kernels: None,
         started_at,
-        gpu_ready,
         startup_ms: Vec::new(),
     };
     // Connect at once to the page's own bridge (or the remembered one), unless told not to.
@@ -294,9 +288,6 @@ async fn run() -> Result<(), String> {
             && let Err(message) = app.submit(frame, arrived).await
         {
             app.fail(&message);
-        }
-        if app.gpu_ready.load(std::sync::atomic::Ordering::Relaxed) {
-            app.milestone("gpu ready");
         }
         app.collect_reports();
         if let Err(message) = app.mode.draw_free_view(&app.gpu) {
@@ -702,10 +693,11 @@ impl App {
             self.reset_run();
         }
         self.milestone("decoded");
-        // Until the GPU process has compiled the pipelines, drawing into the views' canvases
-        // blocks this thread (seen: 3 s for the first frame on SwiftShader) and the page
-        // freezes; the frames submitted meanwhile are fused, their views skipped.
-        let draw_views = self.gpu_ready.load(std::sync::atomic::Ordering::Relaxed);
+        // Until the first frame is fused its pipelines are compiling in the GPU process, and
+        // drawing into the views' canvases would block this thread until then (seen: 3 s on
+        // SwiftShader; the page freezes) and compile the view kernels ahead of the frame's:
+        // the frames submitted meanwhile are fused, their views skipped.
+        let draw_views = self.first_frame_ms.is_some();
         let received = Received { ground_truth: message.ground_truth, arrived, decode_ms };
         self.mode.submit(&self.gpu, source.calibration, source.depth_noise, &frame, received, draw_views).await?;
         self.milestone("submitted");
@@ -731,10 +723,12 @@ impl App {
                 {
                     self.milestone("fused");
                     self.first_frame_ms = Some(at.elapsed().as_secs_f64() * 1e3);
+                    self.first_frame_kernels = Some(self.gpu.kernels.compiled_count());
                 }
-                // The pipelines no frame needs (mesh export) are compiled once a frame is
-                // fused: before, their compilation would hold up the first frame's report.
-                if !self.gpu.kernels.deferred_compiled() {
+                // The pipelines the first frame did not run (tracking, matching, planes,
+                // meshing) are compiled once it is fused: before, their compilation would hold
+                // up its report.
+                if !self.gpu.kernels.all_compiled() {
                     self.gpu.kernels.compile_deferred();
                 }
             }
@@ -822,6 +816,7 @@ impl App {
             reconnects: self.reconnects,
             device_rebuilds: self.device_rebuilds,
             time_to_first_frame_ms: self.first_frame_ms,
+            first_frame_kernels: self.first_frame_kernels.map(|n| [n, webfusion_core::kernels::Kernels::COUNT]),
             startup_ms: self.startup_ms.iter().map(|(w, ms)| ((*w).to_owned(), *ms)).collect(),
             fusion,
             sensor: self.mode.sensor_status(),

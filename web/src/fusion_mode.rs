@@ -615,7 +615,7 @@ impl FusionMode {
         // Kept for the virtual sensor's comparison.
         let depth_units = Rc::new(frame.depth.units.clone());
         // The plane kernels compile once the first frame is fused (they would hold it up).
-        let segment = draw_views && gpu.kernels.deferred_compiled();
+        let segment = draw_views && gpu.kernels.all_compiled();
         // The fused map's planes at this frame's pose wait for its report.
         let source = p.planes.as_ref().map(PlaneViews::source);
         let colour = (segment && source == Some(PlanesFrom::FusedMap)).then(|| Rc::new(frame.color.clone()));

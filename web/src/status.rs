@@ -103,6 +103,8 @@ pub(crate) struct Status {
     pub(crate) device_rebuilds: u32,
     /// Connecting to the first fused frame, milliseconds.
     pub(crate) time_to_first_frame_ms: Option<f64>,
+    /// Pipelines compiled by the first fused frame, of all the kernels.
+    pub(crate) first_frame_kernels: Option<[usize; 2]>,
     /// When the milestones up to the first fused frame happened, milliseconds after the page
     /// started.
     pub(crate) startup_ms: std::collections::BTreeMap<String, f64>,

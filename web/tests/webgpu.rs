@@ -76,9 +76,18 @@ async fn preprocessing_on_webgpu_matches_cpu_reference() {
     holed[ix] = f32::NAN;
     assert!(max_diff("depth_m", &holed, &cpu.levels[0].depth_m).is_err(), "a mask difference is detected");
 
+    // In the browser a pipeline is compiled when it is first used: preprocessing compiled its
+    // own kernels and nothing else (the first frame waits for no kernel it does not run).
+    let compiled = gpu.kernels.compiled_count();
+    assert!(gpu.kernels.depth_to_metres.is_compiled() && gpu.kernels.bilateral_filter.is_compiled(), "the kernels that ran are compiled");
+    assert!(!gpu.kernels.raycast.is_compiled() && !gpu.kernels.plane_label.is_compiled(), "kernels that did not run are not");
+    assert!(compiled < webfusion_core::kernels::Kernels::COUNT / 3, "{compiled} pipelines compiled by preprocessing alone");
+    gpu.kernels.compile_deferred();
+    assert!(gpu.kernels.all_compiled(), "compile_deferred compiles the rest");
+
     let errors = gpu.take_errors();
     assert!(errors.is_empty(), "WebGPU reported errors: {errors:?}");
-    console_log!("webgpu vs cpu: depth {d:e} m, normals {nd:e}, coarse depth {cd:e} m");
+    console_log!("webgpu vs cpu: depth {d:e} m, normals {nd:e}, coarse depth {cd:e} m; {compiled} pipelines compiled by preprocessing");
 }
 
 /// Swapping on WebGPU: the synthetic room fused at its path's poses into half the pool it

@@ -29,20 +29,15 @@ impl From<PinholeIntrinsics> for GpuIntrinsics {
 /// A kernel's reflection and its layout entries, as `Kernels::new` compiles it.
 type KernelSpec = (&'static webfusion_shaders::Kernel, fn() -> Vec<wgpu::BindGroupLayoutEntry>);
 
-/// Capabilities whose kernels not every frame needs (mesh extraction; the sparse map's, which a
-/// dense box never runs): in the browser their pipelines are created on first use or by
-/// [`Kernels::compile_deferred`] (the app calls it once the first frame is fused), so the GPU
-/// process does not compile them before the first frame's work unless that frame uses them.
-pub const DEFERRED_CAPABILITIES: &[&str] = &["mesh", "map", "planes"];
-
 /// Compiles the kernels of `specs`, in order: natively all of them, spread over the available
 /// cores (pipeline creation is thread-safe and dominates start-up on software adapters); in
-/// the browser (one loop: it compiles in its GPU process) all but the `deferred` ones, which
-/// come back as `None`.
-fn compile_eager(device: &wgpu::Device, specs: &[KernelSpec], deferred: &[bool]) -> Vec<Option<KernelPipeline>> {
+/// the browser none (all `None`): there the GPU process compiles each pipeline in the order it
+/// is asked for and runs a submission only after every pipeline asked for before it, so each
+/// is created on first use and the first frame waits only for the kernels it runs (the app
+/// compiles the rest once that frame is fused, [`Kernels::compile_deferred`]).
+fn compile_eager(device: &wgpu::Device, specs: &[KernelSpec]) -> Vec<Option<KernelPipeline>> {
     #[cfg(not(target_arch = "wasm32"))]
     {
-        let _ = deferred;
         let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get).min(specs.len()).max(1);
         let chunk = specs.len().div_ceil(threads).max(1);
         std::thread::scope(|scope| {
@@ -52,12 +47,13 @@ fn compile_eager(device: &wgpu::Device, specs: &[KernelSpec], deferred: &[bool])
     }
     #[cfg(target_arch = "wasm32")]
     {
-        specs.iter().zip(deferred).map(|((k, entries), &later)| (!later).then(|| KernelPipeline::new(device, k, &entries()))).collect()
+        let _ = device;
+        specs.iter().map(|_| None).collect()
     }
 }
 
-/// A kernel pipeline that may be compiled later ([`DEFERRED_CAPABILITIES`]): it derefs to its
-/// [`KernelPipeline`], compiling it on first use if that has not happened yet.
+/// A kernel pipeline that may be compiled later (in the browser, see [`compile_eager`]): it
+/// derefs to its [`KernelPipeline`], compiling it on first use if that has not happened yet.
 pub struct DeferredPipeline {
     cell: std::sync::OnceLock<KernelPipeline>,
     device: wgpu::Device,
