@@ -16,7 +16,9 @@
 //      then the native run's saved map, offered by `serve --map`, opened in a fresh page without
 //      fusing, shown in the free view, and rendered at a pose of the native trajectory as
 //      `webfusion simulate` renders it there; finally a map fused at the ground-truth poses,
-//      opened, and the streamed frames compared with it at their ground truth;
+//      opened with its occupancy grid (`serve --occupancy`), the streamed frames compared with
+//      it at their ground truth, and the last render's unknown marks (asked of the bridge)
+//      those `simulate --occupancy` writes at that pose;
 //   8. plane segmentation (seed 003): the plane view, the world model of planes and its scene
 //      .glb, its textured planes in the free view; then a fresh page segmenting the fused map
 //      at each tracked pose (?planes_model=1), whose planes must be the frame's own.
@@ -378,8 +380,15 @@ try {
   const gtMapPath = join(out, 'gt_map.wfm');
   const gtRun = spawnSync(webfusion, ['reconstruct', sample, '--out', join(out, 'native_gt'), '--poses', join(native, 'groundtruth.txt'), '--map-kind', map, '--voxel-size', String(voxelMm / 1000), '--no-mesh', '--save-map', gtMapPath], { encoding: 'utf8' });
   if (gtRun.status !== 0) throw new Error(`webfusion reconstruct --poses failed: ${gtRun.stderr}`);
+  // Its occupancy grid (5 cm cells, 8 m about the cameras' mean), carved from those poses, lets
+  // the bridge mark the pixels whose ray crossed never-observed space.
+  const gtPoses = parseTum(readFileSync(join(out, 'native_gt', 'trajectory.txt'), 'utf8'));
+  const mean = [0, 1, 2].map((a) => gtPoses.reduce((sum, p) => sum + p.p[a], 0) / gtPoses.length);
+  const gridPath = join(out, 'gt_grid.bin');
+  const gridRun = spawnSync(webfusion, ['export-occupancy', '--map', gtMapPath, '--out', gridPath, '--voxel-size', '0.05', '--dims', '160,160,160', '--center', mean.map((v) => v.toFixed(3)).join(','), '--poses', join(out, 'native_gt', 'trajectory.txt')], { encoding: 'utf8' });
+  if (gridRun.status !== 0) throw new Error(`webfusion export-occupancy failed: ${gridRun.stderr}`);
   bridge.child.kill('SIGKILL');
-  bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0', ['--map', gtMapPath]);
+  bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0', ['--map', gtMapPath, '--occupancy', gridPath.replace(/\.bin$/, '.json')]);
   const { page: fourth, errors: fourthErrors } = await openBridgeMap(browser, bridge);
   await fourth.check('#sim-follow');
   await fourth.click('#play');
@@ -391,6 +400,26 @@ try {
   const upUnit = Array.isArray(up) && Math.abs(Math.hypot(...up) - 1) < 1e-3;
   check('frames compared at their ground truth, not fused', live.sensor.map.frame === 'given poses' && upUnit && live.frames_done === 0 && lc.coverage_percent > 70 && lc.pixels_rel_error_over_10pct_percent < 25 && fourthErrors.length === 0,
     `frame ${live.sensor.last.frame}: ${JSON.stringify(lc)}; up ${JSON.stringify(up)}; ${live.sensor.rendered} renders, ${live.sensor.skipped} frames skipped while the sensor was busy; fused ${live.frames_done}${fourthErrors.length ? '; page errors: ' + fourthErrors.join(' | ') : ''}`);
+  // The unknown marks over the last render: the bridge's mask at its pose, which is what
+  // `simulate --occupancy` marks there natively.
+  const marked = await waitFor(fourth, 'the last render\'s unknown mask', (s) => s.sensor.in_flight === 0 && !s.sensor.unknown.asked && s.sensor.unknown.marked_render === s.sensor.rendered - 1, 120_000);
+  const mu = marked.sensor.unknown;
+  const markPose = marked.sensor.last.pose;
+  writeFileSync(join(out, 'unknown_pose.txt'), `0 ${markPose.join(' ')}\n`);
+  const unknownDir = join(out, 'native_unknown');
+  rmSync(unknownDir, { recursive: true, force: true });
+  const unknownRun = spawnSync(webfusion, ['simulate', '--map', gtMapPath, '--poses', join(out, 'unknown_pose.txt'), '--out', unknownDir, '--occupancy', gridPath.replace(/\.bin$/, '.json')], { encoding: 'utf8' });
+  if (unknownRun.status !== 0) throw new Error(`webfusion simulate --occupancy failed: ${unknownRun.stderr}`);
+  const nativeMask = decodePng(readFileSync(join(unknownDir, 'unknown', readdirSync(join(unknownDir, 'unknown'))[0]))).pixels;
+  const nativePercent = 100 * nativeMask.reduce((n, v) => n + (v > 0 ? 1 : 0), 0) / nativeMask.length;
+  const tint = decodePng(await fourth.locator('#view-sim-unknown').screenshot({ path: join(out, 'sim_unknown_view.png') }));
+  let magenta = 0;
+  for (let i = 0; i < tint.width * tint.height; i++) {
+    const [r, g, b] = [tint.pixels[i * tint.channels], tint.pixels[i * tint.channels + 1], tint.pixels[i * tint.channels + 2]];
+    if (r > 120 && b > 120 && g < 0.6 * Math.min(r, b)) magenta++;
+  }
+  check('unknown marks from the bridge', mu.unavailable === null && mu.marked_percent > 0.5 && mu.marked_percent < 99.5 && Math.abs(mu.marked_percent - nativePercent) < 0.5 && magenta > 0.002 * tint.width * tint.height && fourthErrors.length === 0,
+    `${mu.marked_percent?.toFixed(2)} % of render ${mu.marked_render}'s pixels looked through never-observed space (simulate --occupancy at that pose: ${nativePercent.toFixed(2)} %); ${mu.stale} stale masks; ${(100 * magenta / (tint.width * tint.height)).toFixed(1)} % of the view tinted (saved sim_unknown_view.png)${fourthErrors.length ? '; page errors: ' + fourthErrors.join(' | ') : ''}`);
   await within(fourth.close(), 30_000);
 } catch (error) {
   check('e2e run', false, `${error.stack ?? String(error)} (at: ${stage})`);

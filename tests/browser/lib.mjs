@@ -50,7 +50,7 @@ export function parseTum(text) {
 }
 
 /**
- * Decodes a non-interlaced PNG, 8-bit RGB/RGBA (what Chromium writes) or 16-bit grayscale
+ * Decodes a non-interlaced PNG, 8-bit RGB/RGBA (what Chromium writes), 8-bit grayscale (masks) or 16-bit grayscale
  * (depth, the TUM format) to {width, height, channels, pixels} (bytes), plus `depth16` (the
  * 16-bit values) for the latter.
  */
@@ -67,7 +67,8 @@ export function decodePng(buffer) {
       const [depth, colour, , , interlace] = [data[8], data[9], data[10], data[11], data[12]];
       const rgb = depth === 8 && (colour === 2 || colour === 6);
       const grey16 = depth === 16 && colour === 0;
-      if (interlace !== 0 || !(rgb || grey16)) throw new Error(`unsupported PNG (depth ${depth}, colour type ${colour}, interlace ${interlace})`);
+      const grey8 = depth === 8 && colour === 0;
+      if (interlace !== 0 || !(rgb || grey16 || grey8)) throw new Error(`unsupported PNG (depth ${depth}, colour type ${colour}, interlace ${interlace})`);
       channels = colour === 6 ? 4 : colour === 2 ? 3 : 1;
       bitDepth = depth;
     } else if (type === 'IDAT') idat.push(data);

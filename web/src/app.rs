@@ -290,6 +290,7 @@ async fn run() -> Result<(), String> {
             app.fail(&message);
         }
         app.collect_reports();
+        app.send_bridge_requests();
         if let Err(message) = app.mode.draw_free_view(&app.gpu) {
             app.fail(&message);
         }
@@ -338,6 +339,17 @@ impl App {
         }
     }
 
+    /// Sends the render request due (the virtual sensor's unknown mask), if the link is open.
+    fn send_bridge_requests(&mut self) {
+        if let Some(link) = &self.link
+            && let Some(request) = self.mode.bridge_request()
+            && !link.send(&Message::RenderRequest(request).encode())
+        {
+            // Not sent (the socket is not open): no reply will come.
+            self.mode.bridge_lost();
+        }
+    }
+
     fn is_live(&self) -> bool {
         self.source.as_ref().is_some_and(|s| s.frame_count.is_none())
     }
@@ -370,12 +382,16 @@ impl App {
                 }
                 Ok(Message::Error { code, message }) => self.last_error = Some(format!("bridge: {message} ({code:?})")),
                 Ok(Message::Control(_) | Message::RenderRequest(_)) => self.last_error = Some("the bridge sent a client's message".to_owned()),
-                // The page sends no render requests yet; a reply is the bridge's mistake.
-                Ok(Message::RenderReply { request_id, .. }) => self.last_error = Some(format!("the bridge answered render request {request_id}, which this page never sent")),
+                Ok(Message::RenderReply { request_id, outcome }) => {
+                    if let Err(message) = self.mode.on_bridge_reply(request_id, outcome) {
+                        self.last_error = Some(format!("virtual sensor: {message}"));
+                    }
+                }
                 Err(e) => self.last_error = Some(format!("undecodable message from the bridge: {e}")),
             },
             Event::Closed { generation, code, reason } if generation == self.generation => {
                 self.link = None;
+                self.mode.bridge_lost();
                 if self.want_connected {
                     self.link_state = LinkState::Retrying;
                     if !reason.is_empty() {
@@ -616,13 +632,13 @@ impl App {
                 }
             }
             Ui::OpenMapFile => match ui::chosen_file("open-map").await {
-                Ok(Some((name, bytes))) => self.open_map(&bytes, &name),
+                Ok(Some((name, bytes))) => self.open_map(&bytes, &name, false),
                 Ok(None) => {}
                 Err(message) => self.last_error = Some(format!("opening the map: {message}")),
             },
             Ui::MapFromBridge => match map_url(&ui::value("bridge-url"), &ui::value("bridge-token")) {
                 Ok(url) => match ui::fetch_bytes(&url).await {
-                    Ok(bytes) => self.open_map(&bytes, "the bridge's map"),
+                    Ok(bytes) => self.open_map(&bytes, "the bridge's map", true),
                     Err(message) => self.last_error = Some(format!("the bridge's map: {message}")),
                 },
                 Err(message) => self.last_error = Some(format!("the bridge's map: {message}")),
@@ -643,8 +659,8 @@ impl App {
 
     /// Opens a saved map's bytes: playback pauses, the fused run is dropped and the free view
     /// and the virtual sensor show the map.
-    fn open_map(&mut self, bytes: &[u8], name: &str) {
-        match OpenedMap::load(&self.gpu, bytes, name).and_then(|map| self.mode.open_map(&self.gpu, map)) {
+    fn open_map(&mut self, bytes: &[u8], name: &str, from_bridge: bool) {
+        match OpenedMap::load(&self.gpu, bytes, name, from_bridge).and_then(|map| self.mode.open_map(&self.gpu, map)) {
             Ok(()) => {
                 if self.playing {
                     self.playing = false;

@@ -757,7 +757,8 @@ impl FusionMode {
                 None => return Ok(()),
             },
         };
-        self.sensor.render(gpu, store, pose, real, camera)?;
+        let ask_bridge = self.opened.as_ref().is_some_and(|(o, _)| o.from_bridge);
+        self.sensor.render(gpu, store, pose, real, camera, ask_bridge)?;
         self.free_dirty = true;
         Ok(())
     }
@@ -772,6 +773,22 @@ impl FusionMode {
 
     pub(crate) fn download_sensor(&self) -> Result<(), String> {
         self.sensor.download()
+    }
+
+    /// The render request to send the bridge now (the unknown mask of the sensor's newest
+    /// render in a map opened from the bridge), if one is due.
+    pub(crate) fn bridge_request(&mut self) -> Option<webfusion_core::protocol::RenderRequest> {
+        self.sensor.bridge_request()
+    }
+
+    /// The link to the bridge closed with a request in flight.
+    pub(crate) fn bridge_lost(&mut self) {
+        self.sensor.bridge_lost();
+    }
+
+    /// The bridge answered a render request.
+    pub(crate) fn on_bridge_reply(&mut self, request_id: u32, outcome: webfusion_core::protocol::RenderOutcome) -> Result<(), String> {
+        self.sensor.on_bridge_reply(request_id, outcome)
     }
 
     /// Opens a saved map: the pipeline and the run are dropped (frames are compared with the

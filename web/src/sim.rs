@@ -11,6 +11,14 @@
 //! real depth is drawn beside the simulated one with seed 000's metrics (`core::sim::compare`,
 //! those of `webfusion compare`) and their difference image. Renders come back a frame later,
 //! like the pipeline's reports: nothing waits.
+//!
+//! In a map opened from the bridge, each render is also asked of the bridge for its unknown
+//! mask (a `RenderRequest` with `unknown`; `serve --map M --occupancy G.json` answers it from the
+//! map's occupancy grid, as `simulate --occupancy` marks its frames): the pixels whose ray
+//! crossed never-observed space before its return are tinted over the simulated depth. One
+//! request is in flight at a time and the newest render waiting is asked next; a mask that
+//! comes back after a newer render is not drawn (counted). A bridge without a grid says so once
+//! and is not asked again.
 
 use std::collections::VecDeque;
 use std::rc::Rc;
@@ -21,6 +29,7 @@ use webfusion_core::camera::TUM_DEPTH_UNITS_PER_METRE;
 use webfusion_core::cpu::shared::voxel_anchor;
 use webfusion_core::map::file::{MapFileHeader, MapFrame, parse_map_bytes};
 use webfusion_core::map::{Map, resident_map};
+use webfusion_core::protocol::{RenderFailure, RenderOutcome, RenderRequest, WireDepth};
 use webfusion_core::sim::compare::{DepthComparison, compare_depth, difference_image};
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, VirtualSensor};
 use webfusion_core::tsdf::TsdfStore;
@@ -39,6 +48,9 @@ const SIM_CANVAS: &str = "view-sim";
 const REAL_CANVAS: &str = "view-sim-real";
 const DIFFERENCE_CANVAS: &str = "view-sim-diff";
 const POSE_INPUT: &str = "sim-pose";
+const UNKNOWN_CANVAS: &str = "view-sim-unknown";
+/// The tint of a pixel that looked through never-observed space (RGBA, over the depth).
+const UNKNOWN_TINT: [u8; 4] = [255, 0, 255, 150];
 
 /// A real depth frame and where it was taken, in the map's frame.
 #[derive(Clone, Debug)]
@@ -58,6 +70,8 @@ pub(crate) struct OpenedMap {
     /// What a damaged file lost (its intact blocks were kept).
     pub(crate) damage: Option<String>,
     pub(crate) map: Map,
+    /// Opened from the bridge (`serve --map`), which may mark unknown pixels.
+    pub(crate) from_bridge: bool,
     /// Mean of its blocks' centres and their RMS distance from it, metres (the free view's
     /// first look).
     pub(crate) centre_m: DVec3,
@@ -67,7 +81,7 @@ pub(crate) struct OpenedMap {
 impl OpenedMap {
     /// Parses a map file's bytes (keeping the intact blocks of a damaged one) and loads it
     /// whole onto the GPU.
-    pub(crate) fn load(gpu: &Gpu, bytes: &[u8], name: &str) -> Result<Self, String> {
+    pub(crate) fn load(gpu: &Gpu, bytes: &[u8], name: &str, from_bridge: bool) -> Result<Self, String> {
         let file = parse_map_bytes(bytes, name).map_err(|e| e.to_string())?;
         if file.blocks.is_empty() {
             return Err(format!("{name}: the map has no intact blocks"));
@@ -82,7 +96,7 @@ impl OpenedMap {
         // The mean and RMS spread of the blocks: a few stray far blocks do not push the view out.
         let centre_m = centres.iter().sum::<DVec3>() / centres.len() as f64;
         let spread_m = (centres.iter().map(|c| c.distance_squared(centre_m)).sum::<f64>() / centres.len() as f64).sqrt();
-        Ok(Self { name: name.to_owned(), blocks: file.blocks.len(), damage: file.damage.map(|d| d.to_string()), header: file.header, map, centre_m, spread_m })
+        Ok(Self { name: name.to_owned(), blocks: file.blocks.len(), damage: file.damage.map(|d| d.to_string()), header: file.header, map, from_bridge, centre_m, spread_m })
     }
 
     pub(crate) fn status(&self) -> OpenedMapStatus {
@@ -142,6 +156,23 @@ struct Rendered {
     metrics: Option<DepthComparison>,
 }
 
+/// The bridge's unknown masks of the renders (see the module docs).
+#[derive(Default)]
+struct UnknownMarks {
+    /// The request on its way: its id and the render it marks.
+    asked: Option<(u32, u64)>,
+    /// The newest render of a bridge's map: its tag and the request that asks for its mask.
+    newest: Option<(u64, RenderRequest)>,
+    /// Request ids, counting.
+    next_id: u32,
+    /// Why the bridge cannot mark pixels, once it said so (no more requests).
+    unavailable: Option<String>,
+    /// The last mask drawn: its render's tag, the marked pixels and all pixels.
+    drawn: Option<(u64, usize, usize)>,
+    /// Masks that came back after a newer render, not drawn.
+    stale: u64,
+}
+
 /// The virtual sensor panel.
 #[derive(Default)]
 pub(crate) struct SensorPanel {
@@ -159,6 +190,7 @@ pub(crate) struct SensorPanel {
     skipped: u64,
     /// Submission to readback, milliseconds.
     render_ms: Window,
+    unknown: UnknownMarks,
 }
 
 impl SensorPanel {
@@ -168,6 +200,63 @@ impl SensorPanel {
         self.bound = None;
         self.pending.clear();
         self.real = None;
+        self.unknown.newest = None;
+        self.unknown.drawn = None;
+        if let Some(b) = &self.last {
+            clear_canvas(UNKNOWN_CANVAS, b.key.intrinsics);
+        }
+    }
+
+    /// The request to send the bridge now, if one is due (none in flight, a render not yet
+    /// asked for): it counts as in flight from here.
+    pub(crate) fn bridge_request(&mut self) -> Option<RenderRequest> {
+        let u = &mut self.unknown;
+        if u.asked.is_some() || u.unavailable.is_some() {
+            return None;
+        }
+        let (tag, request) = u.newest.take()?;
+        u.asked = Some((request.request_id, tag));
+        Some(request)
+    }
+
+    /// The link to the bridge closed: the reply to the request in flight will not come.
+    pub(crate) fn bridge_lost(&mut self) {
+        self.unknown.asked = None;
+    }
+
+    /// The bridge's answer to request `request_id`: the mask is drawn over its render if that
+    /// is still the newest. Errors: a reply to no request in flight, or a mask of another size.
+    pub(crate) fn on_bridge_reply(&mut self, request_id: u32, outcome: RenderOutcome) -> Result<(), String> {
+        let u = &mut self.unknown;
+        let Some((asked_id, tag)) = u.asked.filter(|(id, _)| *id == request_id) else {
+            return Err(format!("the bridge answered render request {request_id}, which this page has not in flight"));
+        };
+        u.asked = None;
+        let view = match outcome {
+            RenderOutcome::View(view) => view,
+            RenderOutcome::Failed { code: RenderFailure::RenderFailed, message } => return Err(format!("the bridge's unknown mask for request {asked_id}: {message}")),
+            RenderOutcome::Failed { message, .. } => {
+                u.unavailable = Some(message);
+                return Ok(());
+            }
+        };
+        let Some(mask) = view.unknown_mask else { return Err(format!("the bridge's reply to request {asked_id} has no unknown mask")) };
+        let pixels = (view.width_px * view.height_px) as usize;
+        if mask.len() != pixels {
+            return Err(format!("the bridge's unknown mask has {} bytes for {}x{} pixels", mask.len(), view.width_px, view.height_px));
+        }
+        // A newer render is on show (or on its way): this mask is not its.
+        if self.next_tag != tag + 1 {
+            u.stale += 1;
+            return Ok(());
+        }
+        let marked = mask.iter().filter(|&&m| m != 0).count();
+        let rgba: Vec<u8> = mask.iter().flat_map(|&m| if m != 0 { UNKNOWN_TINT } else { [0; 4] }).collect();
+        if let Ok(canvas) = ui::element::<web_sys::HtmlCanvasElement>(UNKNOWN_CANVAS) {
+            view::draw_rgba(&canvas, view.width_px, view.height_px, &rgba).map_err(|e| format!("the unknown mask: {}", crate::link::js_text(&e)))?;
+        }
+        u.drawn = Some((tag, marked, pixels));
+        Ok(())
     }
 
     pub(crate) fn set_follow(&mut self, on: bool) {
@@ -204,7 +293,9 @@ impl SensorPanel {
     /// its camera; else with `camera`, the map's own, or the nominal Kinect); the result comes
     /// back through [`Self::poll`]. With two renders in flight the request is skipped (counted)
     /// rather than waited for.
-    pub(crate) fn render(&mut self, gpu: &Gpu, store: &dyn TsdfStore, map_from_camera: Se3, real: Option<RealFrame>, camera: Option<PinholeIntrinsics>) -> Result<(), String> {
+    /// With `ask_bridge` (a map opened from the bridge) the bridge is asked for the render's
+    /// unknown mask ([`Self::bridge_request`]).
+    pub(crate) fn render(&mut self, gpu: &Gpu, store: &dyn TsdfStore, map_from_camera: Se3, real: Option<RealFrame>, camera: Option<PinholeIntrinsics>, ask_bridge: bool) -> Result<(), String> {
         let key = SensorKey {
             intrinsics: real.as_ref().map_or_else(|| camera.unwrap_or_else(|| PinholeIntrinsics::nominal_kinect(640, 480)), |r| r.intrinsics),
             units_per_metre: real.as_ref().map_or(TUM_DEPTH_UNITS_PER_METRE, |r| r.units_per_metre),
@@ -245,6 +336,27 @@ impl SensorPanel {
         gpu.submit([encoder.finish()]);
         GpuCanvas::present(gpu, textures);
         ui::set_value(POSE_INPUT, &format_pose(&map_from_camera));
+        // The last mask belongs to an older render.
+        clear_canvas(UNKNOWN_CANVAS, key.intrinsics);
+        self.unknown.drawn = None;
+        if ask_bridge {
+            let request_id = self.unknown.next_id;
+            self.unknown.next_id = self.unknown.next_id.wrapping_add(1);
+            let request = RenderRequest {
+                request_id,
+                world_from_camera: map_from_camera,
+                intrinsics: key.intrinsics,
+                depth_units_per_metre: key.units_per_metre,
+                radial: false,
+                depth_range_m: None,
+                // The mask depends on where each ray returns; the exact render's returns.
+                noise: None,
+                color: false,
+                unknown: true,
+                depth_encoding: WireDepth::Raw,
+            };
+            self.unknown.newest = Some((tag, request));
+        }
         self.pending.push_back(Pending { tag, map_from_camera, key, real, sent: Instant::now() });
         Ok(())
     }
@@ -305,6 +417,13 @@ impl SensorPanel {
             skipped: self.skipped,
             in_flight: self.pending.len(),
             median_ms: self.render_ms.median(),
+            unknown: UnknownStatus {
+                asked: self.unknown.asked.is_some(),
+                unavailable: self.unknown.unavailable.clone(),
+                marked_percent: self.unknown.drawn.map(|(_, marked, pixels)| 100.0 * marked as f64 / pixels.max(1) as f64),
+                marked_render: self.unknown.drawn.map(|(tag, _, _)| tag),
+                stale: self.unknown.stale,
+            },
             last: self.last.as_ref().map(|r| LastRender {
                 pose: tum_pose(&r.map_from_camera),
                 width_px: r.key.intrinsics.width_px,
@@ -394,7 +513,12 @@ impl SensorStatus {
             let damage = m.damage.as_ref().map(|d| format!(" (damaged: {d}; its intact blocks kept)")).unwrap_or_default();
             format!("opened map {}: {} map, {} blocks of {:.1} mm, {:.0} MiB, {} frame{damage}", m.name, m.kind, m.blocks, m.voxel_size_m * 1e3, m.memory_bytes as f64 / 1048576.0, m.frame)
         });
-        let sensor = (self.rendered > 0).then(|| format!("virtual sensor: {} renders ({} skipped), {:.0} ms each", self.rendered, self.skipped, self.median_ms.unwrap_or(0.0)));
+        let unknown = match (&self.unknown.unavailable, self.unknown.marked_percent) {
+            (Some(why), _) => format!(" · no unknown marks: {why}"),
+            (None, Some(p)) => format!(" · {p:.1} % of the pixels looked through never-observed space (magenta, from the bridge)"),
+            (None, None) => String::new(),
+        };
+        let sensor = (self.rendered > 0).then(|| format!("virtual sensor: {} renders ({} skipped), {:.0} ms each{unknown}", self.rendered, self.skipped, self.median_ms.unwrap_or(0.0)));
         match (map, sensor) {
             (None, None) => None,
             (a, b) => Some([a, b].into_iter().flatten().collect::<Vec<_>>().join(" · ")),
@@ -429,7 +553,23 @@ pub(crate) struct SensorStatus {
     skipped: u64,
     in_flight: usize,
     median_ms: Option<f64>,
+    unknown: UnknownStatus,
     last: Option<LastRender>,
+}
+
+/// The bridge's unknown marks of the renders.
+#[derive(Clone, Debug, serde::Serialize)]
+struct UnknownStatus {
+    /// A request is in flight.
+    asked: bool,
+    /// Why the bridge cannot mark pixels (it has no occupancy grid), once it said so.
+    unavailable: Option<String>,
+    /// Of the last marked render, the pixels that looked through never-observed space, %.
+    marked_percent: Option<f64>,
+    /// Which render (counting from 0) that was.
+    marked_render: Option<u64>,
+    /// Masks that came back after a newer render (not drawn).
+    stale: u64,
 }
 
 #[derive(Clone, Debug, serde::Serialize)]
