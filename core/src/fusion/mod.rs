@@ -646,7 +646,7 @@ impl KinectFusion {
         {
             // Tracking, then the tracker keeps this frame as the next one's reference.
             let mut pass = fe.stage("track");
-            self.tracker.encode_in(gpu, &mut pass);
+            self.tracker.encode_in(gpu, &mut pass, self.frames_submitted == 0);
             self.tracker.encode_keep_previous(gpu, &mut pass);
         }
         self.mapper.encode(gpu, &mut fe, "integrate");

@@ -167,9 +167,13 @@ impl IcpTracker {
     }
 
     /// Records the tracking of the preprocessed frame: begin, every level's iterations, finish.
-    pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+    /// `first` says the tracker has fused nothing since its reset (the host knows: no frame was
+    /// submitted since): that frame only initialises the world frame (`track_begin` marks every
+    /// level done and sizes no reduction), so its iterations, which would do nothing, are not
+    /// recorded (nor, in the browser, compiled before the first frame).
+    pub fn encode_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, first: bool) {
         gpu.kernels.track_begin.dispatch_in(pass, &self.begin, [1, 1, 1]);
-        for (l, level) in self.levels.iter().enumerate().rev() {
+        for (l, level) in self.levels.iter().enumerate().rev().filter(|_| !first) {
             for _ in 0..level.iterations {
                 track_reduce::dispatch_indirect(gpu, pass, &level.reduce, &self.dispatch, l);
                 gpu.kernels.track_solve.dispatch_in(pass, &level.solve, [32, 1, 1]);
