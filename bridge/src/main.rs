@@ -442,7 +442,7 @@ fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> an
         ["one ICP iteration, level 0", "one ICP iteration, level 1", "one ICP iteration, level 2", "one ICP iteration, level 3"];
     let mut stages: Vec<Stage> = vec![
         ("preprocess (whole chain)", Box::new(|fe| fusion.preprocessor().encode_in(gpu, &mut fe.stage("preprocess")))),
-        ("track (every level, to convergence)", Box::new(|fe| fusion.tracker().encode_in(gpu, &mut fe.stage("track")))),
+        ("track (every level, to convergence)", Box::new(|fe| fusion.tracker().encode_in(gpu, &mut fe.stage("track"), false))),
         ("keep the reference", Box::new(|fe| fusion.tracker().encode_keep_previous(gpu, &mut fe.stage("keep")))),
         ("integrate", Box::new(|fe| fusion.mapper().encode(gpu, fe, "integrate"))),
         ("raycast + prediction pyramid", Box::new(|fe| fusion.predictor().encode(gpu, fe, "predict"))),
