@@ -202,6 +202,8 @@ impl SensorPanel {
         self.real = None;
         self.unknown.newest = None;
         self.unknown.drawn = None;
+        // Another map (perhaps another bridge's) may have a grid: ask again.
+        self.unknown.unavailable = None;
         if let Some(b) = &self.last {
             clear_canvas(UNKNOWN_CANVAS, b.key.intrinsics);
         }
