@@ -959,7 +959,7 @@ impl FusionMode {
         self.free_model_dirty = false;
         self.free_drawn_at = Some(Instant::now());
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("web.free_view") });
-        free.target.render(gpu, &mut encoder, store, &map_from_viewer, FREE_VIEW_RANGE_M).map_err(|e| e.to_string())?;
+        free.target.render(gpu, &mut encoder, store, &map_from_viewer, FREE_VIEW_RANGE_M, true).map_err(|e| e.to_string())?;
         if !self.free_colour {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("web.free_view.shading"), timestamp_writes: None });
             free.shading.dispatch_in(gpu, &mut pass);

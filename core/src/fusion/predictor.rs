@@ -271,13 +271,19 @@ impl RaycastTarget {
     }
 
     /// Renders `store` from `world_from_camera` (a target that owns its pose): sets the
-    /// parameters and pose, and records the render into `encoder`.
-    pub fn render(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, store: &dyn TsdfStore, world_from_camera: &Se3, depth_range_m: (f32, f32)) -> Result<()> {
+    /// parameters and pose, and records the render into `encoder`; the surface normals only
+    /// with `normals` (a reader that needs none, such as an exact virtual sensor, leaves
+    /// `normal_in_world` as the last render that had them).
+    pub fn render(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, store: &dyn TsdfStore, world_from_camera: &Se3, depth_range_m: (f32, f32), normals: bool) -> Result<()> {
         self.set_params(gpu, store, depth_range_m);
         self.set_pose(gpu, world_from_camera)?;
         self.clear(encoder);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.raycast"), timestamp_writes: None });
-        self.dispatch_in(gpu, &mut pass);
+        for part in [RaycastPart::RangeTiles, RaycastPart::Rays, RaycastPart::Normals] {
+            if normals || part != RaycastPart::Normals {
+                self.dispatch_part(gpu, &mut pass, part);
+            }
+        }
         Ok(())
     }
 }

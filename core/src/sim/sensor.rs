@@ -199,7 +199,8 @@ impl VirtualSensor {
         self.target.intrinsics
     }
 
-    /// The raycast it reads (depth, vertices, normals and colour of the last render).
+    /// The raycast it reads (depth, vertices and colour of the last render; normals only with
+    /// noise, whose incidence angle reads them).
     pub fn target(&self) -> &RaycastTarget {
         &self.target
     }
@@ -217,7 +218,8 @@ impl VirtualSensor {
     /// Records the render at `world_from_camera` (the `frame_index`-th frame of the noise
     /// stream) into `encoder`, without a readback (a view that stays on the GPU).
     pub fn encode(&mut self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, store: &dyn TsdfStore, world_from_camera: &Se3, frame_index: u32) -> Result<()> {
-        self.target.render(gpu, encoder, store, world_from_camera, self.options.depth_range_m)?;
+        // Only the noise model reads the normals (the incidence angle).
+        self.target.render(gpu, encoder, store, world_from_camera, self.options.depth_range_m, self.options.noise.is_some())?;
         self.params.frame_index = frame_index;
         gpu.write_buffer(&self.params_buffer, std::slice::from_ref(&self.params));
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.depth_sensor"), timestamp_writes: None });
