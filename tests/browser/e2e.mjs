@@ -385,10 +385,11 @@ try {
   const gtPoses = parseTum(readFileSync(join(out, 'native_gt', 'trajectory.txt'), 'utf8'));
   const mean = [0, 1, 2].map((a) => gtPoses.reduce((sum, p) => sum + p.p[a], 0) / gtPoses.length);
   const gridPath = join(out, 'gt_grid.bin');
+  const gridJson = join(out, 'gt_grid.json');
   const gridRun = spawnSync(webfusion, ['export-occupancy', '--map', gtMapPath, '--out', gridPath, '--voxel-size', '0.05', '--dims', '160,160,160', '--center', mean.map((v) => v.toFixed(3)).join(','), '--poses', join(out, 'native_gt', 'trajectory.txt')], { encoding: 'utf8' });
   if (gridRun.status !== 0) throw new Error(`webfusion export-occupancy failed: ${gridRun.stderr}`);
   bridge.child.kill('SIGKILL');
-  bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0', ['--map', gtMapPath, '--occupancy', gridPath.replace(/\.bin$/, '.json')]);
+  bridge = await startBridge(webfusion, sample, dist, '127.0.0.1:0', ['--map', gtMapPath, '--occupancy', gridJson]);
   const { page: fourth, errors: fourthErrors } = await openBridgeMap(browser, bridge);
   await fourth.check('#sim-follow');
   await fourth.click('#play');
@@ -408,7 +409,7 @@ try {
   writeFileSync(join(out, 'unknown_pose.txt'), `0 ${markPose.join(' ')}\n`);
   const unknownDir = join(out, 'native_unknown');
   rmSync(unknownDir, { recursive: true, force: true });
-  const unknownRun = spawnSync(webfusion, ['simulate', '--map', gtMapPath, '--poses', join(out, 'unknown_pose.txt'), '--out', unknownDir, '--occupancy', gridPath.replace(/\.bin$/, '.json')], { encoding: 'utf8' });
+  const unknownRun = spawnSync(webfusion, ['simulate', '--map', gtMapPath, '--poses', join(out, 'unknown_pose.txt'), '--out', unknownDir, '--occupancy', gridJson], { encoding: 'utf8' });
   if (unknownRun.status !== 0) throw new Error(`webfusion simulate --occupancy failed: ${unknownRun.stderr}`);
   const nativeMask = decodePng(readFileSync(join(unknownDir, 'unknown', readdirSync(join(unknownDir, 'unknown'))[0]))).pixels;
   const nativePercent = 100 * nativeMask.reduce((n, v) => n + (v > 0 ? 1 : 0), 0) / nativeMask.length;

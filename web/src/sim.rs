@@ -18,7 +18,7 @@
 //! crossed never-observed space before its return are tinted over the simulated depth. One
 //! request is in flight at a time and the newest render waiting is asked next; a mask that
 //! comes back after a newer render is not drawn (counted). A bridge without a grid says so once
-//! and is not asked again.
+//! and is not asked again until another map is opened.
 
 use std::collections::VecDeque;
 use std::rc::Rc;

@@ -231,11 +231,13 @@ impl RaycastTarget {
         encoder.clear_buffer(&self.depth_range_tiles, 0, None);
     }
 
-    /// Records the range tiles (those a hinted prediction reads), the raycast and the normals
-    /// into an open compute pass (the tiles cleared before it).
-    fn dispatch_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+    /// Records the range tiles (those a hinted prediction reads), the raycast and, with
+    /// `normals`, the normals into an open compute pass (the tiles cleared before it).
+    fn dispatch_in(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, normals: bool) {
         for part in [RaycastPart::RangeTiles, RaycastPart::Rays, RaycastPart::Normals] {
-            self.dispatch_part(gpu, pass, part);
+            if normals || part != RaycastPart::Normals {
+                self.dispatch_part(gpu, pass, part);
+            }
         }
     }
 
@@ -258,7 +260,7 @@ impl RaycastTarget {
     /// Records the render as stage `stage` of a frame.
     pub fn encode(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
         self.clear(frame.encoder());
-        self.dispatch_in(gpu, &mut frame.stage(stage));
+        self.dispatch_in(gpu, &mut frame.stage(stage), true);
     }
 
     /// Records one part of the render alone as stage `stage` (what `bench` times; the parts
@@ -279,11 +281,7 @@ impl RaycastTarget {
         self.set_pose(gpu, world_from_camera)?;
         self.clear(encoder);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.raycast"), timestamp_writes: None });
-        for part in [RaycastPart::RangeTiles, RaycastPart::Rays, RaycastPart::Normals] {
-            if normals || part != RaycastPart::Normals {
-                self.dispatch_part(gpu, &mut pass, part);
-            }
-        }
+        self.dispatch_in(gpu, &mut pass, normals);
         Ok(())
     }
 }
@@ -374,7 +372,7 @@ impl Predictor {
     pub fn encode(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
         self.finest.clear(frame.encoder());
         let mut pass = frame.stage(stage);
-        self.finest.dispatch_in(gpu, &mut pass);
+        self.finest.dispatch_in(gpu, &mut pass, true);
         self.dispatch_downsampling(gpu, &mut pass);
     }
 }

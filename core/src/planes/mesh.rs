@@ -429,6 +429,7 @@ pub fn pixel_box(frame: &PlaneFrame, labels: &[u32], label: u32, k: &PinholeIntr
     let (fx, fy, cx, cy) = (f64::from(k.fx_px), f64::from(k.fy_px), f64::from(k.cx_px), f64::from(k.cy_px));
     let linear = |d: DVec3| DVec3::new(d.x / fx, d.y / fy, d.z - d.x * cx / fx - d.y * cy / fy);
     let (den, num) = (linear(n_c), a_c.map(linear));
+    let t_at = |p: DVec3| -d_c / den.dot(p);
     let (mut min, mut max) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
     let w = k.width_px as usize;
     for (row, line) in labels.chunks_exact(w).enumerate() {
@@ -438,7 +439,6 @@ pub fn pixel_box(frame: &PlaneFrame, labels: &[u32], label: u32, k: &PinholeIntr
         let y = row as f64;
         for (col, _) in line.iter().enumerate().filter(|&(_, &l)| l == label) {
             let x = col as f64;
-            let t_at = |p: DVec3| -d_c / den.dot(p);
             let t_centre = t_at(DVec3::new(x, y, 1.0));
             if !(t_centre.is_finite() && t_centre > 0.0) {
                 continue;
