@@ -3,14 +3,16 @@
 //! §1.3 step 2; Boots' filtering and normal estimation, 003-digest §4.2).
 //!
 //! Per frame: raw depth -> metres -> bilateral filter (optional) -> pyramid of depth levels
-//! (edge-aware 2x2 block average) -> per level a vertex map, central-difference gradients,
-//! optional separable gradient smoothing, and camera-facing unit normals. Colour becomes
-//! float RGB and a BT.601 intensity image. Invalid samples are NaN throughout.
+//! (edge-aware 2x2 block average) -> per level a vertex map and camera-facing unit normals
+//! (the crossed central-difference gradients: `vertex_normals` alone, or after
+//! `vertex_gradients` when a separable Gaussian smooths the gradients, its x pass in the
+//! first kernel and its y pass in the second). Colour becomes float RGB and a BT.601
+//! intensity image. Invalid samples are NaN throughout.
 
 use crate::kernels::{
     GpuIntrinsics, KernelPipeline, Kernels, bilateral_filter::BilateralFilterParams, color_to_float::ColorToFloatParams,
-    depth_pyramid_down::DepthPyramidDownParams, depth_to_metres::DepthToMetresParams, gradient_smooth::GradientSmoothParams,
-    intensity_pyramid_down::IntensityPyramidDownParams, normal_map::NormalMapParams, vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams,
+    depth_pyramid_down::DepthPyramidDownParams, depth_to_metres::DepthToMetresParams, intensity_pyramid_down::IntensityPyramidDownParams,
+    vertex_gradients::VertexGradientsParams, vertex_map::VertexMapParams, vertex_normals::VertexNormalsParams,
 };
 use crate::{ColorImage, Error, Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFrame, Result};
 
@@ -33,6 +35,9 @@ pub const DEFAULT_PYRAMID_MAX_DEPTH_DIFF_M: f32 = 0.09;
 pub const DEFAULT_GRADIENT_SMOOTH_RADIUS_PX: u32 = 2;
 /// Gradient smoothing sigma, pixels.
 pub const DEFAULT_GRADIENT_SMOOTH_SIGMA_PX: f32 = 1.5;
+/// Largest gradient smoothing radius accepted, pixels (each invocation of `vertex_gradients`
+/// differentiates 2r+1 pixels).
+pub const MAX_GRADIENT_SMOOTH_RADIUS_PX: u32 = 16;
 /// Squared norm of the gradient cross product (m^4) at or below which no normal is emitted:
 /// well under any real surface patch (1 mm x 1 mm gradients give 1e-12).
 pub const DEFAULT_MIN_CROSS_NORM_SQ: f32 = 1e-20;
@@ -118,9 +123,9 @@ impl PreprocessConfig {
             return bad(format!("bilateral sigmas must be > 0 and radius <= 16, got {b:?}"));
         }
         if let Some(g) = self.gradient_smoothing
-            && !(g.sigma_px > 0.0 && g.radius_px <= 16)
+            && !(g.sigma_px > 0.0 && g.radius_px <= MAX_GRADIENT_SMOOTH_RADIUS_PX)
         {
-            return bad(format!("gradient smoothing sigma must be > 0 and radius <= 16, got {g:?}"));
+            return bad(format!("gradient smoothing sigma must be > 0 and radius <= {MAX_GRADIENT_SMOOTH_RADIUS_PX}, got {g:?}"));
         }
         if !(self.pyramid_max_depth_diff_m > 0.0) {
             return bad("pyramid_max_depth_diff_m must be > 0".into());
@@ -157,9 +162,15 @@ impl PreprocessConfig {
         }
     }
 
-    /// `normal_map` at a level with intrinsics `k`.
-    pub fn normal_map_params(&self, k: &PinholeIntrinsics) -> NormalMapParams {
-        NormalMapParams { width_px: k.width_px, height_px: k.height_px, min_cross_norm_sq: self.min_cross_norm_sq, ..Default::default() }
+    /// `vertex_gradients` at a level with intrinsics `k`, when the gradients are smoothed.
+    pub fn vertex_gradients_params(&self, k: &PinholeIntrinsics) -> Option<VertexGradientsParams> {
+        self.gradient_smoothing.map(|g| VertexGradientsParams { width_px: k.width_px, height_px: k.height_px, radius_px: g.radius_px, sigma_px: g.sigma_px })
+    }
+
+    /// `vertex_normals` at a level with intrinsics `k` (radius 0 without smoothing).
+    pub fn vertex_normals_params(&self, k: &PinholeIntrinsics) -> VertexNormalsParams {
+        let (radius_px, sigma_px) = self.gradient_smoothing.map_or((0, 1.0), |g| (g.radius_px, g.sigma_px));
+        VertexNormalsParams { width_px: k.width_px, height_px: k.height_px, radius_px, sigma_px, min_cross_norm_sq: self.min_cross_norm_sq, ..Default::default() }
     }
 }
 
@@ -177,13 +188,6 @@ impl BilateralConfig {
     }
 }
 
-impl GradientSmoothingConfig {
-    /// One `gradient_smooth` pass along `axis` (0 = x, 1 = y) at a level with intrinsics `k`.
-    pub fn params(&self, k: &PinholeIntrinsics, axis: u32) -> GradientSmoothParams {
-        GradientSmoothParams { width_px: k.width_px, height_px: k.height_px, radius_px: self.radius_px, axis, sigma_px: self.sigma_px, ..Default::default() }
-    }
-}
-
 /// One level of the depth/vertex/normal pyramid.
 #[derive(Debug)]
 pub struct PyramidLevel {
@@ -195,10 +199,6 @@ pub struct PyramidLevel {
     pub vertex_in_camera: wgpu::Buffer,
     /// Unit normals (nx, ny, nz, 0), camera frame.
     pub normal_in_camera: wgpu::Buffer,
-    /// Vertex gradient along x (smoothed when smoothing is on).
-    pub grad_x: wgpu::Buffer,
-    /// Vertex gradient along y (smoothed when smoothing is on).
-    pub grad_y: wgpu::Buffer,
     /// Intensity in [0, 1] (level 0 is [`DepthPreprocessor::intensity`]; coarser levels are
     /// 2x2 block means).
     pub intensity: wgpu::Buffer,
@@ -261,18 +261,18 @@ impl DepthPreprocessor {
                     depth_m: gpu.storage_buffer::<f32>(&name("depth_m"), n),
                     vertex_in_camera: gpu.storage_buffer::<[f32; 4]>(&name("vertex_in_camera"), n),
                     normal_in_camera: gpu.storage_buffer::<[f32; 4]>(&name("normal_in_camera"), n),
-                    grad_x: gpu.storage_buffer::<[f32; 4]>(&name("grad_x"), n),
-                    grad_y: gpu.storage_buffer::<[f32; 4]>(&name("grad_y"), n),
                     intensity: if l == 0 { intensity.clone() } else { gpu.storage_buffer::<f32>(&name("intensity"), n) },
                 }
             })
             .collect();
         let depth_unfiltered_m = config.bilateral.map(|_| gpu.storage_buffer::<f32>("core.preprocess.depth_unfiltered_m", n0));
-        let grad_tmp = config.gradient_smoothing.map(|_| {
-            (gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_x_tmp", n0), gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_y_tmp", n0))
+        // Gradients smoothed along x, when smoothing is on: one pair at full resolution serves
+        // every level (the levels' dispatches run one after another).
+        let gradients = config.gradient_smoothing.map(|_| {
+            [gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_x", n0), gpu.storage_buffer::<[f32; 4]>("core.preprocess.grad_y", n0)]
         });
 
-        use crate::kernels::{bilateral_filter, color_to_float, depth_pyramid_down, depth_to_metres, gradient_smooth, intensity_pyramid_down, normal_map, vertex_gradients, vertex_map};
+        use crate::kernels::{bilateral_filter, color_to_float, depth_pyramid_down, depth_to_metres, intensity_pyramid_down, vertex_gradients, vertex_map, vertex_normals};
         let mut stages = Vec::new();
         // Whether a stage builds the geometry (depth pyramid, vertex and normal maps) or the
         // images (metric depth, colour, intensity pyramid).
@@ -305,23 +305,16 @@ impl DepthPreprocessor {
             let params = gpu.uniform_buffer("core.vertex_map.params", &VertexMapParams { intrinsics: GpuIntrinsics::from(k) });
             let bg = vertex_map::Bindings { params: &params, depth_m: &level.depth_m, vertex_in_camera: &level.vertex_in_camera }.bind_group(gpu);
             push(GEOMETRY, format!("vertex_map[{l}]"), |k| &k.vertex_map, params, bg, inv);
-            let p = VertexGradientsParams { width_px: k.width_px, height_px: k.height_px, ..Default::default() };
-            let params = gpu.uniform_buffer("core.vertex_gradients.params", &p);
-            let bg = vertex_gradients::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x: &level.grad_x, grad_y: &level.grad_y }.bind_group(gpu);
-            push(GEOMETRY, format!("vertex_gradients[{l}]"), |k| &k.vertex_gradients, params, bg, inv);
-            if let (Some(g), Some((tmp_x, tmp_y))) = (config.gradient_smoothing, &grad_tmp) {
-                for axis in 0..2u32 {
-                    let params = gpu.uniform_buffer("core.gradient_smooth.params", &g.params(&k, axis));
-                    let [grad_x_in, grad_y_in, grad_x_out, grad_y_out]: [&wgpu::Buffer; 4] =
-                        if axis == 0 { [&level.grad_x, &level.grad_y, tmp_x, tmp_y] } else { [tmp_x, tmp_y, &level.grad_x, &level.grad_y] };
-                    let bg = gradient_smooth::Bindings { params: &params, grad_x_in, grad_y_in, grad_x_out, grad_y_out }.bind_group(gpu);
-                    push(GEOMETRY, format!("gradient_smooth[{l}].{}", ["x", "y"][axis as usize]), |k| &k.gradient_smooth, params, bg, inv);
-                }
+            if let (Some(p), Some([grad_x, grad_y])) = (config.vertex_gradients_params(&k), &gradients) {
+                let params = gpu.uniform_buffer("core.vertex_gradients.params", &p);
+                let bg = vertex_gradients::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x, grad_y }.bind_group(gpu);
+                push(GEOMETRY, format!("vertex_gradients[{l}]"), |k| &k.vertex_gradients, params, bg, inv);
             }
-            let params = gpu.uniform_buffer("core.normal_map.params", &config.normal_map_params(&k));
-            let bg = normal_map::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x: &level.grad_x, grad_y: &level.grad_y, normal_in_camera: &level.normal_in_camera }
-                .bind_group(gpu);
-            push(GEOMETRY, format!("normal_map[{l}]"), |k| &k.normal_map, params, bg, inv);
+            let params = gpu.uniform_buffer("core.vertex_normals.params", &config.vertex_normals_params(&k));
+            // Without smoothing the gradient bindings are unread: the vertices stand in.
+            let [grad_x, grad_y] = gradients.as_ref().map_or([&level.vertex_in_camera; 2], |[x, y]| [x, y]);
+            let bg = vertex_normals::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x, grad_y, normal_in_camera: &level.normal_in_camera }.bind_group(gpu);
+            push(GEOMETRY, format!("vertex_normals[{l}]"), |k| &k.vertex_normals, params, bg, inv);
         }
         let params = gpu.uniform_buffer("core.color_to_float.params", &ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() });
         let bg = color_to_float::Bindings { params: &params, rgb8: &rgb8, color: &color, intensity: &intensity }.bind_group(gpu);

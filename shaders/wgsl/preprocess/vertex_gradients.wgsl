@@ -1,8 +1,15 @@
 // SPDX-License-Identifier: MIT
-//! Each invocation takes central differences of the vertex map at one pixel (003-digest §4.2):
-//! grad_x = V(x+1, y) - V(x-1, y), grad_y = V(x, y+1) - V(x, y-1), stored as (dx, dy, dz, 0) in
-//! metres. Both are invalid (NaN) on the image border or where any of the four neighbours or
-//! the centre is invalid.
+//! Each invocation computes the vertex-map gradients of one pixel for `vertex_normals` when
+//! the gradients are smoothed (003-digest §4.2): the central differences
+//! grad_x = V(x+1, y) - V(x-1, y) and grad_y = V(x, y+1) - V(x, y-1), then the first, along-x
+//! pass of Boots' separable Gaussian: the weighted mean, weights exp(-i^2 / (2 sigma^2)), of the
+//! differences at the 2r+1 pixels (x+i, y) that have them (each computed here from the vertex
+//! map: the differences are never stored). Stored as (dx, dy, dz, 0) in metres; invalid (NaN)
+//! where the pixel itself has no differences (the image border, or the centre or one of its
+//! four neighbours invalid). `vertex_normals` takes the along-y pass.
+//!
+//! No workgroup memory: CPU adapters (lavapipe, SwiftShader) run a workgroup with barriers as
+//! one coroutine per invocation, which cost more than the recomputed differences save.
 #import invalid
 
 struct VertexGradientsParams {
@@ -10,42 +17,78 @@ struct VertexGradientsParams {
     width_px: u32,
     // Image height, pixels.
     height_px: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // Smoothing taps on each side.
+    radius_px: u32,
+    // Smoothing Gaussian sigma, pixels.
+    sigma_px: f32,
 }
 
 // Uniform `VertexGradientsParams`.
 @group(0) @binding(0) var<uniform> params: VertexGradientsParams;
 // Vertices, camera frame.
 @group(0) @binding(1) var<storage, read> vertex_in_camera: array<vec4<f32>>;
-// V(x+1) - V(x-1), metres.
+// Out: V(x+1) - V(x-1), smoothed along x, metres.
 @group(0) @binding(2) var<storage, read_write> grad_x: array<vec4<f32>>;
-// V(y+1) - V(y-1), metres.
+// Out: V(y+1) - V(y-1), smoothed along x, metres.
 @group(0) @binding(3) var<storage, read_write> grad_y: array<vec4<f32>>;
 
-@compute @workgroup_size(16, 16, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let w = params.width_px;
-    let h = params.height_px;
-    if gid.x >= w || gid.y >= h {
-        return;
+struct Differences {
+    x: vec3<f32>,
+    y: vec3<f32>,
+    valid: bool,
+}
+
+// The central differences at pixel (px, py).
+fn central_differences(px: i32, py: i32) -> Differences {
+    let w = i32(params.width_px);
+    var g = Differences(vec3<f32>(0.0), vec3<f32>(0.0), false);
+    if px < 1 || py < 1 || px + 1 >= w || py + 1 >= i32(params.height_px) {
+        return g;
     }
-    let ix = gid.y * w + gid.x;
-    if gid.x == 0u || gid.y == 0u || gid.x + 1u == w || gid.y + 1u == h {
-        grad_x[ix] = invalid_vec4();
-        grad_y[ix] = invalid_vec4();
-        return;
-    }
+    let ix = u32(py * w + px);
     let centre = vertex_in_camera[ix];
     let left = vertex_in_camera[ix - 1u];
     let right = vertex_in_camera[ix + 1u];
-    let up = vertex_in_camera[ix - w];
-    let down = vertex_in_camera[ix + w];
+    let up = vertex_in_camera[ix - u32(w)];
+    let down = vertex_in_camera[ix + u32(w)];
     if !is_valid_f32(centre.z) || !is_valid_f32(left.z) || !is_valid_f32(right.z) || !is_valid_f32(up.z) || !is_valid_f32(down.z) {
+        return g;
+    }
+    g.x = right.xyz - left.xyz;
+    g.y = down.xyz - up.xyz;
+    g.valid = true;
+    return g;
+}
+
+@compute @workgroup_size(16, 16, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= params.width_px || gid.y >= params.height_px {
+        return;
+    }
+    let ix = gid.y * params.width_px + gid.x;
+    let x = i32(gid.x);
+    let y = i32(gid.y);
+    if !central_differences(x, y).valid {
         grad_x[ix] = invalid_vec4();
         grad_y[ix] = invalid_vec4();
         return;
     }
-    grad_x[ix] = vec4<f32>(right.xyz - left.xyz, 0.0);
-    grad_y[ix] = vec4<f32>(down.xyz - up.xyz, 0.0);
+    let r = i32(params.radius_px);
+    let k = -0.5 / (params.sigma_px * params.sigma_px);
+    var sum_w = 0.0;
+    var sum_x = vec3<f32>(0.0);
+    var sum_y = vec3<f32>(0.0);
+    for (var i = -r; i <= r; i++) {
+        let g = central_differences(x + i, y);
+        if !g.valid {
+            continue;
+        }
+        // The centre's weight is exactly 1, as `vertex_normals`' radius-0 path assumes.
+        let wt = select(exp(f32(i * i) * k), 1.0, i == 0);
+        sum_w += wt;
+        sum_x += wt * g.x;
+        sum_y += wt * g.y;
+    }
+    grad_x[ix] = vec4<f32>(sum_x / sum_w, 0.0);
+    grad_y[ix] = vec4<f32>(sum_y / sum_w, 0.0);
 }

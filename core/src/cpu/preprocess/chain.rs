@@ -3,10 +3,7 @@
 //! the CPU references, for end-to-end checks and for CPU-only tests of later stages.
 
 use crate::cpu::shared::{pack_bytes, pack_u16_pairs};
-use crate::kernels::{
-    GpuIntrinsics, color_to_float::ColorToFloatParams, intensity_pyramid_down::IntensityPyramidDownParams, vertex_gradients::VertexGradientsParams,
-    vertex_map::VertexMapParams,
-};
+use crate::kernels::{GpuIntrinsics, color_to_float::ColorToFloatParams, intensity_pyramid_down::IntensityPyramidDownParams, vertex_map::VertexMapParams};
 use crate::preprocess::PreprocessConfig;
 use crate::{PinholeIntrinsics, RgbdCalibration, RgbdFrame};
 
@@ -19,10 +16,6 @@ pub struct CpuPyramidLevel {
     pub depth_m: Vec<f32>,
     /// Vertices (x, y, z, 1), camera frame.
     pub vertex_in_camera: Vec<[f32; 4]>,
-    /// Final gradients along x (after smoothing when on).
-    pub grad_x: Vec<[f32; 4]>,
-    /// Final gradients along y (after smoothing when on).
-    pub grad_y: Vec<[f32; 4]>,
     /// Unit normals (nx, ny, nz, 0), camera frame.
     pub normal_in_camera: Vec<[f32; 4]>,
     /// Intensity (level 0: BT.601 of the colour; coarser: 2x2 block means).
@@ -88,20 +81,12 @@ pub fn preprocess(calibration: &RgbdCalibration, config: &PreprocessConfig, fram
             let mut vertex_in_camera = vec![[0.0; 4]; n];
             crate::cpu::vertex_map(&VertexMapParams { intrinsics: GpuIntrinsics::from(k) }, &depth_m, &mut vertex_in_camera);
             let (mut grad_x, mut grad_y) = (vec![[0.0; 4]; n], vec![[0.0; 4]; n]);
-            let p = VertexGradientsParams { width_px: k.width_px, height_px: k.height_px, ..Default::default() };
-            crate::cpu::vertex_gradients(&p, &vertex_in_camera, &mut grad_x, &mut grad_y);
-            if let Some(g) = config.gradient_smoothing {
-                for axis in 0..2 {
-                    let p = g.params(&k, axis);
-                    let (mut ox, mut oy) = (vec![[0.0; 4]; n], vec![[0.0; 4]; n]);
-                    crate::cpu::gradient_smooth(&p, &grad_x, &grad_y, &mut ox, &mut oy);
-                    (grad_x, grad_y) = (ox, oy);
-                }
+            if let Some(p) = config.vertex_gradients_params(&k) {
+                crate::cpu::vertex_gradients(&p, &vertex_in_camera, &mut grad_x, &mut grad_y);
             }
             let mut normal_in_camera = vec![[0.0; 4]; n];
-            let p = config.normal_map_params(&k);
-            crate::cpu::normal_map(&p, &vertex_in_camera, &grad_x, &grad_y, &mut normal_in_camera);
-            CpuPyramidLevel { intrinsics: k, depth_m, vertex_in_camera, grad_x, grad_y, normal_in_camera, intensity }
+            crate::cpu::vertex_normals(&config.vertex_normals_params(&k), &vertex_in_camera, &grad_x, &grad_y, &mut normal_in_camera);
+            CpuPyramidLevel { intrinsics: k, depth_m, vertex_in_camera, normal_in_camera, intensity }
         })
         .collect();
     CpuPreprocessed { depth_unfiltered_m, levels, color, intensity }
