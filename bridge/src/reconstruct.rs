@@ -319,6 +319,9 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             times.record("gpu preprocess", g.preprocess);
             if features_on {
                 times.record("gpu features", g.features.iter().sum());
+                for (stage, ms) in webfusion_core::fusion::FEATURE_STAGES.iter().zip(g.features) {
+                    times.record(&format!("gpu features: {stage}"), ms);
+                }
             }
             if report.state != TrackingState::Initialised {
                 times.record("gpu track", g.track);
