@@ -485,6 +485,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
                     "relocalisations_confirmed": s.relocalisations_confirmed,
                     "recoveries": s.recoveries,
                     "keyframes_added": s.keyframes_added,
+                    "withheld": s.withheld,
                     "keyframes": a.keyframes(),
                     "ms_median": if ms.is_empty() { 0.0 } else { crate::timing::summarize(ms).median_ms },
                 })

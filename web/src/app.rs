@@ -907,8 +907,8 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
     ));
     lines.push(match &f.features {
         Some(x) => format!(
-            "feature odometry: {} guesses · {} relocalisations ({} confirmed by ICP) · {} keyframes · {:.0} ms/frame with tracking",
-            x.guesses, x.relocalisations, x.relocalisations_confirmed, x.keyframes, x.median_ms
+            "feature odometry: {} guesses · {} relocalisations ({} confirmed by ICP) · {} withheld after gaps · {} keyframes · {:.0} ms/frame with tracking",
+            x.guesses, x.relocalisations, x.relocalisations_confirmed, x.withheld, x.keyframes, x.median_ms
         ),
         None => "feature odometry off".to_owned(),
     });

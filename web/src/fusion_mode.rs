@@ -381,6 +381,8 @@ pub(crate) struct FeatureStatus {
     pub(crate) relocalisations: usize,
     pub(crate) relocalisations_confirmed: usize,
     pub(crate) recoveries: usize,
+    /// Frames after a gap that no feature pose placed (lost without tracking).
+    pub(crate) withheld: usize,
     pub(crate) keyframes: usize,
     /// Median milliseconds of a frame through features and dense tracking (one submission while
     /// tracking).
@@ -1046,7 +1048,7 @@ impl FusionMode {
             },
             latency_ms: self.latency_ms,
             features: self.pipeline.as_ref().and_then(|p| p.assist.as_ref()).map(|a| {
-                let AssistStats { guesses, relocalisations, relocalisations_confirmed, recoveries, .. } = a.stats();
+                let AssistStats { guesses, relocalisations, relocalisations_confirmed, recoveries, withheld, .. } = a.stats();
                 let mut ms = a.frame_ms().iter().rev().take(STATS_WINDOW).copied().collect::<Vec<f64>>();
                 ms.sort_by(f64::total_cmp);
                 let pair = self.pair.as_ref().map(|v| PairStatus {
@@ -1059,7 +1061,7 @@ impl FusionMode {
                     stage: PAIR_STAGES[self.odometry_stage],
                     stages_ms: v.stages_ms.map(|t| t.is_finite().then_some(t)),
                 });
-                FeatureStatus { guesses, relocalisations, relocalisations_confirmed, recoveries, keyframes: a.keyframes(), median_ms: ms.get(ms.len() / 2).copied().unwrap_or(0.0), pair }
+                FeatureStatus { guesses, relocalisations, relocalisations_confirmed, recoveries, withheld, keyframes: a.keyframes(), median_ms: ms.get(ms.len() / 2).copied().unwrap_or(0.0), pair }
             }),
             planes: self.plane_status.clone().filter(|_| self.pipeline.as_ref().is_some_and(|p| p.planes.is_some())).map(|mut s| {
                 s.median_ms = self.plane_ms.median().unwrap_or(0.0);

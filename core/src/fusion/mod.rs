@@ -295,6 +295,13 @@ pub enum LostReason {
         /// Rotation, radians.
         rotation_rad: f64,
     },
+    /// Not tracked at all: so long after the last tracked frame that ICP from its pose could
+    /// converge to a false fit its checks pass, and no feature pose to start from
+    /// (`odometry::assist::MAX_UNSEEDED_GAP_S`).
+    Unverified {
+        /// Seconds since the last tracked frame.
+        gap_s: f64,
+    },
 }
 
 /// Outcome of tracking one frame.

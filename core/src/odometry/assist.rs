@@ -25,6 +25,15 @@
 //!   and jump checks, the jump now measured from the relocalised pose); otherwise the tracker
 //!   is reseeded back at the last good pose, so a false relocalisation leaves nothing behind.
 //!
+//! - **after a gap** (more than [`MAX_UNSEEDED_GAP_S`] since the last accepted frame: frames
+//!   dropped, a stalled stream, a long loss): the frame goes the lost way, features first, and
+//!   is tracked only from a feature pose that ICP then confirms. Without one it is not
+//!   submitted at all: Lost ([`LostReason::Unverified`]), nothing tracked, nothing fused. ICP
+//!   from the last pose is what a frame 1/30 s later needs, and its jump check is what tells
+//!   its true fits from false ones; after a gap the camera may have moved further than the
+//!   check's limits, and ICP can converge to a false fit within them (fr3_teddy with frames
+//!   30..70 dropped was "tracked" 28 cm off).
+//!
 //! A tracked frame becomes a keyframe when no stored keyframe lies within
 //! [`KEYFRAME_SPACING_M`] and [`KEYFRAME_SPACING_RAD`] of it. The spacing keeps every view of
 //! the covered region within half of it (5 cm, 5°) of a keyframe, well inside the viewpoint
@@ -36,7 +45,7 @@
 use super::gpu::{ESTIMATE_BYTES, FeatureExtractor, RELOCALISATION_CANDIDATES};
 use super::tracker::{MotionEstimate, OdometryConfig};
 use super::Features;
-use crate::fusion::{FrameReport, KinectFusion, PassSummary};
+use crate::fusion::{FrameReport, KinectFusion, LostReason, PassSummary, TrackingState};
 use crate::kernels::feature_guess::{self, FeatureGuessParams, RigidEstimate};
 use crate::preprocess::DepthPreprocessor;
 use crate::{Error, Gpu, GpuCounts, Result, RgbdFrame, Se3};
@@ -47,6 +56,15 @@ pub const KEYFRAME_SPACING_M: f64 = 0.10;
 pub const KEYFRAME_SPACING_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// Keyframes kept (each holds one frame's keypoint slots on the GPU: about 58 KB at 640×480).
 pub const KEYFRAME_CAPACITY: usize = 64;
+/// Longest time since the last accepted frame after which the dense tracker may still start
+/// from that frame's pose without a feature pose, seconds. ICP's jump check (its result within
+/// 20 cm and 25° of the last pose, [`crate::fusion::DEFAULT_MAX_JUMP_M`] and
+/// [`crate::fusion::DEFAULT_MAX_JUMP_RAD`]) is what tells a true fit from a false one that
+/// converged elsewhere; a hand-held camera at typical speeds (the TUM RGB-D benchmark's fr1
+/// sequences: 0.2-0.4 m/s, 25-50°/s) covers those limits in about half a second, after which
+/// the check no longer separates them. Frames a stream drops now and then (every 3rd kept:
+/// 0.1 s; ten in a row: 0.37 s) stay within it.
+pub const MAX_UNSEEDED_GAP_S: f64 = 0.5;
 
 /// A feature-based starting pose for the dense tracker.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -91,14 +109,18 @@ pub struct AssistStats {
     pub recoveries: usize,
     /// Keyframes added (including the ones that replaced others).
     pub keyframes_added: usize,
+    /// Frames more than [`MAX_UNSEEDED_GAP_S`] after the last accepted one that no feature
+    /// pose placed: lost without tracking ([`LostReason::Unverified`]).
+    pub withheld: usize,
 }
 
-/// A frame the dense tracker accepted (the reference, or a keyframe): its features, pose and
-/// source index.
+/// A frame the dense tracker accepted (the reference, or a keyframe): its features, pose,
+/// source index and depth timestamp.
 struct Keyframe {
     features: Features,
     world_from_camera: Se3,
     frame: u64,
+    timestamp_ns: i64,
 }
 
 /// Feature odometry as the dense tracker's assistant.
@@ -254,9 +276,13 @@ impl FeatureAssist {
     pub async fn process_frame(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<AssistedFrame> {
         let started = web_time::Instant::now();
         let before = gpu.counters.snapshot();
-        let (mut assisted, features) = if self.lost_streak == 0 { self.track(gpu, fusion, frame).await? } else { self.recover(gpu, fusion, frame).await? };
+        // Seconds since the last accepted frame, when beyond what ICP alone may bridge (a clock
+        // that went backwards counts as no gap).
+        let gap_s = self.reference.as_ref().map(|r| (frame.depth_timestamp_ns - r.timestamp_ns) as f64 * 1e-9).filter(|&g| g > MAX_UNSEEDED_GAP_S);
+        let (mut assisted, features) =
+            if self.lost_streak == 0 && gap_s.is_none() { self.track(gpu, fusion, frame).await? } else { self.recover(gpu, fusion, frame, gap_s).await? };
         assisted.host = gpu.counters.snapshot() - before;
-        self.verdict(gpu, fusion, features, assisted.guess, &assisted.report)?;
+        self.verdict(gpu, fusion, features, assisted.guess, &assisted.report, frame.depth_timestamp_ns)?;
         self.ms.push(started.elapsed().as_secs_f64() * 1e3);
         Ok(assisted)
     }
@@ -328,10 +354,13 @@ impl FeatureAssist {
         Some((reference.world_from_camera.compose(&ref_from_cur), reference.frame, inliers, beyond))
     }
 
-    /// A frame after a loss: its features alone (waited for), matched against the last accepted
-    /// frame and this loss's window of keyframes; the most inliers win and the dense tracker is
-    /// reseeded there before it tracks the frame. Returns the frame and its features.
-    async fn recover(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<(AssistedFrame, Features)> {
+    /// A frame after a loss or a gap: its features alone (waited for), matched against the last
+    /// accepted frame and this loss's window of keyframes; the most inliers win and the dense
+    /// tracker is reseeded there before it tracks the frame. With none, the dense tracker tries
+    /// from the last good pose, unless the frame came `unverified_gap_s` seconds after it (more
+    /// than [`MAX_UNSEEDED_GAP_S`]): then it is not submitted at all and reported lost
+    /// ([`LostReason::Unverified`]). Returns the frame and its features.
+    async fn recover(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame, unverified_gap_s: Option<f64>) -> Result<(AssistedFrame, Features)> {
         let seed = frame.index as u32;
         let result = self.extractor.process(gpu, fusion.preprocessor(), frame, seed).await?;
         let stages_ms = result.gpu_ms.unwrap_or([f64::NAN; 5]);
@@ -346,6 +375,22 @@ impl FeatureAssist {
             }
         }
         let guess = best.map(|(inliers, world_from_camera, keyframe)| Guess::Relocalised { world_from_camera, keyframe, inliers });
+        if let (None, Some(gap_s), Some(reference)) = (guess, unverified_gap_s, &self.reference) {
+            self.stats.withheld += 1;
+            let report = FrameReport {
+                index: frame.index,
+                world_from_camera: reference.world_from_camera,
+                state: TrackingState::Lost(LostReason::Unverified { gap_s }),
+                icp: Vec::new(),
+                gpu_ms: None,
+                encode_ms: 0.0,
+                latency_ms: 0.0,
+                host: GpuCounts::default(),
+                map: None,
+                pass_summary: Vec::new(),
+            };
+            return Ok((AssistedFrame { report, guess, host: GpuCounts::default() }, result.features));
+        }
         if let Some(Guess::Relocalised { world_from_camera, .. }) = guess {
             self.stats.relocalisations += 1;
             fusion.reseed(gpu, &world_from_camera)?;
@@ -366,7 +411,9 @@ impl FeatureAssist {
         }
         order.sort_by(|&a, &b| pose_distance(&last_good, &self.keyframes[a].world_from_camera).total_cmp(&pose_distance(&last_good, &self.keyframes[b].world_from_camera)));
         let windows = order.len().div_ceil(RELOCALISATION_CANDIDATES);
-        let start = ((self.lost_streak - 1) % windows) * RELOCALISATION_CANDIDATES;
+        // The nearest window first (on the first lost frame, or on a frame after a gap while
+        // tracking), the next ones on later lost frames.
+        let start = (self.lost_streak.saturating_sub(1) % windows) * RELOCALISATION_CANDIDATES;
         let window: Vec<usize> = order[start..(start + RELOCALISATION_CANDIDATES).min(order.len())].to_vec();
         let estimates = self.extractor.match_keyframes(gpu, &window, keypoints, seed).await?;
         Ok(window
@@ -383,7 +430,7 @@ impl FeatureAssist {
     /// tracked from): tracked (it becomes the reference, and a keyframe where the store has none
     /// near it) or lost. A relocalisation the report does not confirm is undone: `fusion` is
     /// reseeded at the last good pose, so it leaves nothing behind.
-    fn verdict(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, features: Features, guess: Option<Guess>, report: &FrameReport) -> Result<()> {
+    fn verdict(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, features: Features, guess: Option<Guess>, report: &FrameReport, timestamp_ns: i64) -> Result<()> {
         let frame = report.index;
         let relocalised = matches!(guess, Some(Guess::Relocalised { .. }));
         let world_from_camera = &report.world_from_camera;
@@ -403,9 +450,9 @@ impl FeatureAssist {
         self.lost_streak = 0;
         self.extractor.accept(true);
         if !self.keyframes.iter().any(|k| within_spacing(&k.world_from_camera, world_from_camera)) {
-            self.add_keyframe(gpu, Keyframe { features: features.clone(), world_from_camera: *world_from_camera, frame })?;
+            self.add_keyframe(gpu, Keyframe { features: features.clone(), world_from_camera: *world_from_camera, frame, timestamp_ns })?;
         }
-        self.reference = Some(Keyframe { features, world_from_camera: *world_from_camera, frame });
+        self.reference = Some(Keyframe { features, world_from_camera: *world_from_camera, frame, timestamp_ns });
         Ok(())
     }
 
@@ -440,7 +487,7 @@ mod tests {
     use glam::{DQuat, DVec3};
 
     fn kf(x: f64, yaw: f64, frame: u64) -> Keyframe {
-        Keyframe { features: Features::default(), world_from_camera: Se3::new(DQuat::from_rotation_y(yaw), DVec3::new(x, 0.0, 0.0)), frame }
+        Keyframe { features: Features::default(), world_from_camera: Se3::new(DQuat::from_rotation_y(yaw), DVec3::new(x, 0.0, 0.0)), frame, timestamp_ns: 0 }
     }
 
     #[test]

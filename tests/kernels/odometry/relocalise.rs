@@ -162,3 +162,63 @@ fn a_jump_beyond_icps_limits_is_relocalised_at_the_feature_motion() {
     assert_eq!(assist.stats().relocalisations_confirmed, 1, "{:?}", assist.stats());
     finish(&gpu);
 }
+
+/// A frame more than `MAX_UNSEEDED_GAP_S` after the last tracked one is tracked only from a
+/// feature pose that ICP confirms. On the fine loop (5 cm and 2° a frame), tracked to frame 6:
+/// frame 7 comes a second later one step on, its colour blanked (no keypoints): ICP from the
+/// last pose would track it, but nothing else vouches for that after a gap, so it is lost
+/// without tracking (Unverified, not submitted, nothing fused). Frame 8, a thirtieth of a
+/// second later with its texture, is relocalised by its features against frame 6 and
+/// confirmed by ICP. Frame 9 is blank again but within the horizon of frame 8: ICP alone
+/// tracks it, as it always did (the control: the same kind of frame the gate withheld is
+/// trackable, so the loss came from the gap alone).
+#[test]
+fn after_a_gap_only_a_feature_pose_that_icp_confirms_is_tracked() {
+    use webfusion_core::fusion::LostReason;
+    use webfusion_core::odometry::assist::MAX_UNSEEDED_GAP_S;
+    let gpu = gpu();
+    let room = SyntheticRoom::new(6.0, 3.0, 6.0);
+    let poses: Vec<Se3> = room.path(180)[..10].to_vec();
+    let frame_ns = 1_000_000_000 / 30;
+    let gap_ns = 1_000_000_000;
+    let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: 5000.0 };
+    // Depth-only ICP: a blanked colour image would otherwise disagree with its textured
+    // predecessor in the photometric rows.
+    let mut config = FusionConfig::default();
+    config.icp.rgb_weight = 0.0;
+    let mut fusion = KinectFusion::new(&gpu, calibration, config.clone()).expect("fusion");
+    let mut assist = FeatureAssist::new(&gpu, fusion.preprocessor(), OdometryConfig::default()).expect("features");
+    assist.set_jump_limits(f64::from(config.icp.max_jump_m), f64::from(config.icp.max_jump_rad));
+    let mut last_good = Se3::IDENTITY;
+    for (i, truth) in poses.iter().enumerate() {
+        let mut frame = room.frame(&K, &poses, i);
+        let t_ns = i as i64 * frame_ns + if i >= 7 { gap_ns } else { 0 };
+        (frame.depth_timestamp_ns, frame.color_timestamp_ns) = (t_ns, t_ns);
+        if i == 7 || i == 9 {
+            frame.color.rgb8.fill(128);
+        }
+        let AssistedFrame { report, guess, host } = pollster::block_on(assist.process_frame(&gpu, &mut fusion, &frame)).expect("frame");
+        let error = poses[0].inverse().compose(truth).inverse().compose(&report.world_from_camera);
+        let (t_cm, r_deg) = (error.translation_m.length() * 100.0, error.rotation_angle_rad().to_degrees());
+        eprintln!("frame {i}: {:?}, guess {guess:?}, {host:?}, error {t_cm:.2} cm {r_deg:.2}°", report.state);
+        if i == 7 {
+            match report.state {
+                TrackingState::Lost(LostReason::Unverified { gap_s }) => assert!(gap_s > MAX_UNSEEDED_GAP_S && (gap_s - 1.0 - 1.0 / 30.0).abs() < 1e-6, "gap {gap_s} s"),
+                other => panic!("frame 7, a second after frame 6 with no feature pose, was {other:?}"),
+            }
+            assert!(guess.is_none() && report.icp.is_empty(), "nothing tracked: {guess:?}, {:?}", report.icp);
+            assert_eq!(report.world_from_camera, last_good, "the last good pose is reported");
+            continue;
+        }
+        assert!(!report.state.is_lost() && t_cm < 1.0 && r_deg < 0.5, "frame {i}: {:?}, {t_cm} cm, {r_deg}°", report.state);
+        match i {
+            8 => assert!(matches!(guess, Some(Guess::Relocalised { keyframe: 6, .. })), "frame 8 placed by its features against frame 6: {guess:?}"),
+            9 => assert!(guess.is_none() && host.submits == 1, "frame 9 tracked by ICP alone in one submission: {guess:?}, {host:?}"),
+            _ => {}
+        }
+        last_good = report.world_from_camera;
+    }
+    let stats = assist.stats();
+    assert_eq!((stats.withheld, stats.relocalisations_confirmed), (1, 1), "{stats:?}");
+    finish(&gpu);
+}
