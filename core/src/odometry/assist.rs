@@ -282,6 +282,11 @@ impl FeatureAssist {
         let (mut assisted, features) =
             if self.lost_streak == 0 && gap_s.is_none() { self.track(gpu, fusion, frame).await? } else { self.recover(gpu, fusion, frame, gap_s).await? };
         assisted.host = gpu.counters.snapshot() - before;
+        if self.lost_streak > 0 && assisted.report.state == TrackingState::Tracked {
+            // The frames lost before it were withheld (never submitted): the dense tracker saw
+            // no loss, but the stream did.
+            assisted.report.state = TrackingState::Recovered;
+        }
         self.verdict(gpu, fusion, features, assisted.guess, &assisted.report, frame.depth_timestamp_ns)?;
         self.ms.push(started.elapsed().as_secs_f64() * 1e3);
         Ok(assisted)
