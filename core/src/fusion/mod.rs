@@ -299,7 +299,7 @@ pub enum LostReason {
     /// converge to a false fit its checks pass, and no feature pose to start from
     /// (`odometry::assist::MAX_UNSEEDED_GAP_S`).
     Unverified {
-        /// Seconds since the last tracked frame.
+        /// Seconds since the last tracked frame (negative where the clock jumped back).
         gap_s: f64,
     },
 }

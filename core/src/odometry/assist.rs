@@ -276,9 +276,10 @@ impl FeatureAssist {
     pub async fn process_frame(&mut self, gpu: &Gpu, fusion: &mut KinectFusion, frame: &RgbdFrame) -> Result<AssistedFrame> {
         let started = web_time::Instant::now();
         let before = gpu.counters.snapshot();
-        // Seconds since the last accepted frame, when beyond what ICP alone may bridge (a clock
-        // that went backwards counts as no gap).
-        let gap_s = self.reference.as_ref().map(|r| (frame.depth_timestamp_ns - r.timestamp_ns) as f64 * 1e-9).filter(|&g| g > MAX_UNSEEDED_GAP_S);
+        // Seconds since the last accepted frame, when beyond what ICP alone may bridge. A clock
+        // that jumped back as far (a splice, a replay that looped) is a gap too: nothing says
+        // the camera moved continuously.
+        let gap_s = self.reference.as_ref().map(|r| (frame.depth_timestamp_ns - r.timestamp_ns) as f64 * 1e-9).filter(|g| g.abs() > MAX_UNSEEDED_GAP_S);
         let (mut assisted, features) =
             if self.lost_streak == 0 && gap_s.is_none() { self.track(gpu, fusion, frame).await? } else { self.recover(gpu, fusion, frame, gap_s).await? };
         assisted.host = gpu.counters.snapshot() - before;
