@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
 //! The feature chain on the GPU, recorded after the preprocessor in one submission:
-//! detection (`fast_score`, `keypoint_select` per level), description (`feature_smooth`,
+//! detection (`fast_score`, `corner_candidates`, `keypoint_select` per level), description (`feature_smooth`,
 //! `orb_describe` per level), matching against the reference frame (`hamming_match`,
 //! current → reference and back, then `match_select`'s filters and 3D pairs) and the robust
 //! motion estimate (`ransac_hypotheses`, `ransac_refine`). Three keypoint sets rotate through three roles: the
@@ -24,7 +24,7 @@ use crate::cpu::shared::DESCRIPTOR_WORDS;
 use crate::engine::{FrameEncoder, ReadbackRing, StageTimer};
 use crate::fusion::FEATURE_STAGES;
 use crate::kernels::gpu_data::{FeaturePair, RigidEstimate};
-use crate::kernels::{fast_score, feature_smooth, hamming_match, keypoint_select, match_select, orb_describe, ransac_hypotheses, ransac_refine};
+use crate::kernels::{corner_candidates, fast_score, feature_smooth, hamming_match, keypoint_select, match_select, orb_describe, ransac_hypotheses, ransac_refine};
 use crate::preprocess::DepthPreprocessor;
 use crate::{Error, Gpu, Result, RgbdFrame};
 
@@ -102,6 +102,7 @@ struct Level {
     layout: LevelLayout,
     _params: Vec<wgpu::Buffer>,
     fast: wgpu::BindGroup,
+    candidates: wgpu::BindGroup,
     /// The smoothing along x (intensity -> smoothed_x), then along y (-> smoothed).
     smooth: [wgpu::BindGroup; 2],
     /// Per set written.
@@ -219,6 +220,9 @@ impl FeatureExtractor {
                 let n = (l.width_px * l.height_px) as usize;
                 let image = &preprocessor.levels[l.level as usize].intensity;
                 let score = gpu.storage_buffer::<f32>(&format!("core.fast_score.score[{}]", l.level), n);
+                let candidate = gpu.storage_buffer::<f32>(&format!("core.corner_candidates.candidate[{}]", l.level), n);
+                let candidates_p = gpu.uniform_buffer("core.corner_candidates.params", &l.candidates_params(&k0));
+                let candidates = corner_candidates::Bindings { params: &candidates_p, score: &score, depth_m, candidate: &candidate }.bind_group(gpu);
                 let smoothed_x = gpu.storage_buffer::<f32>(&format!("core.feature_smooth.smoothed_x[{}]", l.level), n);
                 let smoothed = gpu.storage_buffer::<f32>(&format!("core.feature_smooth.smoothed[{}]", l.level), n);
                 let fast_p = gpu.uniform_buffer("core.fast_score.params", &l.fast_params(&config));
@@ -230,12 +234,12 @@ impl FeatureExtractor {
                     feature_smooth::Bindings { params: &smooth_p[0], intensity: image, smoothed: &smoothed_x }.bind_group(gpu),
                     feature_smooth::Bindings { params: &smooth_p[1], intensity: &smoothed_x, smoothed: &smoothed }.bind_group(gpu),
                 ];
-                let select = [0, 1, 2].map(|s: usize| keypoint_select::Bindings { params: &select_p, score: &score, depth_m, keypoints: &sets[s].keypoints, points: &sets[s].points }.bind_group(gpu));
+                let select = [0, 1, 2].map(|s: usize| keypoint_select::Bindings { params: &select_p, score: &candidate, depth_m, keypoints: &sets[s].keypoints, points: &sets[s].points }.bind_group(gpu));
                 let describe = [0, 1, 2].map(|s: usize| {
                     orb_describe::Bindings { params: &describe_p, smoothed: &smoothed, keypoints: &sets[s].keypoints, pattern: &pattern, descriptors: &sets[s].descriptors, features: &sets[s].features }.bind_group(gpu)
                 });
                 let [smooth_x_p, smooth_y_p] = smooth_p;
-                Level { layout: *l, _params: vec![fast_p, smooth_x_p, smooth_y_p, select_p, describe_p, score, smoothed_x, smoothed], fast, smooth, select, describe }
+                Level { layout: *l, _params: vec![fast_p, candidates_p, smooth_x_p, smooth_y_p, select_p, describe_p, score, candidate, smoothed_x, smoothed], fast, candidates, smooth, select, describe }
             })
             .collect();
         let forward = gpu.storage_buffer::<[u32; 4]>("core.hamming_match.forward", slots);
@@ -378,6 +382,7 @@ impl FeatureExtractor {
             let mut pass = fe.stage("detection");
             for l in &self.levels {
                 gpu.kernels.fast_score.dispatch_in(&mut pass, &l.fast, [l.layout.width_px, l.layout.height_px, 1]);
+                gpu.kernels.corner_candidates.dispatch_in(&mut pass, &l.candidates, [l.layout.width_px, l.layout.height_px, 1]);
                 gpu.kernels.keypoint_select.dispatch_in(&mut pass, &l.select[s], [l.layout.cells_x * l.layout.cells_y, 1, 1]);
             }
         }

@@ -2,8 +2,8 @@
 //! Seed 002's feature-based RGB-D odometry, rebuilt for the GPU (`shaders/wgsl/odometry/`).
 //!
 //! Per frame: FAST-9 corner scores on each level of the intensity pyramid (`fast_score`), the
-//! best few local maxima per cell of an image grid that pass 002's depth border filter, with
-//! their 3D points (`keypoint_select`), the intensity centroid's orientation and a 256-bit
+//! local maxima that pass 002's depth border filter (`corner_candidates`), the best few of them
+//! per cell of an image grid with their 3D points (`keypoint_select`), the intensity centroid's orientation and a 256-bit
 //! rotated binary descriptor on the smoothed level image (`feature_smooth`, `orb_describe`),
 //! then brute-force Hamming matching against the reference frame in both directions
 //! (`hamming_match`). The host filters the matches (Lowe's ratio, the mutual check, 002's
@@ -27,7 +27,7 @@ pub mod tracker;
 
 use crate::cpu::shared::{DESCRIPTOR_BITS, DESCRIPTOR_WORDS, pcg_hash, random_uniform};
 use crate::cpu::odometry::keypoint_select::MAX_PER_CELL;
-use crate::kernels::{fast_score::FastScoreParams, keypoint_select::KeypointSelectParams, orb_describe::OrbDescribeParams};
+use crate::kernels::{corner_candidates::CornerCandidatesParams, fast_score::FastScoreParams, keypoint_select::KeypointSelectParams, orb_describe::OrbDescribeParams};
 use crate::{Error, PinholeIntrinsics, Result};
 
 /// Radius within which the descriptor's test points lie, pixels: rotated by any angle they
@@ -132,6 +132,19 @@ impl LevelLayout {
     /// `fast_score`'s parameters.
     pub fn fast_params(&self, config: &FeatureConfig) -> FastScoreParams {
         FastScoreParams { width_px: self.width_px, height_px: self.height_px, border_px: config.border_px(), threshold: config.fast_threshold }
+    }
+
+    /// `corner_candidates`' parameters, with the full-resolution intrinsics `k0`.
+    pub fn candidates_params(&self, k0: &PinholeIntrinsics) -> CornerCandidatesParams {
+        CornerCandidatesParams {
+            width_px: self.width_px,
+            height_px: self.height_px,
+            level: self.level,
+            depth_width_px: k0.width_px,
+            depth_height_px: k0.height_px,
+            fx_px: k0.fx_px,
+            ..Default::default()
+        }
     }
 
     /// `keypoint_select`'s parameters, with the full-resolution intrinsics `k0`.

@@ -21,7 +21,9 @@ pub fn extract(config: &FeatureConfig, k0: &PinholeIntrinsics, intensity: &[&[f3
         let image = intensity[level.level as usize];
         let mut score = vec![0.0; n];
         cpu::fast_score(&level.fast_params(config), image, &mut score);
-        cpu::keypoint_select(&level.select_params(config, k0), &score, depth_m, &mut out.keypoints, &mut out.points);
+        let mut candidate = vec![0.0; n];
+        cpu::corner_candidates(&level.candidates_params(k0), &score, depth_m, &mut candidate);
+        cpu::keypoint_select(&level.select_params(config, k0), &candidate, depth_m, &mut out.keypoints, &mut out.points);
         let smoothed = cpu::odometry::feature_smooth::smooth_image(level.width_px, level.height_px, image);
         cpu::orb_describe(&level.describe_params(config), &smoothed, &out.keypoints, &pattern, &mut out.descriptors, &mut out.features);
     }

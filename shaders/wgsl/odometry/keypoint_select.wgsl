@@ -1,20 +1,15 @@
 // SPDX-License-Identifier: MIT
 //! Each invocation picks the keypoints of one cell of an image grid at one pyramid level, so
 //! that keypoints spread over the frame (a strong texture cannot take them all): the
-//! `per_cell` highest-scoring FAST corners of its cell that are strict local maxima of the
-//! score among their 8 neighbours (non-maximum suppression; equal scores go to the smaller
-//! pixel index) and pass seed 002's border filter on the full-resolution depth: the 3×3
-//! window at the keypoint's pixel has a depth at its centre and at most 2 missing (002's code:
-//! +1000 per zero depth, rejected at 3000), and no neighbour's depth differs from the
-//! centre's by more than 4 σ(z) of the Kinect noise model plus 2 z / f (the step between two
-//! pixels on a surface at 63° to the ray): a keypoint on a depth discontinuity has no
-//! single 3D point. Slot `slot_offset + cell · per_cell + i` holds the cell's i-th best
-//! (by score, then pixel index): the keypoint (x, y in level pixels, level, score; score 0 for
-//! an empty slot) and its point in the camera frame (back-projected at the level-0 position of
-//! the keypoint, with its depth along that ray: a tent filter of radius 2 px about it over the
-//! valid depths on the centre's surface. Read from the raw depth, this needs no bilateral
-//! filter of the whole image, is unbiased on a planar patch, and averages 7-9 samples' noise;
-//! invalid for an empty slot). Mirrors
+//! `per_cell` highest-scoring candidates of its cell (`corner_candidates`: FAST corners that
+//! are strict local maxima of the score and pass seed 002's border filter). Slot
+//! `slot_offset + cell · per_cell + i` holds the cell's i-th best (by score, then pixel index):
+//! the keypoint (x, y in level pixels, level, score; score 0 for an empty slot) and its point
+//! in the camera frame (back-projected at the level-0 position of the keypoint, with its depth
+//! along that ray: a tent filter of radius 2 px about it over the valid depths within the
+//! border filter's step, 4 σ(z) + 2 z / f, of the centre's, i.e. on the centre's surface. Read
+//! from the raw depth, this needs no bilateral filter of the whole image, is unbiased on a
+//! planar patch, and averages 7-9 samples' noise; invalid for an empty slot). Mirrors
 //! core/src/cpu/odometry/keypoint_select.rs.
 #import invalid
 #import kinect
@@ -43,7 +38,7 @@ struct KeypointSelectParams {
 }
 
 @group(0) @binding(0) var<uniform> params: KeypointSelectParams;
-// The level's FAST scores (0: no corner).
+// The level's candidate scores (`corner_candidates`; 0: none).
 @group(0) @binding(1) var<storage, read> score: array<f32>;
 // Full-resolution depth, metres; invalid where none.
 @group(0) @binding(2) var<storage, read> depth_m: array<f32>;
@@ -54,53 +49,15 @@ struct KeypointSelectParams {
 
 const MAX_PER_CELL: u32 = 8u;
 
-// True when the score at (x, y) beats its 8 neighbours': higher, or equal with a smaller index.
-fn is_local_max(x: u32, y: u32, s: f32) -> bool {
-    let w = params.width_px;
-    let ix = y * w + x;
-    for (var dy = -1; dy <= 1; dy++) {
-        for (var dx = -1; dx <= 1; dx++) {
-            let u = i32(x) + dx;
-            let v = i32(y) + dy;
-            if (dx == 0 && dy == 0) || u < 0 || v < 0 || u >= i32(w) || v >= i32(params.height_px) {
-                continue;
-            }
-            let q = u32(v) * w + u32(u);
-            let t = score[q];
-            if t > s || (t == s && q < ix) {
-                return false;
-            }
-        }
-    }
-    return true;
-}
-
-// The point seen at level-0 position (x0, y0) if 002's border filter accepts the depth around
-// it; invalid otherwise.
-fn filtered_point(x0: f32, y0: f32) -> vec4<f32> {
+// The point seen at level-0 position (x0, y0), a candidate's (its centre depth valid: the
+// border filter passed there).
+fn keypoint_point(x0: f32, y0: f32) -> vec4<f32> {
     let w = i32(params.depth_width_px);
     let h = i32(params.depth_height_px);
     let u = clamp(i32(floor(x0 + 0.5)), 1, w - 2);
     let v = clamp(i32(floor(y0 + 0.5)), 1, h - 2);
     let z = depth_m[v * w + u];
-    if !is_valid_f32(z) || !(z > 0.0) {
-        return invalid_vec4();
-    }
     let step = 4.0 * kinect_sigma_m(z) + 2.0 * z / params.fx_px;
-    var missing = 0u;
-    for (var dy = -1; dy <= 1; dy++) {
-        for (var dx = -1; dx <= 1; dx++) {
-            let n = depth_m[(v + dy) * w + u + dx];
-            if !is_valid_f32(n) || !(n > 0.0) {
-                missing++;
-            } else if abs(n - z) > step {
-                return invalid_vec4();
-            }
-        }
-    }
-    if missing >= 3u {
-        return invalid_vec4();
-    }
     // The depth along the keypoint's ray: a tent filter of radius 2 px centred on (x0, y0) over
     // the valid samples within `step` of the centre's (weights 1 2 1 about a whole pixel, 1 3 3 1
     // about a pixel corner, where coarser levels' keypoints fall), so a planar patch gives the
@@ -135,7 +92,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     // The cell's best so far, by score descending then pixel index ascending.
     var best_score: array<f32, MAX_PER_CELL>;
     var best_pixel: array<u32, MAX_PER_CELL>;
-    var best_point: array<vec4<f32>, MAX_PER_CELL>;
     var kept = 0u;
     let x_begin = (cell % params.cells_x) * params.cell_px;
     let y_begin = (cell / params.cells_x) * params.cell_px;
@@ -146,11 +102,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         for (var x = x_begin; x < x_end; x++) {
             let s = score[y * params.width_px + x];
             // Pixels arrive in index order, so a tie never displaces an earlier keypoint.
-            if !(s > 0.0) || (kept == k && !(s > best_score[k - 1u])) || !is_local_max(x, y, s) {
-                continue;
-            }
-            let p = filtered_point((f32(x) + 0.5) * scale - 0.5, (f32(y) + 0.5) * scale - 0.5);
-            if !is_valid_f32(p.z) {
+            if !(s > 0.0) || (kept == k && !(s > best_score[k - 1u])) {
                 continue;
             }
             // Insert after every entry with a score at least s.
@@ -161,20 +113,20 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             while at > 0u && best_score[at - 1u] < s {
                 best_score[at] = best_score[at - 1u];
                 best_pixel[at] = best_pixel[at - 1u];
-                best_point[at] = best_point[at - 1u];
                 at--;
             }
             best_score[at] = s;
             best_pixel[at] = y * params.width_px + x;
-            best_point[at] = p;
         }
     }
     for (var i = 0u; i < k; i++) {
         let slot = params.slot_offset + cell * k + i;
         if i < kept {
             let px = best_pixel[i];
-            keypoints[slot] = vec4<f32>(f32(px % params.width_px), f32(px / params.width_px), f32(params.level), best_score[i]);
-            points[slot] = best_point[i];
+            let x = px % params.width_px;
+            let y = px / params.width_px;
+            keypoints[slot] = vec4<f32>(f32(x), f32(y), f32(params.level), best_score[i]);
+            points[slot] = keypoint_point((f32(x) + 0.5) * scale - 0.5, (f32(y) + 0.5) * scale - 0.5);
         } else {
             keypoints[slot] = vec4<f32>(0.0, 0.0, f32(params.level), 0.0);
             points[slot] = invalid_vec4();

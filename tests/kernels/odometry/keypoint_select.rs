@@ -1,18 +1,32 @@
 // SPDX-License-Identifier: MIT
-//! `keypoint_select`: per-cell keypoints against the CPU twin. The selection is order-based on
-//! exact scores, so keypoints must be identical; the back-projected points within 1e-6
-//! relative. On a synthetic image with known maxima and depth holes, and on a real frame.
+//! `keypoint_select`: per-cell keypoints against the CPU twin, from `corner_candidates`'
+//! candidates (computed by its twin). The selection is order-based on exact scores, so
+//! keypoints must be identical; the back-projected points within 1e-6 relative. On a synthetic
+//! image with known maxima and depth holes, and on a real frame.
 
 use webfusion_core::cpu;
 use webfusion_core::cpu::preprocess::chain::preprocess;
-use webfusion_core::kernels::keypoint_select::KeypointSelectParams;
+use webfusion_core::kernels::{corner_candidates::CornerCandidatesParams, keypoint_select::KeypointSelectParams};
 use webfusion_core::odometry::{FeatureConfig, slot_count};
 use webfusion_core::preprocess::PreprocessConfig;
 use webfusion_tests::{Slot, Tolerance, assert_negative_control_vec4, cast, compare_vec4, finish, gpu, run_kernel_slots, sample_frame};
 
 const POINT_TOL: Tolerance = Tolerance { absolute: 1e-7, relative: 1e-6 };
 
+/// Selects among the candidates of `score` (marked by `corner_candidates`' twin), GPU and CPU.
 fn run(p: &KeypointSelectParams, score: &[f32], depth_m: &[f32], slots: usize) -> ([Vec<[f32; 4]>; 2], [Vec<[f32; 4]>; 2]) {
+    let candidates_params = CornerCandidatesParams {
+        width_px: p.width_px,
+        height_px: p.height_px,
+        level: p.level,
+        depth_width_px: p.depth_width_px,
+        depth_height_px: p.depth_height_px,
+        fx_px: p.fx_px,
+        ..Default::default()
+    };
+    let mut candidate = vec![0.0; score.len()];
+    cpu::corner_candidates(&candidates_params, score, depth_m, &mut candidate);
+    let score = candidate.as_slice();
     let gpu = gpu();
     let out = run_kernel_slots(
         &gpu,
