@@ -877,10 +877,11 @@ fn status_text(s: &Status, has_ground_truth: bool) -> String {
             f.recovered_frames
         ),
         format!(
-            "median ms ({}): decode {:.1} · preprocess {:.1} · track {:.1} · integrate {:.1} · raycast {:.1} · views {:.1}",
+            "median ms ({}): decode {:.1} · preprocess {:.1} · features {:.1} · track {:.1} · integrate {:.1} · raycast {:.1} · views {:.1}",
             if f.gpu_timestamps { "GPU timestamps" } else { "no GPU timestamps: GPU stages unknown" },
             m.decode,
             m.preprocess,
+            m.features,
             m.track,
             m.integrate,
             m.raycast,

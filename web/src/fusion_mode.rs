@@ -276,7 +276,7 @@ pub(crate) struct FusionMode {
     recovered_frames: u64,
     /// A sparse map's counters as of the last report.
     map: Option<MapStats>,
-    stages: [Window; 6],
+    stages: [Window; 7],
     frame_instants: VecDeque<Instant>,
     host: HostPerFrame,
     latency_ms: Option<f64>,
@@ -886,7 +886,7 @@ impl FusionMode {
             self.orbit = Some(Orbit::looking_at(world_from_camera.transform_point(DVec3::new(0.0, 0.0, 1.5)), 3.0, world_from_camera.rotation * DVec3::NEG_Y));
         }
         let t = report.gpu_ms.unwrap_or_default();
-        for (window, sample) in self.stages.iter_mut().zip([meta.decode_ms, t.preprocess, t.track, t.integrate, t.raycast, meta.views_ms]) {
+        for (window, sample) in self.stages.iter_mut().zip([meta.decode_ms, t.preprocess, t.track, t.integrate, t.raycast, meta.views_ms, t.features.iter().sum()]) {
             window.push(sample);
         }
         self.host = HostPerFrame { submits: report.host.submits as f64, host_waits: report.host.host_waits as f64, readbacks: report.host.readbacks as f64 };
@@ -1025,7 +1025,7 @@ impl FusionMode {
             last_index: self.last_reported,
             frames_in_flight: self.in_flight.len(),
             fps,
-            stages_ms: StageMedians { decode: m(0), preprocess: m(1), track: m(2), integrate: m(3), raycast: m(4), views: m(5) },
+            stages_ms: StageMedians { decode: m(0), preprocess: m(1), features: m(6), track: m(2), integrate: m(3), raycast: m(4), views: m(5) },
             gpu_timestamps: self.pipeline.as_ref().is_some_and(|p| p.fusion.timer_available()),
             host_per_frame: self.host,
             tracking: self.tracking,

@@ -41,6 +41,9 @@ impl Window {
 pub(crate) struct StageMedians {
     pub(crate) decode: f64,
     pub(crate) preprocess: f64,
+    /// The feature pass recorded into the frame (detection, description, matching,
+    /// estimation; 0 with features off).
+    pub(crate) features: f64,
     pub(crate) track: f64,
     pub(crate) integrate: f64,
     pub(crate) raycast: f64,
