@@ -4,8 +4,10 @@
 //! positive, a strict local maximum among its 8 neighbours (non-maximum suppression; equal
 //! scores go to the smaller pixel index) and the depth around its level-0 position passes
 //! seed 002's border filter (the 3×3 window at that pixel has a depth at its centre and at most
-//! 2 missing, and none differs from the centre's by more than 4 σ(z) of the Kinect noise model
-//! plus 2 z / f: a corner on a depth discontinuity has no single 3D point); 0 otherwise. One
+//! 2 missing, as 002's code's +1000 per zero depth rejected at 3000; and none differs from the
+//! centre's by more than 4 σ(z) of the Kinect noise model plus 2 z / f, the step between two
+//! pixels on a surface at 63° to the ray: a corner on a depth discontinuity has no single 3D
+//! point); 0 otherwise. One
 //! invocation per pixel: the tests that used to run serially inside each cell's invocation
 //! run in parallel over the image. Mirrors core/src/cpu/odometry/corner_candidates.rs.
 #import invalid
