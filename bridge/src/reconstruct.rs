@@ -310,6 +310,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
     // works on the previous one, and each report arrives a frame or so late.
     let (mut assist, features_off) = feature_assist(args, &gpu, &fusion, given.is_some())?;
     let features_on = assist.is_some();
+    let feature_stage_names = webfusion_core::fusion::FEATURE_STAGES.map(|stage| format!("gpu features: {stage}"));
     let mut on_report = |report: FrameReport, times: &mut StageTimes, trajectory: &mut Vec<TimedPose>, timestamps: &mut std::collections::HashMap<u64, (i64, Option<Se3>)>| {
         let now = std::time::Instant::now();
         if let Some(prev) = last_done.replace(now) {
@@ -319,8 +320,8 @@ pub(crate) fn run(options: &GpuOptions, args: &ReconstructArgs) -> anyhow::Resul
             times.record("gpu preprocess", g.preprocess);
             if features_on {
                 times.record("gpu features", g.features.iter().sum());
-                for (stage, ms) in webfusion_core::fusion::FEATURE_STAGES.iter().zip(g.features) {
-                    times.record(&format!("gpu features: {stage}"), ms);
+                for (stage, ms) in feature_stage_names.iter().zip(g.features) {
+                    times.record(stage, ms);
                 }
             }
             if report.state != TrackingState::Initialised {

@@ -11,7 +11,7 @@
 //! invocation per pixel: the tests that used to run serially inside each cell's invocation
 //! run in parallel over the image. Mirrors core/src/cpu/odometry/corner_candidates.rs.
 #import invalid
-#import kinect
+#import keypoint_depth
 
 struct CornerCandidatesParams {
     // The level's size.
@@ -61,13 +61,14 @@ fn is_local_max(x: u32, y: u32, s: f32) -> bool {
 fn depth_window_ok(x0: f32, y0: f32) -> bool {
     let w = i32(params.depth_width_px);
     let h = i32(params.depth_height_px);
-    let u = clamp(i32(floor(x0 + 0.5)), 1, w - 2);
-    let v = clamp(i32(floor(y0 + 0.5)), 1, h - 2);
+    let c = keypoint_depth_pixel(x0, y0, w, h);
+    let u = c.x;
+    let v = c.y;
     let z = depth_m[v * w + u];
     if !is_valid_f32(z) || !(z > 0.0) {
         return false;
     }
-    let step = 4.0 * kinect_sigma_m(z) + 2.0 * z / params.fx_px;
+    let step = same_surface_step_m(z, params.fx_px);
     var missing = 0u;
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {

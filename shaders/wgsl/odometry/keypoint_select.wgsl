@@ -12,7 +12,7 @@
 //! planar patch, and averages 7-9 samples' noise; invalid for an empty slot). Mirrors
 //! core/src/cpu/odometry/keypoint_select.rs.
 #import invalid
-#import kinect
+#import keypoint_depth
 
 struct KeypointSelectParams {
     // The level's size.
@@ -54,10 +54,9 @@ const MAX_PER_CELL: u32 = 8u;
 fn keypoint_point(x0: f32, y0: f32) -> vec4<f32> {
     let w = i32(params.depth_width_px);
     let h = i32(params.depth_height_px);
-    let u = clamp(i32(floor(x0 + 0.5)), 1, w - 2);
-    let v = clamp(i32(floor(y0 + 0.5)), 1, h - 2);
-    let z = depth_m[v * w + u];
-    let step = 4.0 * kinect_sigma_m(z) + 2.0 * z / params.fx_px;
+    let c = keypoint_depth_pixel(x0, y0, w, h);
+    let z = depth_m[c.y * w + c.x];
+    let step = same_surface_step_m(z, params.fx_px);
     // The depth along the keypoint's ray: a tent filter of radius 2 px centred on (x0, y0) over
     // the valid samples within `step` of the centre's (weights 1 2 1 about a whole pixel, 1 3 3 1
     // about a pixel corner, where coarser levels' keypoints fall), so a planar patch gives the

@@ -11,6 +11,7 @@
 //! No workgroup memory: CPU adapters (lavapipe, SwiftShader) run a workgroup with barriers as
 //! one coroutine per invocation, which cost more than the recomputed differences save.
 #import invalid
+#import vertex_differences
 
 struct VertexGradientsParams {
     // Image width, pixels.
@@ -32,34 +33,6 @@ struct VertexGradientsParams {
 // Out: V(y+1) - V(y-1), smoothed along x, metres.
 @group(0) @binding(3) var<storage, read_write> grad_y: array<vec4<f32>>;
 
-struct Differences {
-    x: vec3<f32>,
-    y: vec3<f32>,
-    valid: bool,
-}
-
-// The central differences at pixel (px, py).
-fn central_differences(px: i32, py: i32) -> Differences {
-    let w = i32(params.width_px);
-    var g = Differences(vec3<f32>(0.0), vec3<f32>(0.0), false);
-    if px < 1 || py < 1 || px + 1 >= w || py + 1 >= i32(params.height_px) {
-        return g;
-    }
-    let ix = u32(py * w + px);
-    let centre = vertex_in_camera[ix];
-    let left = vertex_in_camera[ix - 1u];
-    let right = vertex_in_camera[ix + 1u];
-    let up = vertex_in_camera[ix - u32(w)];
-    let down = vertex_in_camera[ix + u32(w)];
-    if !is_valid_f32(centre.z) || !is_valid_f32(left.z) || !is_valid_f32(right.z) || !is_valid_f32(up.z) || !is_valid_f32(down.z) {
-        return g;
-    }
-    g.x = right.xyz - left.xyz;
-    g.y = down.xyz - up.xyz;
-    g.valid = true;
-    return g;
-}
-
 @compute @workgroup_size(16, 16, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= params.width_px || gid.y >= params.height_px {
@@ -68,7 +41,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let ix = gid.y * params.width_px + gid.x;
     let x = i32(gid.x);
     let y = i32(gid.y);
-    if !central_differences(x, y).valid {
+    if !central_differences(params.width_px, params.height_px, x, y).valid {
         grad_x[ix] = invalid_vec4();
         grad_y[ix] = invalid_vec4();
         return;
@@ -79,7 +52,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var sum_x = vec3<f32>(0.0);
     var sum_y = vec3<f32>(0.0);
     for (var i = -r; i <= r; i++) {
-        let g = central_differences(x + i, y);
+        let g = central_differences(params.width_px, params.height_px, x + i, y);
         if !g.valid {
             continue;
         }

@@ -12,6 +12,7 @@
 //! mean, weights exp(-j^2 / (2 sigma^2)), of the valid gradients at the 2r+1 pixels (x, y+j)
 //! within the image; an invalid centre stays invalid.
 #import invalid
+#import vertex_differences
 
 struct VertexNormalsParams {
     // Image width, pixels.
@@ -52,20 +53,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var a = vec3<f32>(0.0);
     var b = vec3<f32>(0.0);
     if params.radius_px == 0u {
-        if gid.x == 0u || gid.y == 0u || gid.x + 1u == w || gid.y + 1u == h {
+        let g = central_differences(w, h, i32(gid.x), i32(gid.y));
+        if !g.valid {
             normal_in_camera[ix] = invalid_vec4();
             return;
         }
-        let left = vertex_in_camera[ix - 1u];
-        let right = vertex_in_camera[ix + 1u];
-        let up = vertex_in_camera[ix - w];
-        let down = vertex_in_camera[ix + w];
-        if !is_valid_f32(v.z) || !is_valid_f32(left.z) || !is_valid_f32(right.z) || !is_valid_f32(up.z) || !is_valid_f32(down.z) {
-            normal_in_camera[ix] = invalid_vec4();
-            return;
-        }
-        a = right.xyz - left.xyz;
-        b = down.xyz - up.xyz;
+        a = g.x;
+        b = g.y;
     } else {
         if !is_valid_f32(v.z) || !is_valid_f32(grad_x[ix].x) {
             normal_in_camera[ix] = invalid_vec4();

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/odometry/corner_candidates.wgsl`.
 
-use crate::cpu::shared::{is_valid_f32, kinect_sigma_m};
+use super::keypoint_depth::{keypoint_depth_pixel, same_surface_step_m};
+use crate::cpu::shared::is_valid_f32;
 use crate::kernels::corner_candidates::CornerCandidatesParams;
 
 fn is_local_max(params: &CornerCandidatesParams, score: &[f32], x: u32, y: u32, s: f32) -> bool {
@@ -25,13 +26,12 @@ fn is_local_max(params: &CornerCandidatesParams, score: &[f32], x: u32, y: u32, 
 
 fn depth_window_ok(params: &CornerCandidatesParams, depth_m: &[f32], x0: f32, y0: f32) -> bool {
     let (w, h) = (params.depth_width_px as i32, params.depth_height_px as i32);
-    let u = ((x0 + 0.5).floor() as i32).clamp(1, w - 2);
-    let v = ((y0 + 0.5).floor() as i32).clamp(1, h - 2);
+    let (u, v) = keypoint_depth_pixel(x0, y0, w, h);
     let z = depth_m[(v * w + u) as usize];
     if !is_valid_f32(z) || !(z > 0.0) {
         return false;
     }
-    let step = 4.0 * kinect_sigma_m(z) + 2.0 * z / params.fx_px;
+    let step = same_surface_step_m(z, params.fx_px);
     let mut missing = 0u32;
     for dy in -1..=1 {
         for dx in -1..=1 {

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 //! CPU reference of `shaders/wgsl/odometry/keypoint_select.wgsl`.
 
-use crate::cpu::shared::{INVALID_VEC4, is_valid_f32, kinect_sigma_m};
+use super::keypoint_depth::{keypoint_depth_pixel, same_surface_step_m};
+use crate::cpu::shared::{INVALID_VEC4, is_valid_f32};
 use crate::kernels::keypoint_select::KeypointSelectParams;
 
 /// Twin of the kernel's `MAX_PER_CELL`.
@@ -10,10 +11,9 @@ pub const MAX_PER_CELL: u32 = 8;
 /// The point at level-0 position (x0, y0) of a candidate (its centre depth valid).
 fn keypoint_point(params: &KeypointSelectParams, depth_m: &[f32], x0: f32, y0: f32) -> [f32; 4] {
     let (w, h) = (params.depth_width_px as i32, params.depth_height_px as i32);
-    let u = ((x0 + 0.5).floor() as i32).clamp(1, w - 2);
-    let v = ((y0 + 0.5).floor() as i32).clamp(1, h - 2);
+    let (u, v) = keypoint_depth_pixel(x0, y0, w, h);
     let z = depth_m[(v * w + u) as usize];
-    let step = 4.0 * kinect_sigma_m(z) + 2.0 * z / params.fx_px;
+    let step = same_surface_step_m(z, params.fx_px);
     // The depth along the ray: the tent filter of radius 2 px about (x0, y0).
     let (bx, by) = (x0.floor() as i32 - 1, y0.floor() as i32 - 1);
     let (mut sum, mut weight) = (0.0f32, 0.0f32);
