@@ -6,7 +6,10 @@
 //
 // usage: node tests/browser/bench.mjs [--webfusion target/release/webfusion] [--dist dist]
 //          [--sample data/sample/fr1_rpy.wfr] [--volume 256] [--voxel-mm 20] [--out out/bench-web]
-//          [--repeat N]
+//          [--repeat N] [--planes 0|1]
+// The page runs what native `reconstruct` runs (feature odometry on, as there): seed 003's
+// per-frame plane segmentation, which `reconstruct` does not do, is off unless `--planes 1`
+// (the page's own default) measures the page as it opens.
 // With --repeat N the native and browser runs alternate N times and the frames/s ratio and the
 // time to the first frame are reported per run and as medians: on a shared machine one run's
 // speed can differ from the next by half, and only runs side by side compare.
@@ -16,7 +19,8 @@ import { join } from 'node:path';
 import { gzipSync } from 'node:zlib';
 import { launchChromium, options, startBridge, waitFor } from './lib.mjs';
 
-const { webfusion, dist, sample, out, map, volume, voxelMm } = options({ out: 'out/bench-web', map: 'sparse', volume: 256, 'voxel-mm': 20 });
+const { webfusion, dist, sample, out, map, volume, voxelMm, planes } = options({ out: 'out/bench-web', map: 'sparse', volume: 256, 'voxel-mm': 20, planes: '0' });
+if (!['0', '1'].includes(planes)) throw new Error(`--planes takes 0 or 1, got ${planes}`);
 const repeatArg = process.argv.indexOf('--repeat');
 const repeat = repeatArg > 0 ? Number(process.argv[repeatArg + 1]) : 1;
 if (!(Number.isInteger(repeat) && repeat >= 1)) throw new Error(`--repeat needs a whole number >= 1, got ${process.argv[repeatArg + 1]}`);
@@ -39,7 +43,7 @@ async function runOnce() {
   try {
     const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
     const tLoad = Date.now();
-    await page.goto(`http://${bridge.addr}/?map=${map}&volume=${volume}&voxel_mm=${voxelMm}&centred=1&autoplay=1`);
+    await page.goto(`http://${bridge.addr}/?map=${map}&volume=${volume}&voxel_mm=${voxelMm}&centred=1&planes=${planes}&autoplay=1`);
     const first = await waitFor(page, 'the first frame', (s) => s.frames_done >= 1, 300_000);
     firstMs = Date.now() - tLoad;
     const tFirst = Date.now();
@@ -63,7 +67,7 @@ const median = (values) => [...values].sort((x, y) => x - y)[Math.floor(values.l
 const { stats, nativeWallS, done, firstMs, browserWallS } = runs[runs.length - 1];
 const frames = stats.frames;
 const row = (name, nat, web) => console.log(`${name.padEnd(28)}${nat.padStart(14)}${web.padStart(16)}${(typeof nat === 'string' && nat.endsWith('ms') && web.endsWith('ms') ? `${(parseFloat(web) / parseFloat(nat)).toFixed(2)}x`.padStart(10) : '')}`);
-console.log(`\n${frames} frames of ${sample}, ${volume}^3 voxels of ${voxelMm} mm`);
+console.log(`\n${frames} frames of ${sample}, ${volume}^3 voxels of ${voxelMm} mm; the page's plane segmentation ${planes === '1' ? 'on' : 'off (as native reconstruct)'}`);
 console.log(`native: ${stats.adapter}\nbrowser: ${done.adapter}\n`);
 row('', 'native', 'browser');
 // stats.json names GPU-timed stages `gpu <stage>` (wall clock where the adapter has no timestamps).

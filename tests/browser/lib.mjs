@@ -9,14 +9,15 @@ import { chromium } from 'playwright-core';
 
 /**
  * The scripts' command line: `--webfusion`, `--dist`, `--sample`, `--out`, `--volume`,
- * `--voxel-mm`, with the given defaults; paths resolved, `out` created.
+ * `--voxel-mm` and any other `--name value` a script defaults, with the given defaults; paths
+ * resolved, `out` created.
  */
 export function options(defaults) {
   const given = Object.fromEntries(process.argv.slice(2).reduce((pairs, a, i, all) => (a.startsWith('--') ? [...pairs, [a.slice(2), all[i + 1]]] : pairs), []));
   const o = { webfusion: 'target/release/webfusion', dist: 'dist', sample: 'data/sample/fr1_rpy.wfr', ...defaults, ...given };
   const out = resolve(o.out);
   mkdirSync(out, { recursive: true });
-  return { webfusion: resolve(o.webfusion), dist: resolve(o.dist), sample: resolve(o.sample), out, map: o.map, volume: Number(o.volume), voxelMm: Number(o['voxel-mm']) };
+  return { ...o, webfusion: resolve(o.webfusion), dist: resolve(o.dist), sample: resolve(o.sample), out, map: o.map, volume: Number(o.volume), voxelMm: Number(o['voxel-mm']) };
 }
 
 /** Chromium flags that give WebGPU (SwiftShader) and a visible canvas, headless (see ../shared/TOOLCHAIN.md). */

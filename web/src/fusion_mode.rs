@@ -57,9 +57,26 @@ pub(crate) const FREE_VIEW: PinholeIntrinsics = PinholeIntrinsics { fx_px: 420.0
 /// Depth range the free view searches, metres.
 const FREE_VIEW_RANGE_M: (f32, f32) = (0.05, 20.0);
 /// While frames stream, the free view follows the model at most this often, milliseconds (it
-/// costs a full raycast; the per-frame views show every frame). A move of its camera, or the
-/// stream stopping, redraws it at once.
+/// costs a full raycast; the per-frame views show every frame). A move of its camera redraws
+/// it at once; the stream stopping (nothing in flight, no report for this long) soon after.
 pub(crate) const FREE_VIEW_MODEL_REFRESH_MS: f64 = 500.0;
+/// While frames stream, the free view's redraws take at most this share of the GPU's time: a
+/// redraw costs about one raycast of the model (the frame's own raycast, whose median GPU time
+/// the stage statistics keep), so it follows the model no more often than every
+/// raycast time / share. On a fast GPU the refresh period above is the bound; on a CPU
+/// adapter (a raycast of 220 ms on SwiftShader) this one, or each frame would pay twice for
+/// its raycast.
+const FREE_VIEW_GPU_SHARE: f64 = 0.1;
+
+/// The per-frame stages whose windowed medians the status shows, in `FusionMode::stages`.
+const STAGE_DECODE: usize = 0;
+const STAGE_PREPROCESS: usize = 1;
+const STAGE_TRACK: usize = 2;
+const STAGE_INTEGRATE: usize = 3;
+const STAGE_RAYCAST: usize = 4;
+const STAGE_VIEWS: usize = 5;
+const STAGE_FEATURES: usize = 6;
+const STAGES: usize = 7;
 
 /// What the shell knows about a frame until its report comes back.
 #[derive(Clone, Debug)]
@@ -276,7 +293,7 @@ pub(crate) struct FusionMode {
     recovered_frames: u64,
     /// A sparse map's counters as of the last report.
     map: Option<MapStats>,
-    stages: [Window; 7],
+    stages: [Window; STAGES],
     frame_instants: VecDeque<Instant>,
     host: HostPerFrame,
     latency_ms: Option<f64>,
@@ -886,7 +903,15 @@ impl FusionMode {
             self.orbit = Some(Orbit::looking_at(world_from_camera.transform_point(DVec3::new(0.0, 0.0, 1.5)), 3.0, world_from_camera.rotation * DVec3::NEG_Y));
         }
         let t = report.gpu_ms.unwrap_or_default();
-        for (window, sample) in self.stages.iter_mut().zip([meta.decode_ms, t.preprocess, t.track, t.integrate, t.raycast, meta.views_ms, t.features.iter().sum()]) {
+        let mut samples = [0.0; STAGES];
+        samples[STAGE_DECODE] = meta.decode_ms;
+        samples[STAGE_PREPROCESS] = t.preprocess;
+        samples[STAGE_TRACK] = t.track;
+        samples[STAGE_INTEGRATE] = t.integrate;
+        samples[STAGE_RAYCAST] = t.raycast;
+        samples[STAGE_VIEWS] = meta.views_ms;
+        samples[STAGE_FEATURES] = t.features.iter().sum();
+        for (window, sample) in self.stages.iter_mut().zip(samples) {
             window.push(sample);
         }
         self.host = HostPerFrame { submits: report.host.submits as f64, host_waits: report.host.host_waits as f64, readbacks: report.host.readbacks as f64 };
@@ -906,11 +931,17 @@ impl FusionMode {
         if !self.free_model_dirty {
             return None;
         }
+        let since_ms = |t: Option<Instant>| t.map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64() * 1e3);
+        let raycast_ms = self.stages[STAGE_RAYCAST].median().unwrap_or(0.0);
+        let period_ms = FREE_VIEW_MODEL_REFRESH_MS.max(raycast_ms / FREE_VIEW_GPU_SHARE);
+        let mut due_ms = (period_ms - since_ms(self.free_drawn_at)).max(0.0);
         if self.in_flight.is_empty() {
-            // The stream paused or ended: show the model as it is now.
-            return Some(0.0);
+            // Nothing in flight (with feature odometry every frame's report is awaited, so
+            // this holds between any two frames): the stream paused or ended once no report
+            // came for a refresh period, and the model as it is then is shown.
+            due_ms = due_ms.min((FREE_VIEW_MODEL_REFRESH_MS - since_ms(self.frame_instants.back().copied())).max(0.0));
         }
-        Some(self.free_drawn_at.map_or(0.0, |t| (FREE_VIEW_MODEL_REFRESH_MS - t.elapsed().as_secs_f64() * 1e3).max(0.0)))
+        Some(due_ms)
     }
 
     /// The free view's camera moved or its shading changed.
@@ -1025,7 +1056,15 @@ impl FusionMode {
             last_index: self.last_reported,
             frames_in_flight: self.in_flight.len(),
             fps,
-            stages_ms: StageMedians { decode: m(0), preprocess: m(1), features: m(6), track: m(2), integrate: m(3), raycast: m(4), views: m(5) },
+            stages_ms: StageMedians {
+                decode: m(STAGE_DECODE),
+                preprocess: m(STAGE_PREPROCESS),
+                features: m(STAGE_FEATURES),
+                track: m(STAGE_TRACK),
+                integrate: m(STAGE_INTEGRATE),
+                raycast: m(STAGE_RAYCAST),
+                views: m(STAGE_VIEWS),
+            },
             gpu_timestamps: self.pipeline.as_ref().is_some_and(|p| p.fusion.timer_available()),
             host_per_frame: self.host,
             tracking: self.tracking,

@@ -13,12 +13,19 @@ pub(crate) fn rgba_from_rgb(rgb8: &[u8]) -> Vec<u8> {
 }
 
 /// The 2D context of a canvas sized `width`x`height` (resized to fit).
+///
+/// Rasterised on the CPU (`willReadFrequently`): what the page draws in 2D comes from the host
+/// (frames' colour, keypoints, trajectories), so a GPU-accelerated canvas only adds an upload
+/// and, where the browser's GPU is itself software (SwiftShader), rasterises every stroke
+/// there: the odometry view alone cost the GPU process 0.3 s a frame that way.
 pub(crate) fn context_2d(canvas: &web_sys::HtmlCanvasElement, width: u32, height: u32) -> Result<web_sys::CanvasRenderingContext2d, JsValue> {
     if canvas.width() != width || canvas.height() != height {
         canvas.set_width(width);
         canvas.set_height(height);
     }
-    canvas.get_context("2d")?.ok_or("no 2d context")?.dyn_into().map_err(JsValue::from)
+    let options = js_sys::Object::new();
+    js_sys::Reflect::set(&options, &"willReadFrequently".into(), &JsValue::TRUE)?;
+    canvas.get_context_with_context_options("2d", &options)?.ok_or("no 2d context")?.dyn_into().map_err(JsValue::from)
 }
 
 /// Puts RGBA8 pixels of `width`x`height` on a canvas, resizing it to fit.
@@ -47,33 +54,35 @@ pub(crate) fn draw_odometry_pair(canvas: &web_sys::HtmlCanvasElement, reference:
         ctx.put_image_data(&data, x0, 0.0)?;
     }
     ctx.set_line_width(1.5);
+    // One path per colour, stroked once, not a stroke per keypoint or match (a thousand a frame).
     let radius = |k: &[f32; 4]| 3.0 * f64::from(1u32 << (k[3].max(0.0) as u32).min(4));
     if stage >= 1 {
         ctx.set_stroke_style_str("rgba(255, 220, 0, 0.9)");
+        ctx.begin_path();
         for (keypoints, x0) in [(&pair.reference, 0.0), (&pair.current, f64::from(w))] {
             for k in keypoints.iter() {
                 let (x, y, r) = (x0 + f64::from(k[0]), f64::from(k[1]), radius(k));
-                ctx.begin_path();
+                // A new subpath at the circle's start, so no line joins it to the last one.
+                ctx.move_to(x + r, y);
                 ctx.arc(x, y, r, 0.0, std::f64::consts::TAU)?;
                 if stage >= 2 {
                     ctx.move_to(x, y);
                     ctx.line_to(x + r * f64::from(k[2]).cos(), y + r * f64::from(k[2]).sin());
                 }
-                ctx.stroke();
             }
         }
+        ctx.stroke();
     }
     if stage >= 3 {
-        for &(q, t, inlier) in &pair.matches {
-            let (Some(c), Some(r)) = (pair.current.get(q as usize), pair.reference.get(t as usize)) else { continue };
-            ctx.set_stroke_style_str(match (stage, inlier) {
-                (3, _) => "rgba(0, 200, 255, 0.8)",
-                (_, true) => "rgba(40, 230, 40, 0.9)",
-                (_, false) => "rgba(255, 40, 40, 0.9)",
-            });
+        let colours: &[(&str, Option<bool>)] = if stage == 3 { &[("rgba(0, 200, 255, 0.8)", None)] } else { &[("rgba(40, 230, 40, 0.9)", Some(true)), ("rgba(255, 40, 40, 0.9)", Some(false))] };
+        for &(colour, inliers) in colours {
+            ctx.set_stroke_style_str(colour);
             ctx.begin_path();
-            ctx.move_to(f64::from(r[0]), f64::from(r[1]));
-            ctx.line_to(f64::from(w) + f64::from(c[0]), f64::from(c[1]));
+            for &(q, t, _) in pair.matches.iter().filter(|m| inliers.is_none_or(|i| i == m.2)) {
+                let (Some(c), Some(r)) = (pair.current.get(q as usize), pair.reference.get(t as usize)) else { continue };
+                ctx.move_to(f64::from(r[0]), f64::from(r[1]));
+                ctx.line_to(f64::from(w) + f64::from(c[0]), f64::from(c[1]));
+            }
             ctx.stroke();
         }
     }
