@@ -261,6 +261,8 @@ pub const SWAPPED_BLOCK: u32 = 0xffff_fffe;
 pub const NO_SLOT: u32 = u32::MAX;
 /// Twin of `MAP_MAX_PROBES`.
 pub const MAP_MAX_PROBES: u32 = 64;
+/// Twin of `NO_DEPTH_TILE`: a depth tile without a valid depth.
+pub const NO_DEPTH_TILE: f32 = -1.0;
 /// Twin of `MAP_COUNTER_BLOCKS_USED`.
 pub const MAP_COUNTER_BLOCKS_USED: usize = 0;
 /// Twin of `MAP_COUNTER_VISIBLE`.

@@ -10,9 +10,10 @@ use crate::kernels::block_assign::{self, BlockAssignParams};
 use crate::kernels::block_integrate::{self, BlockIntegrateParams};
 use crate::kernels::block_list_args::{self, BlockListArgsParams};
 use crate::kernels::block_visible::{self, BlockVisibleParams};
+use crate::kernels::depth_tile_max::{self, DepthTileMaxParams};
 use crate::kernels::tsdf_integrate::{self, TsdfIntegrateParams};
 use crate::map::swap::{MapSwapper, SwapConfig};
-use crate::map::{Map, MapBlock, MapStats, SparseMap};
+use crate::map::{DEPTH_TILE_PX, Map, MapBlock, MapStats, SparseMap};
 use crate::preprocess::DepthPreprocessor;
 use crate::tsdf::{TsdfConfig, TsdfStore};
 use crate::{Gpu, Result, Se3};
@@ -26,6 +27,10 @@ enum Integration {
     Sparse {
         alloc: wgpu::BindGroup,
         assign: wgpu::BindGroup,
+        /// `depth_tile_max` over the depth fused, and its tile count.
+        tiles: (wgpu::BindGroup, u32),
+        /// The tiles' largest depths, which `visible` reads.
+        _tile_max_m: wgpu::Buffer,
         visible: wgpu::BindGroup,
         args: wgpu::BindGroup,
         integrate: wgpu::BindGroup,
@@ -93,12 +98,29 @@ impl Mapper {
                 );
                 let assign_params =
                     gpu.uniform_buffer("core.block_assign.params", &BlockAssignParams { volume });
+                let k = preprocessor.levels[0].intrinsics;
+                let tiles_xy = [k.width_px.div_ceil(DEPTH_TILE_PX), k.height_px.div_ceil(DEPTH_TILE_PX)];
+                let tile_count = tiles_xy[0] * tiles_xy[1];
+                let tile_max_m = gpu.storage_buffer::<f32>("core.map.depth_tile_max_m", tile_count as usize);
+                let tiles_params = gpu.uniform_buffer(
+                    "core.depth_tile_max.params",
+                    &DepthTileMaxParams {
+                        width_px: k.width_px,
+                        height_px: k.height_px,
+                        tile_px: DEPTH_TILE_PX,
+                        tiles_x: tiles_xy[0],
+                        tiles_y: tiles_xy[1],
+                        ..Default::default()
+                    },
+                );
                 let visible_params = gpu.uniform_buffer(
                     "core.block_visible.params",
                     &BlockVisibleParams {
                         volume,
                         intrinsics,
-                        max_depth_m,
+                        tile_px: DEPTH_TILE_PX,
+                        tiles_x: tiles_xy[0],
+                        tiles_y: tiles_xy[1],
                         ..Default::default()
                     },
                 );
@@ -135,14 +157,25 @@ impl Mapper {
                         free_blocks: sparse.free_blocks(),
                     }
                     .bind_group(gpu),
+                    tiles: (
+                        depth_tile_max::Bindings {
+                            params: &tiles_params,
+                            depth_m,
+                            tile_max_m: &tile_max_m,
+                        }
+                        .bind_group(gpu),
+                        tile_count,
+                    ),
                     visible: block_visible::Bindings {
                         params: &visible_params,
                         pose,
                         block_coords: sparse.block_coords(),
                         map_counters: counters,
                         visible_blocks: sparse.visible_blocks(),
+                        tile_max_m: &tile_max_m,
                     }
                     .bind_group(gpu),
+                    _tile_max_m: tile_max_m,
                     args: block_list_args::Bindings {
                         params: &args_params,
                         map_counters: counters,
@@ -170,6 +203,7 @@ impl Mapper {
                     vec![
                         alloc_params,
                         assign_params,
+                        tiles_params,
                         visible_params,
                         args_params,
                         integrate_params,
@@ -406,10 +440,12 @@ impl Mapper {
             Integration::Sparse {
                 alloc,
                 assign,
+                tiles,
                 visible,
                 args,
                 integrate,
                 swapper,
+                ..
             } => {
                 let [w, h] = self.image_size;
                 if let Some(s) = swapper {
@@ -419,6 +455,9 @@ impl Mapper {
                 gpu.kernels
                     .block_assign
                     .dispatch_in(pass, assign, [d.hash_slots, 1, 1]);
+                gpu.kernels
+                    .depth_tile_max
+                    .dispatch_in(pass, &tiles.0, [tiles.1, 1, 1]);
                 gpu.kernels
                     .block_visible
                     .dispatch_in(pass, visible, [d.pool_blocks, 1, 1]);

@@ -13,9 +13,10 @@
 //! Every kernel that reads a map reads both kinds (`map_lookup.wgsl`); integration differs:
 //! the dense box is swept column by column in the frustum (`tsdf_integrate`), the sparse map
 //! runs, per frame, `block_alloc` (insert the blocks of every pixel's truncation band),
-//! `block_assign` (pool blocks for new keys), `block_visible` (the allocated blocks in the
-//! frustum), `block_list_args` (their count as a dispatch size) and `block_integrate` (one
-//! workgroup per visible block). Capacity is explicit: the pool's size comes from a memory
+//! `block_assign` (pool blocks for new keys), `depth_tile_max` (the deepest depth of each
+//! tile of the image), `block_visible` (the allocated blocks in the frustum that are not wholly
+//! hidden behind the surface the tiles they cover measure), `block_list_args` (their count as a
+//! dispatch size) and `block_integrate` (one workgroup per visible block). Capacity is explicit: the pool's size comes from a memory
 //! budget, and a full pool or hash table is counted on the GPU ([`MapStats`]), never written
 //! past: a key without a block reads as unobserved.
 
@@ -32,6 +33,11 @@ use crate::tsdf::{TsdfConfig, TsdfStore, VolumeDesc};
 use crate::{Error, Gpu, Result};
 
 pub use crate::tsdf::DenseTsdfVolume;
+
+/// Edge of the depth tiles `block_visible` bounds occlusion with, pixels (40 x 30 tiles at
+/// 640 x 480): a block's footprint reads a few of them, and a tile's deepest depth is a bound
+/// tight enough that blocks hidden behind a surface drop out.
+pub const DEPTH_TILE_PX: u32 = 16;
 
 /// Voxels along x, y and z of a sparse map's box: 2048, 2048 and 1023 blocks of 8 (block keys
 /// pack 11, 11 and 10 bits; the all-ones key marks a free hash slot).

@@ -1,13 +1,18 @@
 // SPDX-License-Identifier: MIT
 //! Each invocation tests one allocated block of a sparse map (a block on the free list holds
-//! EMPTY_KEY and is skipped) against the camera's view and
+//! EMPTY_KEY and is skipped) against the camera's view and this frame's depth, and
 //! appends it to `visible_blocks` (atomicAdd on MAP_COUNTER_VISIBLE; the list has a slot for
 //! every pool block, so it cannot overflow) when integration may change one of its voxels: the
 //! block's box, bounded by its 8 corners in the camera frame, reaches in front of the camera,
-//! not beyond `max_depth_m` + the truncation band there, and its projection (the bounding
-//! rectangle of the corners' projections, widened by half a pixel for the nearest-pixel rounding) meets the image. A box
-//! that straddles the camera plane counts as visible. The visible list's order depends on the
-//! order invocations run; its set does not. Nothing is listed when the pose is disabled.
+//! its projection (the bounding rectangle of the corners' projections) meets the image, and
+//! its nearest point is not behind the deepest depth of the pixels its voxels round to (the
+//! `depth_tile_max` tiles that rectangle covers) by more than that depth's truncation band. A
+//! voxel takes an update only where depth - z >= -band(depth), and depth + band(depth) grows
+//! with depth, so a block beyond that bound (hidden behind the surface seen there, or over
+//! pixels without depth) keeps every voxel as it was: listing only the rest changes no voxel
+//! (tests/kernels/map/block_visible.rs checks it). A box that straddles the camera plane counts
+//! as visible. The visible list's order depends on the order invocations run; its set does not.
+//! Nothing is listed when the pose is disabled.
 #import camera
 #import camera_pose
 #import map
@@ -17,11 +22,11 @@ struct BlockVisibleParams {
     volume: VolumeDesc,
     // Intrinsics of the depth image.
     intrinsics: Intrinsics,
-    // Farthest valid depth, metres: blocks wholly beyond it plus μ take no update.
-    max_depth_m: f32,
+    // The depth tiles (`depth_tile_max`): edge in pixels, and tiles along x and y.
+    tile_px: u32,
+    tiles_x: u32,
+    tiles_y: u32,
     _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: BlockVisibleParams;
@@ -33,6 +38,12 @@ struct BlockVisibleParams {
 @group(0) @binding(3) var<storage, read_write> map_counters: array<atomic<u32>>;
 // Out: the pool indices of the visible blocks, in any order (MAP_COUNTER_VISIBLE of them).
 @group(0) @binding(4) var<storage, read_write> visible_blocks: array<u32>;
+// The largest valid depth of each tile of the depth fused, metres (NO_DEPTH_TILE: none).
+@group(0) @binding(5) var<storage, read> tile_max_m: array<f32>;
+
+// Slack on the occlusion bound, metres, for the f32 rounding of the corners' and the voxel
+// centres' transforms (both within a micrometre at room scale).
+const OCCLUSION_SLACK_M: f32 = 1e-3;
 
 @compute @workgroup_size(256, 1, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -65,12 +76,27 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             uv_max = max(uv_max, uv);
         }
     }
-    if z_far <= 0.0 || z_near > params.max_depth_m + truncation_band_m(d, params.max_depth_m) {
+    if z_far <= 0.0 {
         return;
     }
     if z_near > 0.0 {
         let size = vec2<f32>(f32(k.width_px), f32(k.height_px));
+        // Voxel centres inside the box project inside the rectangle and round to the nearest
+        // pixel (as integration does): the pixels floor(uv + 0.5), clamped to the image.
         if any(uv_max < vec2<f32>(-0.5)) || any(uv_min >= size - vec2<f32>(0.5)) {
+            return;
+        }
+        let px_lo = vec2<u32>(clamp(floor(uv_min + 0.5), vec2<f32>(0.0), size - 1.0));
+        let px_hi = vec2<u32>(clamp(floor(uv_max + 0.5), vec2<f32>(0.0), size - 1.0));
+        let t_lo = px_lo / params.tile_px;
+        let t_hi = px_hi / params.tile_px;
+        var deepest = NO_DEPTH_TILE;
+        for (var ty = t_lo.y; ty <= t_hi.y; ty++) {
+            for (var tx = t_lo.x; tx <= t_hi.x; tx++) {
+                deepest = max(deepest, tile_max_m[ty * params.tiles_x + tx]);
+            }
+        }
+        if deepest == NO_DEPTH_TILE || z_near > deepest + truncation_band_m(d, deepest) + OCCLUSION_SLACK_M {
             return;
         }
     }

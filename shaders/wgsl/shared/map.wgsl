@@ -26,6 +26,9 @@ const NO_SLOT: u32 = 0xffffffffu;
 // (a lookup) or counted as a failed insertion (MAP_COUNTER_HASH_FULL).
 const MAP_MAX_PROBES: u32 = 64u;
 
+// A tile of `depth_tile_max` without a valid depth (valid depths are positive).
+const NO_DEPTH_TILE: f32 = -1.0;
+
 // Words of the map's counters buffer (`map_counters`), read back by the host each frame.
 // Pool blocks ever handed out by bump allocation (never more than `pool_blocks`): blocks
 // 0..this are in use or on the free list (MAP_COUNTER_FREE of them).

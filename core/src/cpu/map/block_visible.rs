@@ -2,11 +2,15 @@
 //! CPU reference of `shaders/wgsl/map/block_visible.wgsl`. Blocks are listed in pool order; the
 //! GPU lists them in any order: compare as sets.
 
-use crate::cpu::shared::{BRICK_SHIFT, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_VISIBLE, block_of_key, transform_point, truncation_band_m, voxel_anchor};
+use crate::cpu::shared::{BRICK_SHIFT, EMPTY_KEY, MAP_COUNTER_BLOCKS_USED, MAP_COUNTER_VISIBLE, NO_DEPTH_TILE, block_of_key, transform_point, truncation_band_m, voxel_anchor};
 use crate::kernels::block_visible::{BlockVisibleParams, CameraPose};
 
-/// Twin of one invocation: whether pool block `block` (at `key`) may take an update.
-pub fn block_is_visible(params: &BlockVisibleParams, pose: &CameraPose, key: u32) -> bool {
+/// Twin of `OCCLUSION_SLACK_M`.
+const OCCLUSION_SLACK_M: f32 = 1e-3;
+
+/// Twin of one invocation: whether pool block `block` (at `key`) may take an update, given the
+/// depth tiles' largest depths `tile_max_m`.
+pub fn block_is_visible(params: &BlockVisibleParams, pose: &CameraPose, key: u32, tile_max_m: &[f32]) -> bool {
     let d = &params.volume;
     let k = &params.intrinsics;
     let edge_m = (1u32 << BRICK_SHIFT) as f32 * d.voxel_size_m;
@@ -29,7 +33,7 @@ pub fn block_is_visible(params: &BlockVisibleParams, pose: &CameraPose, key: u32
             }
         }
     }
-    if z_far <= 0.0 || z_near > params.max_depth_m + truncation_band_m(d, params.max_depth_m) {
+    if z_far <= 0.0 {
         return false;
     }
     if z_near > 0.0 {
@@ -37,18 +41,29 @@ pub fn block_is_visible(params: &BlockVisibleParams, pose: &CameraPose, key: u32
         if (0..2).any(|i| uv_max[i] < -0.5 || uv_min[i] >= size[i] - 0.5) {
             return false;
         }
+        let px_lo: [u32; 2] = std::array::from_fn(|i| (uv_min[i] + 0.5).floor().clamp(0.0, size[i] - 1.0) as u32);
+        let px_hi: [u32; 2] = std::array::from_fn(|i| (uv_max[i] + 0.5).floor().clamp(0.0, size[i] - 1.0) as u32);
+        let mut deepest = NO_DEPTH_TILE;
+        for ty in px_lo[1] / params.tile_px..=px_hi[1] / params.tile_px {
+            for tx in px_lo[0] / params.tile_px..=px_hi[0] / params.tile_px {
+                deepest = deepest.max(tile_max_m[(ty * params.tiles_x + tx) as usize]);
+            }
+        }
+        if deepest == NO_DEPTH_TILE || z_near > deepest + truncation_band_m(d, deepest) + OCCLUSION_SLACK_M {
+            return false;
+        }
     }
     true
 }
 
 /// Lists the visible blocks, as the kernel's invocations do.
-pub fn block_visible(params: &BlockVisibleParams, pose: &CameraPose, block_coords: &[u32], map_counters: &mut [u32], visible_blocks: &mut [u32]) {
+pub fn block_visible(params: &BlockVisibleParams, pose: &CameraPose, block_coords: &[u32], map_counters: &mut [u32], visible_blocks: &mut [u32], tile_max_m: &[f32]) {
     if pose.enabled == 0 {
         return;
     }
     for block in 0..map_counters[MAP_COUNTER_BLOCKS_USED] {
         let key = block_coords[block as usize];
-        if key != EMPTY_KEY && block_is_visible(params, pose, key) {
+        if key != EMPTY_KEY && block_is_visible(params, pose, key, tile_max_m) {
             visible_blocks[map_counters[MAP_COUNTER_VISIBLE] as usize] = block;
             map_counters[MAP_COUNTER_VISIBLE] += 1;
         }
