@@ -424,6 +424,7 @@ fn bench(options: &GpuOptions, args: &BenchArgs) -> anyhow::Result<()> {
 /// alone (one submission each, repeated): what a frame's GPU time is made of.
 fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> anyhow::Result<()> {
     use webfusion_core::engine::FrameEncoder;
+    use webfusion_core::fusion::mapper::IntegratePart;
     use webfusion_core::fusion::predictor::RaycastPart;
     use webfusion_core::fusion::{FusionConfig, KinectFusion};
     let n = args.fusion_frames.min(source.frame_count().saturating_sub(1));
@@ -445,6 +446,9 @@ fn bench_fusion(gpu: &Gpu, source: &mut dyn FrameSource, args: &BenchArgs) -> an
         ("track (every level, to convergence)", Box::new(|fe| fusion.tracker().encode_in(gpu, &mut fe.stage("track"), false))),
         ("keep the reference", Box::new(|fe| fusion.tracker().encode_keep_previous(gpu, &mut fe.stage("keep")))),
         ("integrate", Box::new(|fe| fusion.mapper().encode(gpu, fe, "integrate"))),
+        ("  allocation (sparse)", Box::new(|fe| fusion.mapper().encode_part(gpu, fe, "integrate", IntegratePart::Allocate))),
+        ("  visible blocks (sparse)", Box::new(|fe| fusion.mapper().encode_part(gpu, fe, "integrate", IntegratePart::Visible))),
+        ("  voxel update", Box::new(|fe| fusion.mapper().encode_part(gpu, fe, "integrate", IntegratePart::Blocks))),
         ("raycast + prediction pyramid", Box::new(|fe| fusion.predictor().encode(gpu, fe, "predict"))),
         ("  depth-range tiles", Box::new(|fe| fusion.predictor().finest().encode_part(gpu, fe, "predict", RaycastPart::RangeTiles))),
         ("  rays (finest level)", Box::new(|fe| fusion.predictor().finest().encode_part(gpu, fe, "predict", RaycastPart::Rays))),

@@ -427,50 +427,72 @@ impl Mapper {
         }
     }
 
+    /// Records one part of the integration alone as stage `stage` (what `bench` times; each
+    /// part reads what the earlier ones wrote, so run alone on a fused map they time the same
+    /// work as in a frame). A dense map has only [`IntegratePart::Blocks`].
+    pub fn encode_part(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str, part: IntegratePart) {
+        if let (Map::Sparse(sparse), IntegratePart::Visible) = (&self.map, part) {
+            let visible_word = (crate::cpu::shared::MAP_COUNTER_VISIBLE * 4) as u64;
+            frame.encoder().clear_buffer(sparse.counters(), visible_word, Some(4));
+        }
+        self.record_part(gpu, &mut frame.stage(stage), part);
+    }
+
     /// Records the integration into an open compute pass, after [`Self::encode`] cleared a
-    /// sparse map's visible count.
+    /// sparse map's visible count: a sparse map's swap-in, its parts in order, its swap-out.
     fn record(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        let swapper = self.swapper();
+        if let Some(s) = swapper {
+            s.record_in(gpu, pass);
+        }
+        for part in [IntegratePart::Allocate, IntegratePart::Visible, IntegratePart::Blocks] {
+            self.record_part(gpu, pass, part);
+        }
+        if let Some(s) = swapper {
+            s.record_out(gpu, pass);
+        }
+    }
+
+    /// Records one part of the integration into an open compute pass.
+    fn record_part(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, part: IntegratePart) {
         let d = self.map.desc();
-        match &self.integration {
-            Integration::Dense { bind_group } => {
-                gpu.kernels
-                    .tsdf_integrate
-                    .dispatch_in(pass, bind_group, [d.dim_x, d.dim_y, 1])
-            }
-            Integration::Sparse {
-                alloc,
-                assign,
-                tiles,
-                visible,
-                args,
-                integrate,
-                swapper,
-                ..
-            } => {
-                let [w, h] = self.image_size;
-                if let Some(s) = swapper {
-                    s.record_in(gpu, pass);
-                }
-                gpu.kernels.block_alloc.dispatch_in(pass, alloc, [w, h, 1]);
-                gpu.kernels
-                    .block_assign
-                    .dispatch_in(pass, assign, [d.hash_slots, 1, 1]);
-                gpu.kernels
-                    .depth_tile_max
-                    .dispatch_in(pass, &tiles.0, [tiles.1, 1, 1]);
-                gpu.kernels
-                    .block_visible
-                    .dispatch_in(pass, visible, [d.pool_blocks, 1, 1]);
-                gpu.kernels
-                    .block_list_args
-                    .dispatch_in(pass, args, [1, 1, 1]);
-                if let Map::Sparse(sparse) = &self.map {
-                    block_integrate::dispatch_indirect_in(gpu, pass, integrate, sparse.counters());
-                }
-                if let Some(s) = swapper {
-                    s.record_out(gpu, pass);
+        match (&self.integration, &self.map) {
+            (Integration::Dense { bind_group }, _) => {
+                if part == IntegratePart::Blocks {
+                    gpu.kernels.tsdf_integrate.dispatch_in(pass, bind_group, [d.dim_x, d.dim_y, 1]);
                 }
             }
+            (Integration::Sparse { alloc, assign, tiles, visible, args, integrate, .. }, map) => match part {
+                IntegratePart::Allocate => {
+                    let [w, h] = self.image_size;
+                    gpu.kernels.block_alloc.dispatch_in(pass, alloc, [w, h, 1]);
+                    gpu.kernels.block_assign.dispatch_in(pass, assign, [d.hash_slots, 1, 1]);
+                }
+                IntegratePart::Visible => {
+                    gpu.kernels.depth_tile_max.dispatch_in(pass, &tiles.0, [tiles.1, 1, 1]);
+                    gpu.kernels.block_visible.dispatch_in(pass, visible, [d.pool_blocks, 1, 1]);
+                    gpu.kernels.block_list_args.dispatch_in(pass, args, [1, 1, 1]);
+                }
+                IntegratePart::Blocks => {
+                    if let Map::Sparse(sparse) = map {
+                        block_integrate::dispatch_indirect_in(gpu, pass, integrate, sparse.counters());
+                    }
+                }
+            },
         }
     }
 }
+
+/// The parts of an integration, in the order a frame records them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum IntegratePart {
+    /// A sparse map's allocation: `block_alloc` (the blocks every pixel's truncation band
+    /// crosses) and `block_assign` (pool blocks for new keys).
+    Allocate,
+    /// A sparse map's visible list: `depth_tile_max`, `block_visible`, `block_list_args`.
+    Visible,
+    /// The voxel update: `block_integrate` over the visible blocks, or the dense box's
+    /// `tsdf_integrate`.
+    Blocks,
+}
+
