@@ -46,16 +46,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k_range = -0.5 / (params.sigma_range_m * params.sigma_range_m);
     var sum_w = 0.0;
     var sum_wd = 0.0;
-    for (var dy = -radius; dy <= radius; dy++) {
-        let y = i32(gid.y) + dy;
-        if y < 0 || y >= height {
-            continue;
-        }
-        for (var dx = -radius; dx <= radius; dx++) {
-            let x = i32(gid.x) + dx;
-            if x < 0 || x >= width {
-                continue;
-            }
+    // The window clipped to the image (the same taps in the same order as testing each one,
+    // without the tests: 8 % faster on lavapipe).
+    let x_lo = max(i32(gid.x) - radius, 0);
+    let x_hi = min(i32(gid.x) + radius, width - 1);
+    let y_lo = max(i32(gid.y) - radius, 0);
+    let y_hi = min(i32(gid.y) + radius, height - 1);
+    for (var y = y_lo; y <= y_hi; y++) {
+        let dy = y - i32(gid.y);
+        for (var x = x_lo; x <= x_hi; x++) {
+            let dx = x - i32(gid.x);
             let d_m = depth_in_m[y * width + x];
             if !is_valid_f32(d_m) {
                 continue;

@@ -21,16 +21,12 @@ pub fn bilateral_filter(params: &BilateralFilterParams, depth_in_m: &[f32], dept
             }
             let mut sum_w = 0.0f32;
             let mut sum_wd = 0.0f32;
-            for dy in -radius..=radius {
-                let y = gy + dy;
-                if y < 0 || y >= height {
-                    continue;
-                }
-                for dx in -radius..=radius {
-                    let x = gx + dx;
-                    if x < 0 || x >= width {
-                        continue;
-                    }
+            let (x_lo, x_hi) = ((gx - radius).max(0), (gx + radius).min(width - 1));
+            let (y_lo, y_hi) = ((gy - radius).max(0), (gy + radius).min(height - 1));
+            for y in y_lo..=y_hi {
+                let dy = y - gy;
+                for x in x_lo..=x_hi {
+                    let dx = x - gx;
                     let d_m = depth_in_m[(y * width + x) as usize];
                     if !is_valid_f32(d_m) {
                         continue;
