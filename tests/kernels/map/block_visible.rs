@@ -43,6 +43,28 @@ fn twin_list(p: &BlockVisibleParams, pose: &CameraPose, coords: &[u32], counters
     c_list
 }
 
+/// The map both poses of the real frame allocate, with the visibility parameters and the
+/// frame's depth tiles.
+struct Scene {
+    desc: webfusion_core::tsdf::VolumeDesc,
+    k: PinholeIntrinsics,
+    depth: &'static [f32],
+    coords: Vec<u32>,
+    counters: Vec<u32>,
+    p: BlockVisibleParams,
+    tile_max_m: Vec<f32>,
+}
+
+fn scene() -> Scene {
+    let desc = sparse_desc(POOL_BLOCKS);
+    let (k, depth) = frame();
+    let (_, coords, mut counters) = cpu_map(&desc, &poses());
+    counters[MAP_COUNTER_VISIBLE] = 0;
+    let p = params(desc, k);
+    let tile_max_m = tiles(&p, depth);
+    Scene { desc, k, depth, coords, counters, p, tile_max_m }
+}
+
 /// (GPU, CPU) visible sets.
 fn run(p: &BlockVisibleParams, pose: &CameraPose, coords: &[u32], counters: &[u32], tile_max_m: &[f32]) -> (Vec<u32>, BTreeSet<u32>) {
     let gpu = gpu();
@@ -66,13 +88,8 @@ fn as_set(list: &[u32]) -> Result<BTreeSet<u32>, String> {
 
 #[test]
 fn the_gpu_lists_the_twins_blocks() {
-    let desc = sparse_desc(POOL_BLOCKS);
-    let (k, depth) = frame();
-    let (_, coords, mut counters) = cpu_map(&desc, &poses());
-    counters[MAP_COUNTER_VISIBLE] = 0;
+    let Scene { desc, k: _, depth: _, coords, counters, p, tile_max_m } = scene();
     let used = counters[0];
-    let p = params(desc, k);
-    let tile_max_m = tiles(&p, depth);
     let turned = Se3::new(DQuat::from_rotation_y(0.6), DVec3::new(0.1, 0.0, -0.2));
     let behind = Se3::new(DQuat::from_rotation_y(std::f64::consts::PI), DVec3::ZERO);
     let backed = Se3::new(DQuat::IDENTITY, DVec3::new(0.0, 0.0, -0.4));
@@ -136,12 +153,7 @@ fn integrated(desc: webfusion_core::tsdf::VolumeDesc, k: PinholeIntrinsics, pose
 
 #[test]
 fn the_blocks_dropped_for_occlusion_take_no_update() {
-    let desc = sparse_desc(POOL_BLOCKS);
-    let (k, depth) = frame();
-    let (_, coords, mut counters) = cpu_map(&desc, &poses());
-    counters[MAP_COUNTER_VISIBLE] = 0;
-    let p = params(desc, k);
-    let tile_max_m = tiles(&p, depth);
+    let Scene { desc, k, depth, coords, counters, p, tile_max_m } = scene();
     // Every block in the frustum: tiles deeper than any block.
     let unbounded = vec![1e4f32; tile_max_m.len()];
     // The map as fused at both poses (the twins), so the voxels hold a surface to change.
