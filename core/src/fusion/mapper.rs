@@ -10,10 +10,10 @@ use crate::kernels::block_assign::{self, BlockAssignParams};
 use crate::kernels::block_integrate::{self, BlockIntegrateParams};
 use crate::kernels::block_list_args::{self, BlockListArgsParams};
 use crate::kernels::block_visible::{self, BlockVisibleParams};
-use crate::kernels::depth_tile_max::{self, DepthTileMaxParams};
+use crate::kernels::depth_tile_max;
 use crate::kernels::tsdf_integrate::{self, TsdfIntegrateParams};
 use crate::map::swap::{MapSwapper, SwapConfig};
-use crate::map::{DEPTH_TILE_PX, Map, MapBlock, MapStats, SparseMap};
+use crate::map::{Map, MapBlock, MapStats, SparseMap, depth_tile_params};
 use crate::preprocess::DepthPreprocessor;
 use crate::tsdf::{TsdfConfig, TsdfStore};
 use crate::{Gpu, Result, Se3};
@@ -98,29 +98,18 @@ impl Mapper {
                 );
                 let assign_params =
                     gpu.uniform_buffer("core.block_assign.params", &BlockAssignParams { volume });
-                let k = preprocessor.levels[0].intrinsics;
-                let tiles_xy = [k.width_px.div_ceil(DEPTH_TILE_PX), k.height_px.div_ceil(DEPTH_TILE_PX)];
-                let tile_count = tiles_xy[0] * tiles_xy[1];
+                let tiles = depth_tile_params(&preprocessor.levels[0].intrinsics);
+                let tile_count = tiles.tiles_x * tiles.tiles_y;
                 let tile_max_m = gpu.storage_buffer::<f32>("core.map.depth_tile_max_m", tile_count as usize);
-                let tiles_params = gpu.uniform_buffer(
-                    "core.depth_tile_max.params",
-                    &DepthTileMaxParams {
-                        width_px: k.width_px,
-                        height_px: k.height_px,
-                        tile_px: DEPTH_TILE_PX,
-                        tiles_x: tiles_xy[0],
-                        tiles_y: tiles_xy[1],
-                        ..Default::default()
-                    },
-                );
+                let tiles_params = gpu.uniform_buffer("core.depth_tile_max.params", &tiles);
                 let visible_params = gpu.uniform_buffer(
                     "core.block_visible.params",
                     &BlockVisibleParams {
                         volume,
                         intrinsics,
-                        tile_px: DEPTH_TILE_PX,
-                        tiles_x: tiles_xy[0],
-                        tiles_y: tiles_xy[1],
+                        tile_px: tiles.tile_px,
+                        tiles_x: tiles.tiles_x,
+                        tiles_y: tiles.tiles_y,
                         ..Default::default()
                     },
                 );
@@ -413,10 +402,7 @@ impl Mapper {
     /// above its mark), copying the swap-out list for the host.
     pub fn encode(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str) {
         if let Map::Sparse(sparse) = &self.map {
-            let visible_word = (crate::cpu::shared::MAP_COUNTER_VISIBLE * 4) as u64;
-            frame
-                .encoder()
-                .clear_buffer(sparse.counters(), visible_word, Some(4));
+            Self::clear_visible_count(frame, sparse);
             if let Some(s) = self.swapper() {
                 s.encode_clear(frame, sparse.counters());
             }
@@ -432,10 +418,15 @@ impl Mapper {
     /// work as in a frame). A dense map has only [`IntegratePart::Blocks`].
     pub fn encode_part(&self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, stage: &'static str, part: IntegratePart) {
         if let (Map::Sparse(sparse), IntegratePart::Visible) = (&self.map, part) {
-            let visible_word = (crate::cpu::shared::MAP_COUNTER_VISIBLE * 4) as u64;
-            frame.encoder().clear_buffer(sparse.counters(), visible_word, Some(4));
+            Self::clear_visible_count(frame, sparse);
         }
         self.record_part(gpu, &mut frame.stage(stage), part);
+    }
+
+    /// Clears a sparse map's visible count, before the pass that lists the visible blocks.
+    fn clear_visible_count(frame: &mut FrameEncoder<'_>, sparse: &SparseMap) {
+        let visible_word = (crate::cpu::shared::MAP_COUNTER_VISIBLE * 4) as u64;
+        frame.encoder().clear_buffer(sparse.counters(), visible_word, Some(4));
     }
 
     /// Records the integration into an open compute pass, after [`Self::encode`] cleared a

@@ -39,6 +39,19 @@ pub use crate::tsdf::DenseTsdfVolume;
 /// tight enough that blocks hidden behind a surface drop out.
 pub const DEPTH_TILE_PX: u32 = 16;
 
+/// `depth_tile_max`'s parameters for a depth image of `k`'s size: tiles of [`DEPTH_TILE_PX`],
+/// the grid `block_visible` reads too.
+pub fn depth_tile_params(k: &crate::PinholeIntrinsics) -> crate::kernels::depth_tile_max::DepthTileMaxParams {
+    crate::kernels::depth_tile_max::DepthTileMaxParams {
+        width_px: k.width_px,
+        height_px: k.height_px,
+        tile_px: DEPTH_TILE_PX,
+        tiles_x: k.width_px.div_ceil(DEPTH_TILE_PX),
+        tiles_y: k.height_px.div_ceil(DEPTH_TILE_PX),
+        ..Default::default()
+    }
+}
+
 /// Voxels along x, y and z of a sparse map's box: 2048, 2048 and 1023 blocks of 8 (block keys
 /// pack 11, 11 and 10 bits; the all-ones key marks a free hash slot).
 pub const SPARSE_DIMS_VOXELS: [u32; 3] = [2048 * 8, 2048 * 8, 1023 * 8];

@@ -8,26 +8,20 @@
 use webfusion_core::cpu::{self, shared::{BLOCK_VOXELS, BRICK_SHIFT, MAP_COUNTER_VISIBLE, block_of_key, voxel_index, voxel_tsdf, voxel_weight}};
 use webfusion_core::kernels::GpuIntrinsics;
 use webfusion_core::kernels::block_integrate::{BlockIntegrateParams, CameraPose};
-use webfusion_core::kernels::block_visible::BlockVisibleParams;
-use webfusion_core::kernels::depth_tile_max::DepthTileMaxParams;
-use webfusion_core::map::DEPTH_TILE_PX;
 use webfusion_core::kernels::tsdf_integrate::TsdfIntegrateParams;
 use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
 use webfusion_core::Se3;
 use webfusion_tests::{cast, finish, gpu, run_kernel_in_place};
 
-use super::scene::{POOL_BLOCKS, VOXEL_M, camera_pose, cpu_map, frame, poses, sparse_desc};
+use super::scene::{POOL_BLOCKS, VOXEL_M, camera_pose, cpu_map, depth_tiles, frame, poses, sparse_desc, visible_params};
 use crate::fusion::tsdf_integrate::compare_volumes;
 use crate::preprocess::chain::real_cpu_chain;
 
 /// The visible list and counters for `pose`, by the twin.
 fn visible(desc: &VolumeDesc, pose: &CameraPose, coords: &[u32], counters: &[u32]) -> (Vec<u32>, Vec<u32>) {
     let (k, depth) = frame();
-    let tiles = [k.width_px.div_ceil(DEPTH_TILE_PX), k.height_px.div_ceil(DEPTH_TILE_PX)];
-    let t = DepthTileMaxParams { width_px: k.width_px, height_px: k.height_px, tile_px: DEPTH_TILE_PX, tiles_x: tiles[0], tiles_y: tiles[1], ..Default::default() };
-    let mut tile_max_m = vec![0.0; (tiles[0] * tiles[1]) as usize];
-    cpu::depth_tile_max(&t, depth, &mut tile_max_m);
-    let p = BlockVisibleParams { volume: *desc, intrinsics: GpuIntrinsics::from(k), tile_px: DEPTH_TILE_PX, tiles_x: tiles[0], tiles_y: tiles[1], ..Default::default() };
+    let tile_max_m = depth_tiles(&k, depth);
+    let p = visible_params(*desc, k);
     let (mut c, mut list) = (counters.to_vec(), vec![0u32; desc.pool_blocks as usize]);
     c[MAP_COUNTER_VISIBLE] = 0;
     cpu::block_visible(&p, pose, coords, &mut c, &mut list, &tile_max_m);

@@ -14,26 +14,10 @@ use webfusion_core::cpu::{self, shared::{MAP_COUNTER_VISIBLE, MAP_COUNTERS, NO_D
 use webfusion_core::kernels::GpuIntrinsics;
 use webfusion_core::kernels::block_integrate::BlockIntegrateParams;
 use webfusion_core::kernels::block_visible::{BlockVisibleParams, CameraPose};
-use webfusion_core::kernels::depth_tile_max::DepthTileMaxParams;
-use webfusion_core::map::DEPTH_TILE_PX;
 use webfusion_core::{PinholeIntrinsics, Se3};
 use webfusion_tests::{Slot, cast, finish, gpu, run_kernel_slots};
 
-use super::scene::{POOL_BLOCKS, camera_pose, cpu_map, frame, poses, sparse_desc};
-
-/// The visibility parameters for `desc` and the frame's camera `k`, with the mapper's tiles.
-fn params(desc: webfusion_core::tsdf::VolumeDesc, k: PinholeIntrinsics) -> BlockVisibleParams {
-    BlockVisibleParams { volume: desc, intrinsics: GpuIntrinsics::from(k), tile_px: DEPTH_TILE_PX, tiles_x: k.width_px.div_ceil(DEPTH_TILE_PX), tiles_y: k.height_px.div_ceil(DEPTH_TILE_PX), ..Default::default() }
-}
-
-/// The twin's depth tiles of `depth` for `p`.
-fn tiles(p: &BlockVisibleParams, depth: &[f32]) -> Vec<f32> {
-    let k = p.intrinsics;
-    let t = DepthTileMaxParams { width_px: k.width_px, height_px: k.height_px, tile_px: p.tile_px, tiles_x: p.tiles_x, tiles_y: p.tiles_y, ..Default::default() };
-    let mut out = vec![0.0; (p.tiles_x * p.tiles_y) as usize];
-    cpu::depth_tile_max(&t, depth, &mut out);
-    out
-}
+use super::scene::{POOL_BLOCKS, camera_pose, cpu_map, depth_tiles, frame, poses, sparse_desc, visible_params};
 
 /// The twin's visible list.
 fn twin_list(p: &BlockVisibleParams, pose: &CameraPose, coords: &[u32], counters: &[u32], tile_max_m: &[f32]) -> Vec<u32> {
@@ -60,8 +44,8 @@ fn scene() -> Scene {
     let (k, depth) = frame();
     let (_, coords, mut counters) = cpu_map(&desc, &poses());
     counters[MAP_COUNTER_VISIBLE] = 0;
-    let p = params(desc, k);
-    let tile_max_m = tiles(&p, depth);
+    let p = visible_params(desc, k);
+    let tile_max_m = depth_tiles(&k, depth);
     Scene { desc, k, depth, coords, counters, p, tile_max_m }
 }
 

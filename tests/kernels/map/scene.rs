@@ -10,6 +10,8 @@ use webfusion_core::cpu::{self, shared::{EMPTY_KEY, MAP_COUNTERS, NO_BLOCK}};
 use webfusion_core::kernels::GpuIntrinsics;
 use webfusion_core::kernels::block_alloc::{BlockAllocParams, CameraPose};
 use webfusion_core::kernels::block_assign::BlockAssignParams;
+use webfusion_core::kernels::block_visible::BlockVisibleParams;
+use webfusion_core::map::depth_tile_params;
 use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
 use webfusion_core::{PinholeIntrinsics, Se3};
 
@@ -36,6 +38,20 @@ pub(crate) fn frame() -> (PinholeIntrinsics, &'static [f32]) {
 /// The poses the tests fuse at: the identity, and a small motion as between two frames.
 pub(crate) fn poses() -> [Se3; 2] {
     [Se3::IDENTITY, Se3::new(DQuat::from_axis_angle(DVec3::new(0.2, 1.0, 0.1).normalize(), 0.05), DVec3::new(0.03, -0.02, 0.05))]
+}
+
+/// `block_visible`'s parameters for `desc` and the frame's camera `k`, with the mapper's tiles.
+pub(crate) fn visible_params(desc: VolumeDesc, k: PinholeIntrinsics) -> BlockVisibleParams {
+    let t = depth_tile_params(&k);
+    BlockVisibleParams { volume: desc, intrinsics: GpuIntrinsics::from(k), tile_px: t.tile_px, tiles_x: t.tiles_x, tiles_y: t.tiles_y, ..Default::default() }
+}
+
+/// The twin's depth tiles of `depth` (an image of `k`'s size) at the mapper's tile size.
+pub(crate) fn depth_tiles(k: &PinholeIntrinsics, depth: &[f32]) -> Vec<f32> {
+    let t = depth_tile_params(k);
+    let mut out = vec![0.0; (t.tiles_x * t.tiles_y) as usize];
+    cpu::depth_tile_max(&t, depth, &mut out);
+    out
 }
 
 pub(crate) fn camera_pose(world_from_camera: &Se3) -> CameraPose {
