@@ -48,7 +48,7 @@ use webfusion_core::{ColorImage, Gpu, PinholeIntrinsics, RgbdCalibration, RgbdFr
 use crate::canvas::GpuCanvas;
 use crate::planes_world::{Drawn, PlaneWorldModel, WorldStatus};
 use crate::sim::{OpenedMap, RealFrame, SensorPanel, SensorStatus};
-use crate::status::{HostPerFrame, STATS_WINDOW, StageMedians, VolumeStatus, Window};
+use crate::status::{HostPerFrame, STATS_WINDOW, StageMedians, StageWindows, VolumeStatus, Window};
 use crate::ui;
 use crate::view::{self, FrameImage, Orbit};
 
@@ -67,16 +67,6 @@ pub(crate) const FREE_VIEW_MODEL_REFRESH_MS: f64 = 500.0;
 /// adapter (a raycast of 220 ms on SwiftShader) this one, or each frame would pay twice for
 /// its raycast.
 const FREE_VIEW_GPU_SHARE: f64 = 0.1;
-
-/// The per-frame stages whose windowed medians the status shows, in `FusionMode::stages`.
-const STAGE_DECODE: usize = 0;
-const STAGE_PREPROCESS: usize = 1;
-const STAGE_TRACK: usize = 2;
-const STAGE_INTEGRATE: usize = 3;
-const STAGE_RAYCAST: usize = 4;
-const STAGE_VIEWS: usize = 5;
-const STAGE_FEATURES: usize = 6;
-const STAGES: usize = 7;
 
 /// What the shell knows about a frame until its report comes back.
 #[derive(Clone, Debug)]
@@ -293,7 +283,7 @@ pub(crate) struct FusionMode {
     recovered_frames: u64,
     /// A sparse map's counters as of the last report.
     map: Option<MapStats>,
-    stages: [Window; STAGES],
+    stages: StageWindows,
     frame_instants: VecDeque<Instant>,
     host: HostPerFrame,
     latency_ms: Option<f64>,
@@ -533,7 +523,7 @@ impl FusionMode {
         self.tracking = "idle";
         self.lost_frames = 0;
         self.recovered_frames = 0;
-        self.stages.iter_mut().for_each(Window::clear);
+        self.stages.clear();
         self.frame_instants.clear();
         self.latency_ms = None;
         self.orbit = None;
@@ -903,17 +893,15 @@ impl FusionMode {
             self.orbit = Some(Orbit::looking_at(world_from_camera.transform_point(DVec3::new(0.0, 0.0, 1.5)), 3.0, world_from_camera.rotation * DVec3::NEG_Y));
         }
         let t = report.gpu_ms.unwrap_or_default();
-        let mut samples = [0.0; STAGES];
-        samples[STAGE_DECODE] = meta.decode_ms;
-        samples[STAGE_PREPROCESS] = t.preprocess;
-        samples[STAGE_TRACK] = t.track;
-        samples[STAGE_INTEGRATE] = t.integrate;
-        samples[STAGE_RAYCAST] = t.raycast;
-        samples[STAGE_VIEWS] = meta.views_ms;
-        samples[STAGE_FEATURES] = t.features.iter().sum();
-        for (window, sample) in self.stages.iter_mut().zip(samples) {
-            window.push(sample);
-        }
+        self.stages.push(&StageMedians {
+            decode: meta.decode_ms,
+            preprocess: t.preprocess,
+            features: t.features.iter().sum(),
+            track: t.track,
+            integrate: t.integrate,
+            raycast: t.raycast,
+            views: meta.views_ms,
+        });
         self.host = HostPerFrame { submits: report.host.submits as f64, host_waits: report.host.host_waits as f64, readbacks: report.host.readbacks as f64 };
         self.latency_ms = Some(meta.arrived.elapsed().as_secs_f64() * 1e3);
         if self.frame_instants.len() == STATS_WINDOW {
@@ -932,7 +920,7 @@ impl FusionMode {
             return None;
         }
         let since_ms = |t: Option<Instant>| t.map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64() * 1e3);
-        let raycast_ms = self.stages[STAGE_RAYCAST].median().unwrap_or(0.0);
+        let raycast_ms = self.stages.raycast.median().unwrap_or(0.0);
         let period_ms = FREE_VIEW_MODEL_REFRESH_MS.max(raycast_ms / FREE_VIEW_GPU_SHARE);
         let mut due_ms = (period_ms - since_ms(self.free_drawn_at)).max(0.0);
         if self.in_flight.is_empty() {
@@ -1049,22 +1037,13 @@ impl FusionMode {
             (Some(first), Some(last)) if self.frame_instants.len() >= 2 => (self.frame_instants.len() - 1) as f64 / (*last - *first).as_secs_f64().max(1e-9),
             _ => 0.0,
         };
-        let m = |i: usize| self.stages[i].median().unwrap_or(0.0);
         let t = &self.config.tsdf;
         FusionStatus {
             frames_done: self.trajectory.len(),
             last_index: self.last_reported,
             frames_in_flight: self.in_flight.len(),
             fps,
-            stages_ms: StageMedians {
-                decode: m(STAGE_DECODE),
-                preprocess: m(STAGE_PREPROCESS),
-                features: m(STAGE_FEATURES),
-                track: m(STAGE_TRACK),
-                integrate: m(STAGE_INTEGRATE),
-                raycast: m(STAGE_RAYCAST),
-                views: m(STAGE_VIEWS),
-            },
+            stages_ms: self.stages.medians(),
             gpu_timestamps: self.pipeline.as_ref().is_some_and(|p| p.fusion.timer_available()),
             host_per_frame: self.host,
             tracking: self.tracking,

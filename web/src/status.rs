@@ -51,6 +51,50 @@ pub(crate) struct StageMedians {
     pub(crate) views: f64,
 }
 
+/// A window of each stage's times, one sample per frame.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct StageWindows {
+    pub(crate) decode: Window,
+    pub(crate) preprocess: Window,
+    pub(crate) features: Window,
+    pub(crate) track: Window,
+    pub(crate) integrate: Window,
+    pub(crate) raycast: Window,
+    pub(crate) views: Window,
+}
+
+impl StageWindows {
+    fn all_mut(&mut self) -> [&mut Window; 7] {
+        [&mut self.decode, &mut self.preprocess, &mut self.features, &mut self.track, &mut self.integrate, &mut self.raycast, &mut self.views]
+    }
+
+    /// Adds one frame's stage times (milliseconds, in [`StageMedians`]' fields).
+    pub(crate) fn push(&mut self, frame: &StageMedians) {
+        let StageMedians { decode, preprocess, features, track, integrate, raycast, views } = *frame;
+        for (window, sample) in self.all_mut().into_iter().zip([decode, preprocess, features, track, integrate, raycast, views]) {
+            window.push(sample);
+        }
+    }
+
+    /// Each stage's median (0 before the first frame).
+    pub(crate) fn medians(&self) -> StageMedians {
+        let m = |w: &Window| w.median().unwrap_or(0.0);
+        StageMedians {
+            decode: m(&self.decode),
+            preprocess: m(&self.preprocess),
+            features: m(&self.features),
+            track: m(&self.track),
+            integrate: m(&self.integrate),
+            raycast: m(&self.raycast),
+            views: m(&self.views),
+        }
+    }
+
+    pub(crate) fn clear(&mut self) {
+        self.all_mut().into_iter().for_each(Window::clear);
+    }
+}
+
 /// The volume the pipeline fuses into.
 #[derive(Clone, Copy, Debug, Serialize, PartialEq)]
 pub(crate) struct VolumeStatus {
