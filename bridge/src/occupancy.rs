@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use webfusion_core::map::file::{MapFrame, read_map_file, read_map_file_recovering};
 use webfusion_core::map::occupancy::{CarveView, FREE, GridSpec, OCCUPIED, OccupancyBuilder, UNKNOWN};
+use webfusion_core::map::window::{ViewCone, ViewedMap};
 use webfusion_core::sim::sensor::VirtualSensor;
 use webfusion_core::{Gpu, GpuOptions};
 
@@ -65,11 +66,11 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
     spec.validate()?;
     anyhow::ensure!(args.out.extension().is_none_or(|e| e != "json"), "--out {}: the grid's description is written as .json beside it; name the grid otherwise (e.g. .bin)", args.out.display());
     let poses = crate::simulate::given_poses(&args.given)?;
-    let file = if args.skip_corrupt { read_map_file_recovering(&args.map) } else { read_map_file(&args.map) }.with_context(|| format!("reading the map {}", args.map.display()))?;
+    let mut file = if args.skip_corrupt { read_map_file_recovering(&args.map) } else { read_map_file(&args.map) }.with_context(|| format!("reading the map {}", args.map.display()))?;
     if let Some(damage) = &file.damage {
         eprintln!("warning: {}: {damage}; using the intact blocks", args.map.display());
     }
-    let header = &file.header;
+    let header = &file.header.clone();
     let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let started = std::time::Instant::now();
     let mut builder = OccupancyBuilder::new(&spec, threads)?;
@@ -79,14 +80,18 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
         // The map rendered at each pose it was fused from: exact depth from the camera on (no
         // near limit: a nearer surface must stop the carving), far enough for any room.
         let gpu = pollster::block_on(Gpu::new(options))?;
-        let map = webfusion_core::map::resident_map(&gpu, header, &file.blocks).with_context(|| format!("loading {}", args.map.display()))?;
+        // A map larger than the device's largest pool is rendered through a window holding
+        // each view (map::window); the blocks come back for the marking below.
+        let mut viewed = ViewedMap::load(&gpu, header, std::mem::take(&mut file.blocks), None).with_context(|| format!("loading {}", args.map.display()))?;
         let sensor_options = crate::simulate::kinect_sensor(CARVE_UNITS_PER_METRE, false, None, (Some(0.0), Some(args.max_depth)), false)?;
-        let mut sensor = VirtualSensor::new(&gpu, &map, k, sensor_options)?;
+        let mut sensor = VirtualSensor::new(&gpu, viewed.map(), k, sensor_options)?;
+        let cone = ViewCone::for_camera(&k, sensor_options.depth_range_m.1);
         for batch in poses.chunks(CARVE_BATCH) {
             let rendering = std::time::Instant::now();
             let mut depths = Vec::with_capacity(batch.len());
             for p in batch {
-                let frame = pollster::block_on(sensor.render(&gpu, &map, &p.world_from_camera, 0))?;
+                viewed.prepare(&gpu, &p.world_from_camera, &cone)?;
+                let frame = pollster::block_on(sensor.render(&gpu, viewed.map(), &p.world_from_camera, 0))?;
                 depths.push(frame.depth_units.iter().map(|&u| f32::from(u) / CARVE_UNITS_PER_METRE).collect::<Vec<f32>>());
             }
             let errors = gpu.take_errors();
@@ -97,6 +102,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
             builder.carve(&views, f64::from(header.truncation_m))?;
             carve_s += carving.elapsed().as_secs_f64();
         }
+        file.blocks = viewed.into_blocks();
     } else {
         eprintln!("note: no --poses: free space is known only within {:.1} cm of the map's surfaces (pass the poses the map was fused from to carve the rest)", header.truncation_m * 100.0);
     }

@@ -13,6 +13,7 @@ use webfusion_core::io::{CALIBRATION_FILE, WrittenCalibration, format_calibratio
 use webfusion_core::source::DepthNoise;
 use webfusion_core::map::file::{MapFileHeader, read_map_file, read_map_file_recovering};
 use webfusion_core::map::occupancy::OccupancyGrid;
+use webfusion_core::map::window::{ViewCone, ViewedMap};
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, SimulatedFrame, VirtualSensor};
 use webfusion_core::tsdf::TsdfStore as _;
 use webfusion_core::{ColorImage, DepthImage, Gpu, GpuOptions, PinholeIntrinsics, RgbdCalibration};
@@ -66,6 +67,13 @@ pub(crate) struct SimulateArgs {
     /// Load the intact blocks of a damaged map file (with a warning) instead of stopping.
     #[arg(long)]
     skip_corrupt: bool,
+    /// GPU memory for a sparse map's pool, MiB (default: the largest pool the device binds,
+    /// 65,536 blocks of 8³ on a 128 MiB binding). A map with more blocks than the pool is
+    /// rendered through a window: before each view the pool holds every block that view can
+    /// reach, re-filled from host memory when the camera turns or moves away (exact: the same
+    /// depth as the whole map on the GPU).
+    #[arg(long)]
+    map_budget_mib: Option<f64>,
     /// The map's occupancy grid (`export-occupancy`'s G.json or G.bin): also write, per frame,
     /// which pixels looked through never-observed space between the sensor's near range and
     /// their return (or the far range, without one): unknown/*.png, 255 marked, 0 not, listed
@@ -213,30 +221,44 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
     let poses = poses(args)?;
     let sensor_options = SensorOptions { hits: args.occupancy.is_some(), ..sensor_options(args)? };
     anyhow::ensure!(args.bench || args.out.is_some(), "--out DIR is needed (or --bench)");
-    let file = if args.skip_corrupt { read_map_file_recovering(&args.map) } else { read_map_file(&args.map) }.with_context(|| format!("reading the map {}", args.map.display()))?;
+    let mut file = if args.skip_corrupt { read_map_file_recovering(&args.map) } else { read_map_file(&args.map) }.with_context(|| format!("reading the map {}", args.map.display()))?;
     if let Some(damage) = &file.damage {
         eprintln!("warning: {}: {damage}; rendering the intact blocks", args.map.display());
     }
     let (k, camera_from) = intrinsics(args, &file.header)?;
     println!("camera: {camera_from}, {}x{}, f = ({}, {}) px, c = ({}, {}) px", k.width_px, k.height_px, k.fx_px, k.fy_px, k.cx_px, k.cy_px);
     let gpu = pollster::block_on(Gpu::new(options))?;
-    let map = webfusion_core::map::resident_map(&gpu, &file.header, &file.blocks).with_context(|| format!("loading {}", args.map.display()))?;
-    println!("map {}: {} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU); {} poses, {}x{}, noise {:?}", args.map.display(), file.blocks.len(), file.header.voxel_size_m * 1e3, file.header.kind.name(), map.memory_bytes() as f64 / 1048576.0, poses.len(), k.width_px, k.height_px, args.noise);
-    let mut sensor = VirtualSensor::new(&gpu, &map, k, sensor_options)?;
+    let max_pool = args.map_budget_mib.map(webfusion_core::map::pool_blocks_for_budget_mib).transpose()?;
+    let n_blocks = file.blocks.len();
+    let mut viewed = ViewedMap::load(&gpu, &file.header, std::mem::take(&mut file.blocks), max_pool).with_context(|| format!("loading {}", args.map.display()))?;
+    let windowed = viewed.window().map(|w| format!(", rendered through a window of {} of them", w.capacity())).unwrap_or_default();
+    println!("map {}: {n_blocks} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU{windowed}); {} poses, {}x{}, noise {:?}", args.map.display(), file.header.voxel_size_m * 1e3, file.header.kind.name(), viewed.map().memory_bytes() as f64 / 1048576.0, poses.len(), k.width_px, k.height_px, args.noise);
+    let mut sensor = VirtualSensor::new(&gpu, viewed.map(), k, sensor_options)?;
+    let cone = ViewCone::for_camera(&k, sensor_options.depth_range_m.1);
     if args.bench {
-        // One warm-up render, then each pose alone: submit, wait, read back.
-        pollster::block_on(sensor.render(&gpu, &map, &poses[0].world_from_camera, 0))?;
+        // One warm-up render, then each pose alone: (a new window where one is needed,) submit,
+        // wait, read back.
+        viewed.prepare(&gpu, &poses[0].world_from_camera, &cone)?;
+        pollster::block_on(sensor.render(&gpu, viewed.map(), &poses[0].world_from_camera, 0))?;
         let mut ms = Vec::with_capacity(poses.len());
+        let mut window_ms = Vec::new();
         let started = std::time::Instant::now();
         for (i, p) in poses.iter().enumerate() {
             let t = std::time::Instant::now();
-            pollster::block_on(sensor.render(&gpu, &map, &p.world_from_camera, i as u32))?;
+            if viewed.prepare(&gpu, &p.world_from_camera, &cone)? {
+                window_ms.push(t.elapsed().as_secs_f64() * 1e3);
+            }
+            pollster::block_on(sensor.render(&gpu, viewed.map(), &p.world_from_camera, i as u32))?;
             ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
         let total_s = started.elapsed().as_secs_f64();
         let mut sorted = ms.clone();
         sorted.sort_by(f64::total_cmp);
         println!("simulated {} frames in {total_s:.2} s: {:.1} frames/s; per frame median {:.1} ms, p95 {:.1} ms (render + readback, noise {:?})", poses.len(), poses.len() as f64 / total_s, percentile(&sorted, 0.5), percentile(&sorted, 0.95), args.noise);
+        if viewed.window().is_some() {
+            window_ms.sort_by(f64::total_cmp);
+            println!("windows: {} uploaded for {} frames (median {:.0} ms each, in the frame times above)", window_ms.len(), poses.len(), if window_ms.is_empty() { 0.0 } else { percentile(&window_ms, 0.5) });
+        }
         return Ok(());
     }
     let out = args.out.as_ref().expect("checked");
@@ -253,7 +275,9 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
             let frame = pollster::block_on(sensor.wait(&gpu))?.context("a frame in flight")?;
             write(frame, &mut dir)?;
         }
-        sensor.submit(&gpu, &map, &p.world_from_camera, i as u32, i as u64)?;
+        // A new window waits for nothing: uploads are ordered after the frames in flight.
+        viewed.prepare(&gpu, &p.world_from_camera, &cone)?;
+        sensor.submit(&gpu, viewed.map(), &p.world_from_camera, i as u32, i as u64)?;
         for frame in sensor.collect(&gpu)? {
             write(frame, &mut dir)?;
         }

@@ -15,6 +15,15 @@ pub enum Error {
         /// The adapter-name filter, if any.
         wanted: Option<String>,
     },
+    /// A view of a saved map reaches more of its blocks than the GPU pool holds, so it cannot
+    /// be rendered whole.
+    #[error("the view reaches {view_blocks} blocks of the map, more than the GPU pool's {pool_blocks}: render it with a shorter depth range (--max-depth) or narrower intrinsics, or on a device with larger storage bindings")]
+    ViewExceedsPool {
+        /// Blocks the view may read.
+        view_blocks: usize,
+        /// Blocks the pool holds.
+        pool_blocks: usize,
+    },
     /// The adapter offers less of a limit than the kernels need.
     #[error("GPU adapter {adapter:?} offers {name} = {available}, but webfusion needs at least {required}")]
     MissingLimit {

@@ -16,6 +16,7 @@ use anyhow::Context as _;
 use tokio::sync::{mpsc, oneshot};
 use webfusion_core::map::Map;
 use webfusion_core::map::occupancy::OccupancyGrid;
+use webfusion_core::map::window::{ViewCone, ViewedMap};
 use webfusion_core::map::file::{read_map_file, read_map_file_recovering};
 use webfusion_core::protocol::{RenderFailure, RenderOutcome, RenderRequest, RenderedView};
 use webfusion_core::sim::sensor::{SensorOptions, VirtualSensor};
@@ -49,7 +50,7 @@ impl Renderer {
         std::thread::Builder::new()
             .name("webfusion-render".to_owned())
             .spawn(move || {
-                let (gpu, map, grid) = match load(&options, &path, occupancy.as_deref(), skip_corrupt) {
+                let (gpu, mut map, grid) = match load(&options, &path, occupancy.as_deref(), skip_corrupt) {
                     Ok((gpu, map, grid, summary)) => {
                         let _ = ready_tx.send(Ok(summary));
                         (gpu, map, grid)
@@ -61,7 +62,7 @@ impl Renderer {
                 };
                 let mut sensors = SensorCache::default();
                 while let Some(job) = queue.blocking_recv() {
-                    let outcome = render(&gpu, &map, grid.as_ref(), &mut sensors, &job.request);
+                    let outcome = render(&gpu, &mut map, grid.as_ref(), &mut sensors, &job.request);
                     // A client that left before its answer needs none.
                     let _ = job.reply.send(outcome);
                 }
@@ -84,21 +85,24 @@ impl Renderer {
 
 /// The GPU and the map at `path` on it, the map's occupancy grid at `occupancy`, and a line
 /// describing them.
-fn load(options: &GpuOptions, path: &Path, occupancy: Option<&Path>, skip_corrupt: bool) -> anyhow::Result<(Gpu, Map, Option<OccupancyGrid>, String)> {
-    let file = if skip_corrupt { read_map_file_recovering(path) } else { read_map_file(path) }.with_context(|| format!("reading the map {}", path.display()))?;
+fn load(options: &GpuOptions, path: &Path, occupancy: Option<&Path>, skip_corrupt: bool) -> anyhow::Result<(Gpu, ViewedMap, Option<OccupancyGrid>, String)> {
+    let mut file = if skip_corrupt { read_map_file_recovering(path) } else { read_map_file(path) }.with_context(|| format!("reading the map {}", path.display()))?;
     if let Some(damage) = &file.damage {
         eprintln!("warning: {}: {damage}; serving the intact blocks", path.display());
     }
     let grid = occupancy.map(|g| crate::occupancy::read_grid_for_map(g, file.header.frame, path)).transpose()?;
     let gpu = pollster::block_on(Gpu::new(options))?;
-    let map = webfusion_core::map::resident_map(&gpu, &file.header, &file.blocks).with_context(|| format!("loading {}", path.display()))?;
+    let n_blocks = file.blocks.len();
+    // A map larger than the device's largest pool is rendered through a window that holds
+    // each request's view (map::window).
+    let map = ViewedMap::load(&gpu, &file.header, std::mem::take(&mut file.blocks), None).with_context(|| format!("loading {}", path.display()))?;
     let summary = format!(
-        "map {}: {} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU); render requests are answered{}",
+        "map {}: {n_blocks} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU{}); render requests are answered{}",
         path.display(),
-        file.blocks.len(),
         file.header.voxel_size_m * 1e3,
         file.header.kind.name(),
-        map.memory_bytes() as f64 / 1048576.0,
+        map.map().memory_bytes() as f64 / 1048576.0,
+        map.window().map(|w| format!(", through a window of {} blocks", w.capacity())).unwrap_or_default(),
         if grid.is_some() { ", with unknown masks from the occupancy grid" } else { "" }
     );
     Ok((gpu, map, grid, summary))
@@ -124,7 +128,7 @@ impl SensorCache {
 }
 
 /// Renders one request: its view, or why there is none.
-fn render(gpu: &Gpu, map: &Map, grid: Option<&OccupancyGrid>, sensors: &mut SensorCache, request: &RenderRequest) -> RenderOutcome {
+fn render(gpu: &Gpu, viewed: &mut ViewedMap, grid: Option<&OccupancyGrid>, sensors: &mut SensorCache, request: &RenderRequest) -> RenderOutcome {
     let failed = |code, message: String| RenderOutcome::Failed { code, message };
     let k = request.intrinsics;
     if request.unknown && grid.is_none() {
@@ -135,6 +139,13 @@ fn render(gpu: &Gpu, map: &Map, grid: Option<&OccupancyGrid>, sensors: &mut Sens
         Ok(options) => SensorOptions { hits: request.unknown, ..options },
         Err(e) => return failed(RenderFailure::InvalidRequest, format!("{e:#}")),
     };
+    match viewed.prepare(gpu, &request.world_from_camera, &ViewCone::for_camera(&k, options.depth_range_m.1)) {
+        Ok(_) => {}
+        // The view alone needs more than the pool: the request must ask for less.
+        Err(e @ webfusion_core::Error::ViewExceedsPool { .. }) => return failed(RenderFailure::InvalidRequest, e.to_string()),
+        Err(e) => return failed(RenderFailure::RenderFailed, e.to_string()),
+    }
+    let map = viewed.map();
     let sensor = match sensors.get(gpu, map, k, options) {
         Ok(sensor) => sensor,
         // The sensor refuses what the protocol cannot check alone (a range past the u16 scale).

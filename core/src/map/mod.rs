@@ -29,6 +29,7 @@ use crate::cpu::shared::{
 pub mod file;
 pub mod occupancy;
 pub mod swap;
+pub mod window;
 use crate::tsdf::{TsdfConfig, TsdfStore, VolumeDesc};
 use crate::{Error, Gpu, Result};
 

@@ -17,14 +17,14 @@ use webfusion_tests::{finish, gpu};
 use crate::synthetic::{Room, UNITS_PER_M};
 
 /// 160x120 camera with TUM-like focal lengths.
-const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 129.3, fy_px: 129.1, cx_px: 79.6, cy_px: 63.8, width_px: 160, height_px: 120 };
+pub(crate) const K: PinholeIntrinsics = PinholeIntrinsics { fx_px: 129.3, fy_px: 129.1, cx_px: 79.6, cy_px: 63.8, width_px: 160, height_px: 120 };
 /// Voxel edge: 2 cm (blocks of 16 cm).
-const VOXEL_M: f32 = 0.02;
+pub(crate) const VOXEL_M: f32 = 0.02;
 /// Frames: 10° of yaw each, 450° in all.
 const FRAMES: usize = 46;
 
 /// Frame `i`'s pose: at the room's centre, turned 10° per frame about the vertical (y) axis.
-fn pose(i: usize) -> Se3 {
+pub(crate) fn pose(i: usize) -> Se3 {
     Se3::new(DQuat::from_rotation_y((10.0 * i as f64).to_radians()), DVec3::new(0.0, -0.1, 1.1))
 }
 
@@ -42,6 +42,12 @@ fn frame(i: usize) -> RgbdFrame {
 
 /// Fuses every frame into a sparse map of `pool_blocks`: (all blocks, the stats after each frame).
 fn fuse(pool_blocks: u32, swap: bool) -> (Vec<MapBlock>, Vec<MapStats>) {
+    let (blocks, stats, _) = fuse_room(pool_blocks, swap);
+    (blocks, stats)
+}
+
+/// [`fuse`], with the map's origin (the world position of its box's voxel (0, 0, 0) corner).
+pub(crate) fn fuse_room(pool_blocks: u32, swap: bool) -> (Vec<MapBlock>, Vec<MapStats>, [f32; 3]) {
     let gpu = gpu();
     let calibration = RgbdCalibration { intrinsics: K, depth_units_per_metre: UNITS_PER_M };
     let tsdf = TsdfConfig { swap, ..TsdfConfig::sparse(VOXEL_M, pool_blocks) };
@@ -54,8 +60,9 @@ fn fuse(pool_blocks: u32, swap: bool) -> (Vec<MapBlock>, Vec<MapStats>) {
         stats.push(mapper.map_stats().expect("a sparse map reports"));
     }
     let blocks = pollster::block_on(mapper.download_blocks(&gpu)).expect("download");
+    let origin = mapper.mapper().origin_in_world();
     finish(&gpu);
-    (blocks, stats)
+    (blocks, stats, origin)
 }
 
 #[test]

@@ -1,0 +1,269 @@
+// SPDX-License-Identifier: MIT
+//! Rendering a saved sparse map larger than the GPU pool (a room at 1 cm is 75-100k blocks; a
+//! 128 MiB storage binding holds 65,536): the host keeps every block, and before each view the
+//! pool holds a window of them that contains every block the view can read.
+//!
+//! What a view reads is bounded by geometry: the raycast's rays leave the camera centre inside
+//! the image's cone (half-angle θ: the widest pixel's ray) and stop at the sensor's farthest
+//! depth, i.e. within `max_depth / cos θ` of the centre; a trilinear sample or the colour
+//! lookup reads voxels at most one voxel beyond the ray. So a block whose bounding sphere,
+//! grown by two voxels, misses that truncated cone is never read, and a view renders exactly
+//! as it would with the whole map on the GPU. (The sensor model after the raycast, projector
+//! shadows included, works on the rendered images, not on the map.)
+//!
+//! [`ViewedMap::prepare`] checks the view's blocks against the window; when one is missing it
+//! uploads a new window: the view's blocks, then the others nearest the camera centre until
+//! the pool is full, so the next views of a trajectory (or a planner's nearby queries) usually
+//! find theirs resident and cost nothing more. A view that by itself reaches more blocks than
+//! the pool holds is a typed error ([`Error::ViewExceedsPool`]), never a silently partial
+//! image. A map that fits the pool is uploaded once, as before.
+
+use glam::DVec3;
+
+use super::file::MapFileHeader;
+use super::{Map, MapBlock, SparseMap, max_pool_blocks, resident_map};
+use crate::cpu::map::block_swap_out::block_centre;
+use crate::tsdf::{MapKind, TsdfConfig, TsdfStore, VolumeDesc};
+use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
+
+/// The part of space a view of a map can read: a cone about the optical axis, from the camera
+/// centre to `reach_m`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewCone {
+    /// The angle between the optical axis and the widest pixel ray, radians.
+    pub half_angle_rad: f64,
+    /// The farthest any ray goes, metres.
+    pub reach_m: f64,
+}
+
+impl ViewCone {
+    /// The cone of a camera with intrinsics `k` whose depth stops at `max_depth_m` (along the
+    /// optical axis): the widest ray through the image's outer pixel edges.
+    pub fn for_camera(k: &PinholeIntrinsics, max_depth_m: f32) -> Self {
+        let (fx, fy) = (f64::from(k.fx_px), f64::from(k.fy_px));
+        let xs = [-0.5, f64::from(k.width_px) - 0.5].map(|x| (x - f64::from(k.cx_px)) / fx);
+        let ys = [-0.5, f64::from(k.height_px) - 0.5].map(|y| (y - f64::from(k.cy_px)) / fy);
+        let tan = xs.iter().flat_map(|x| ys.iter().map(move |y| x.hypot(*y))).fold(0.0, f64::max);
+        let half_angle_rad = tan.atan();
+        Self { half_angle_rad, reach_m: f64::from(max_depth_m) / half_angle_rad.cos() }
+    }
+
+    /// Whether a sphere of radius `radius_m` centred `v` from the camera centre (`axis` the
+    /// unit optical axis) meets the cone: within the reach of the centre, and at an angle to the
+    /// axis of at most the half-angle plus the angle the sphere subtends (exact for a sphere
+    /// and a cone; a sphere holding the centre always meets it).
+    pub fn meets_sphere(&self, v: DVec3, axis: DVec3, radius_m: f64) -> bool {
+        self.miss_by(v, axis, radius_m) <= 0.0
+    }
+
+    /// How far the sphere of [`Self::meets_sphere`] misses the cone: the angle (radians) the
+    /// cone would have to widen by to meet it, plus the distance past its reach as a fraction of
+    /// the reach; zero or less when it meets it. Windows rank the blocks a view does not need by
+    /// it, so that the next views of a turning or walking camera find theirs resident.
+    pub fn miss_by(&self, v: DVec3, axis: DVec3, radius_m: f64) -> f64 {
+        let dist = v.length();
+        if dist <= radius_m {
+            return 0.0;
+        }
+        let angle = (v.dot(axis) / dist).clamp(-1.0, 1.0).acos();
+        let widen_rad = (angle - self.half_angle_rad - (radius_m / dist).asin()).max(0.0);
+        let beyond = (dist - radius_m - self.reach_m).max(0.0) / self.reach_m;
+        widen_rad + beyond
+    }
+}
+
+/// A saved map's blocks on the host, and the window of them the GPU pool holds.
+#[derive(Debug)]
+pub struct MapWindow {
+    /// Every block; the first `resident` are the ones in the pool.
+    blocks: Vec<MapBlock>,
+    /// Centre of each block (same order), world metres.
+    centres: Vec<DVec3>,
+    /// Bounding-sphere radius of a block plus the two voxels beyond a ray a view reads, metres.
+    radius_m: f64,
+    /// How many of `blocks` (a prefix) the pool holds.
+    resident: usize,
+    /// Blocks the pool holds at most.
+    capacity: usize,
+    /// Windows uploaded so far.
+    uploads: u64,
+}
+
+impl MapWindow {
+    /// A window of `capacity` blocks over `blocks` of a map described by `desc`; nothing is
+    /// resident until the first [`Self::prepare`].
+    pub fn new(desc: &VolumeDesc, blocks: Vec<MapBlock>, capacity: usize) -> Self {
+        let centres = blocks
+            .iter()
+            .map(|b| {
+                let (c, _) = block_centre(desc, b.coords);
+                DVec3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2]))
+            })
+            .collect();
+        let (_, half_diagonal_m) = block_centre(desc, [0; 3]);
+        let radius_m = f64::from(half_diagonal_m) + 2.0 * f64::from(desc.voxel_size_m);
+        Self { blocks, centres, radius_m, resident: 0, capacity, uploads: 0 }
+    }
+
+    /// Which blocks the pool must hold for the view at `world_from_camera` bounded by `cone`: `None` when it holds
+    /// them already, else the new window as indices into `blocks`: the view's blocks, then the
+    /// others by how far they miss its cone ([`ViewCone::miss_by`]; the nearer first among
+    /// equals), up to the capacity. Errors when the view alone needs more than the pool holds.
+    fn plan(&self, world_from_camera: &Se3, cone: &ViewCone) -> Result<Option<Vec<usize>>> {
+        let centre = world_from_camera.translation_m;
+        let axis = world_from_camera.rotation * DVec3::Z;
+        let miss: Vec<f64> = self.centres.iter().map(|&c| cone.miss_by(c - centre, axis, self.radius_m)).collect();
+        let needed = (0..self.blocks.len()).filter(|&i| miss[i] <= 0.0);
+        if self.uploads > 0 && needed.clone().all(|i| i < self.resident) {
+            return Ok(None);
+        }
+        let view_blocks = needed.count();
+        if view_blocks > self.capacity {
+            return Err(Error::ViewExceedsPool { view_blocks, pool_blocks: self.capacity });
+        }
+        let mut order: Vec<usize> = (0..self.blocks.len()).collect();
+        let distance = |i: usize| (self.centres[i] - centre).length_squared();
+        order.sort_by(|&a, &b| miss[a].max(0.0).total_cmp(&miss[b].max(0.0)).then(distance(a).total_cmp(&distance(b))));
+        order.truncate(self.capacity);
+        Ok(Some(order))
+    }
+
+    /// Puts the blocks of `window` (indices) first, in that order, and the rest after them.
+    fn reorder(&mut self, window: &[usize]) {
+        let mut in_window = vec![false; self.blocks.len()];
+        for &i in window {
+            in_window[i] = true;
+        }
+        let order: Vec<usize> = window.iter().copied().chain((0..self.blocks.len()).filter(|&i| !in_window[i])).collect();
+        let mut blocks: Vec<Option<MapBlock>> = std::mem::take(&mut self.blocks).into_iter().map(Some).collect();
+        self.blocks = order.iter().map(|&i| blocks[i].take().expect("each index once")).collect();
+        self.centres = order.iter().map(|&i| self.centres[i]).collect();
+        self.resident = window.len();
+    }
+
+    /// Makes the pool of `map` hold every block the view at `world_from_camera` bounded by
+    /// `cone` may read, uploading a new window when it does not. Returns whether it uploaded.
+    pub fn prepare(&mut self, gpu: &Gpu, map: &SparseMap, world_from_camera: &Se3, cone: &ViewCone) -> Result<bool> {
+        let Some(window) = self.plan(world_from_camera, cone)? else {
+            return Ok(false);
+        };
+        self.reorder(&window);
+        map.upload_blocks(gpu, &self.blocks[..self.resident])?;
+        self.uploads += 1;
+        Ok(true)
+    }
+
+    /// Windows uploaded so far.
+    pub fn uploads(&self) -> u64 {
+        self.uploads
+    }
+
+    /// Blocks the pool holds at most.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// Blocks of the whole map (on the host).
+    pub fn blocks(&self) -> usize {
+        self.blocks.len()
+    }
+}
+
+/// A saved map made ready for rendering views: wholly on the GPU when its blocks fit one
+/// pool, else a [`MapWindow`] over them.
+#[derive(Debug)]
+pub struct ViewedMap {
+    map: Map,
+    /// The blocks of a map held whole on the GPU (a windowed map's are in its window).
+    blocks: Vec<MapBlock>,
+    window: Option<MapWindow>,
+}
+
+impl ViewedMap {
+    /// Loads `blocks` of the map `header` describes. A sparse map gets a pool of at most
+    /// `max_pool` blocks (`None`: the largest the device binds); more blocks than that are
+    /// windowed.
+    pub fn load(gpu: &Gpu, header: &MapFileHeader, blocks: Vec<MapBlock>, max_pool: Option<u32>) -> Result<Self> {
+        let largest = max_pool_blocks(gpu.limits.max_storage_buffer_binding_size);
+        let capacity = max_pool.map_or(largest, |p| p.min(largest)).max(1);
+        if header.kind == MapKind::Dense || blocks.len() <= capacity as usize {
+            return Ok(Self { map: resident_map(gpu, header, &blocks)?, blocks, window: None });
+        }
+        let config = TsdfConfig {
+            kind: MapKind::Sparse,
+            voxel_size_m: header.voxel_size_m,
+            truncation_m: header.truncation_m,
+            noise_band_sigmas: header.noise_band_sigmas,
+            max_weight: header.max_weight,
+            color: header.color,
+            swap: false,
+            pool_blocks: capacity,
+            ..TsdfConfig::default()
+        };
+        let sparse = SparseMap::new(gpu, config, header.origin_in_world)?;
+        let window = MapWindow::new(&sparse.desc(), blocks, capacity as usize);
+        Ok(Self { map: Map::Sparse(sparse), blocks: Vec::new(), window: Some(window) })
+    }
+
+    /// Makes the GPU hold every block the view at `world_from_camera` bounded by `cone` may
+    /// read (a new window when a windowed map's pool does not). Returns whether it uploaded.
+    pub fn prepare(&mut self, gpu: &Gpu, world_from_camera: &Se3, cone: &ViewCone) -> Result<bool> {
+        match (&mut self.window, &self.map) {
+            (Some(window), Map::Sparse(sparse)) => window.prepare(gpu, sparse, world_from_camera, cone),
+            _ => Ok(false),
+        }
+    }
+
+    /// The map to render (call [`Self::prepare`] for each view first).
+    pub fn map(&self) -> &Map {
+        &self.map
+    }
+
+    /// The window, when the map is larger than its pool.
+    pub fn window(&self) -> Option<&MapWindow> {
+        self.window.as_ref()
+    }
+
+    /// The map's blocks, given back (a windowed map's in the window's order).
+    pub fn into_blocks(self) -> Vec<MapBlock> {
+        match self.window {
+            Some(window) => window.blocks,
+            None => self.blocks,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kinect() -> PinholeIntrinsics {
+        PinholeIntrinsics { fx_px: 525.0, fy_px: 525.0, cx_px: 319.5, cy_px: 239.5, width_px: 640, height_px: 480 }
+    }
+
+    #[test]
+    fn the_cone_holds_the_corner_rays_and_the_farthest_depth() {
+        let cone = ViewCone::for_camera(&kinect(), 4.0);
+        // The corner pixel's outer edge: 320 px and 240 px off the centre at f = 525.
+        let corner = DVec3::new(320.0 / 525.0, 240.0 / 525.0, 1.0);
+        assert!((cone.half_angle_rad - (corner.x.hypot(corner.y)).atan()).abs() < 1e-12);
+        assert!((cone.reach_m - 4.0 * corner.length()).abs() < 1e-9);
+        // A point on the corner ray at 4 m depth lies on the cone's edge; a sphere there meets it.
+        let p = corner * 4.0;
+        assert!(cone.meets_sphere(p, DVec3::Z, 1e-6));
+        // Behind the camera, beside it beyond the cone, or past the reach (the corner ray's
+        // length at the farthest depth, 5.0 m, in every direction of the cone): missed.
+        assert!(!cone.meets_sphere(DVec3::new(0.0, 0.0, -1.0), DVec3::Z, 0.1));
+        assert!(!cone.meets_sphere(DVec3::new(2.0, 0.0, 0.5), DVec3::Z, 0.1));
+        assert!(!cone.meets_sphere(DVec3::new(0.0, 0.0, cone.reach_m + 0.11), DVec3::Z, 0.1));
+        assert!(cone.meets_sphere(DVec3::new(0.0, 0.0, cone.reach_m + 0.09), DVec3::Z, 0.1));
+        // A sphere holding the centre, or reaching into the cone from beside it: met.
+        assert!(cone.meets_sphere(DVec3::new(0.05, 0.0, -0.05), DVec3::Z, 0.1));
+        // Beside the cone: the sphere meets it exactly when it reaches the cone's surface,
+        // |v| sin(φ − θ) away (φ its angle to the axis).
+        let beside = DVec3::new(1.5, 0.0, 1.0);
+        let gap = beside.length() * (beside.x.atan2(beside.z) - cone.half_angle_rad).sin();
+        assert!(cone.meets_sphere(beside, DVec3::Z, gap + 0.01));
+        assert!(!cone.meets_sphere(beside, DVec3::Z, gap - 0.01));
+    }
+}

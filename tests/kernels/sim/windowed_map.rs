@@ -1,0 +1,121 @@
+// SPDX-License-Identifier: MIT
+//! A saved map larger than the GPU pool, rendered through a window (`map::window`): the
+//! analytic room the swapping test fuses from its centre, rendered by the virtual sensor at
+//! poses all around it and off its centre, once with every block on the GPU and once through a
+//! pool of 40 % of the blocks. The depth is word for word the same at every pose, turning
+//! uploads new windows and nearby views reuse them. A view that alone reaches more blocks
+//! than the pool is a typed error. Negative control: a window planned for too narrow a cone
+//! (so blocks the view reads stay on the host) renders other depth, and the comparison sees it.
+
+use glam::{DQuat, DVec3};
+use webfusion_core::map::file::{MapFileHeader, MapFrame};
+use webfusion_core::map::window::{MapWindow, ViewCone, ViewedMap};
+use webfusion_core::map::{MapBlock, SparseMap};
+use webfusion_core::sim::sensor::{SensorOptions, VirtualSensor};
+use webfusion_core::tsdf::{MapKind, TsdfConfig, TsdfStore};
+use webfusion_core::{Error, Gpu, Se3};
+use webfusion_tests::{finish, gpu};
+
+use crate::map::swapping::{K, VOXEL_M, fuse_room};
+use crate::synthetic::UNITS_PER_M;
+
+/// The header a saved copy of the fused room would carry.
+fn header(origin_in_world: [f32; 3]) -> MapFileHeader {
+    let t = TsdfConfig::sparse(VOXEL_M, 16384);
+    MapFileHeader {
+        kind: MapKind::Sparse,
+        color: t.color,
+        voxel_size_m: t.voxel_size_m,
+        truncation_m: t.truncation_m,
+        noise_band_sigmas: t.noise_band_sigmas,
+        max_weight: t.max_weight,
+        dims_voxels: t.box_dims_voxels(),
+        origin_in_world,
+        frame: MapFrame::GivenPoses,
+        up_in_map: None,
+        creation: "{}".to_owned(),
+    }
+}
+
+/// The views: a full turn at the room's centre in 15° steps, then a walk towards a wall.
+fn views() -> Vec<Se3> {
+    let turn = (0..24).map(|i| Se3::new(DQuat::from_rotation_y((15.0 * f64::from(i)).to_radians()), DVec3::new(0.0, -0.1, 1.1)));
+    let walk = (0..6).map(|i| Se3::new(DQuat::from_rotation_y(0.3), DVec3::new(0.1 * f64::from(i), -0.1, 1.1 - 0.1 * f64::from(i))));
+    turn.chain(walk).collect()
+}
+
+fn options() -> SensorOptions {
+    SensorOptions { units_per_metre: UNITS_PER_M, ..SensorOptions::default() }
+}
+
+/// The depth the sensor renders at every view of `views()` from `map`, preparing it first.
+fn render_all(gpu: &Gpu, map: &mut ViewedMap) -> Vec<Vec<u16>> {
+    let mut sensor = VirtualSensor::new(gpu, map.map(), K, options()).expect("sensor");
+    let cone = ViewCone::for_camera(&K, options().depth_range_m.1);
+    views()
+        .iter()
+        .enumerate()
+        .map(|(i, pose)| {
+            map.prepare(gpu, pose, &cone).expect("the view fits the pool");
+            pollster::block_on(sensor.render(gpu, map.map(), pose, i as u32)).expect("render").depth_units
+        })
+        .collect()
+}
+
+/// Views whose depth differs between `a` and `b`, with their differing pixel counts.
+fn differing(a: &[Vec<u16>], b: &[Vec<u16>]) -> Vec<(usize, usize)> {
+    a.iter().zip(b).enumerate().map(|(i, (x, y))| (i, x.iter().zip(y).filter(|(p, q)| p != q).count())).filter(|&(_, n)| n > 0).collect()
+}
+
+#[test]
+fn a_windowed_map_renders_every_view_as_the_whole_map_does() {
+    let (blocks, _, origin) = fuse_room(16384, false);
+    let header = header(origin);
+    let gpu = gpu();
+    let mut whole = ViewedMap::load(&gpu, &header, blocks.clone(), None).expect("load");
+    assert!(whole.window().is_none(), "the room fits the device's pool whole");
+    let reference = render_all(&gpu, &mut whole);
+    let hits = reference.iter().map(|d| d.iter().filter(|&&u| u > 0).count()).min().unwrap_or(0);
+    assert!(hits > K.pixel_count() / 2, "every view sees the room ({hits} of {} pixels at least)", K.pixel_count());
+
+    let pool = (blocks.len() * 2 / 5) as u32;
+    let mut windowed = ViewedMap::load(&gpu, &header, blocks.clone(), Some(pool)).expect("load");
+    let window = windowed.window().expect("more blocks than the pool: windowed");
+    assert_eq!((window.blocks(), window.capacity()), (blocks.len(), pool as usize));
+    let rendered = render_all(&gpu, &mut windowed);
+    let uploads = windowed.window().expect("windowed").uploads();
+    eprintln!("room: {} blocks, pool {pool}: {uploads} windows for {} views", blocks.len(), views().len());
+    assert_eq!(differing(&rendered, &reference), [], "views through the window differ from the whole map's");
+    assert!(uploads > 1 && uploads < views().len() as u64 / 2, "turning uploads new windows, nearby views reuse them ({uploads})");
+
+    // A view that alone reaches more blocks than the pool: a typed error, nothing rendered.
+    let mut tiny = ViewedMap::load(&gpu, &header, blocks.clone(), Some(8)).expect("load");
+    let err = tiny.prepare(&gpu, &views()[0], &ViewCone::for_camera(&K, options().depth_range_m.1)).expect_err("the view needs more than 8 blocks");
+    assert!(matches!(err, Error::ViewExceedsPool { pool_blocks: 8, view_blocks } if view_blocks > 8), "{err}");
+    finish(&gpu);
+
+    // Negative control: windows planned for a 5° cone leave blocks the 75° view reads on the
+    // host, and some view renders other depth.
+    let gpu = webfusion_tests::gpu();
+    let narrow = narrow_window_depths(&gpu, &header, blocks, pool);
+    let missed = differing(&narrow, &reference);
+    assert!(missed.iter().map(|&(_, n)| n).sum::<usize>() > K.pixel_count() / 10, "a window missing blocks must change the depth: {missed:?}");
+    finish(&gpu);
+}
+
+/// The depth of every view through a window of `pool` blocks planned for a 5° cone.
+fn narrow_window_depths(gpu: &Gpu, header: &MapFileHeader, blocks: Vec<MapBlock>, pool: u32) -> Vec<Vec<u16>> {
+    let config = TsdfConfig { swap: false, ..TsdfConfig::sparse(VOXEL_M, pool) };
+    let sparse = SparseMap::new(gpu, config, header.origin_in_world).expect("pool");
+    let cone = ViewCone { half_angle_rad: 5f64.to_radians(), ..ViewCone::for_camera(&K, options().depth_range_m.1) };
+    let mut window = MapWindow::new(&sparse.desc(), blocks, pool as usize);
+    let mut sensor = VirtualSensor::new(gpu, &sparse, K, options()).expect("sensor");
+    views()
+        .iter()
+        .enumerate()
+        .map(|(i, pose)| {
+            window.prepare(gpu, &sparse, pose, &cone).expect("the narrow view fits");
+            pollster::block_on(sensor.render(gpu, &sparse, pose, i as u32)).expect("render").depth_units
+        })
+        .collect()
+}
