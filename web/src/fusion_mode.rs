@@ -29,6 +29,7 @@ use std::rc::Rc;
 
 use glam::DVec3;
 use web_time::Instant;
+use webfusion_core::map::window::ViewCone;
 use webfusion_core::map::{MapKind, MapStats};
 use webfusion_core::eval::{Alignment, RunningAte};
 use webfusion_core::fusion::{FrameReport, FusionConfig, KinectFusion, RaycastTarget, TrackingState};
@@ -736,13 +737,6 @@ impl FusionMode {
     /// Renders the virtual sensor in the opened map, or else in the fused one.
     pub(crate) fn render_sensor(&mut self, gpu: &Gpu, at: SensorPose) -> Result<(), String> {
         let map_from_world = self.map_from_world();
-        // Without a real frame at the pose, the sensor is the camera the map was made with: an
-        // opened map's (as `webfusion simulate` renders it), the stream's for the live map.
-        let (store, camera) = match (&self.opened, &self.pipeline) {
-            (Some((o, _)), _) => (&o.map, o.header.fused_camera()),
-            (None, Some(p)) => (p.fusion.volume(), Some(p.fusion.preprocessor().calibration().intrinsics)),
-            (None, None) => return Err("virtual sensor: no map yet (fuse a frame, or open a saved map)".to_owned()),
-        };
         let real = self.sensor.real().cloned();
         let (pose, real) = match at {
             SensorPose::At(pose) => (pose, None),
@@ -765,6 +759,18 @@ impl FusionMode {
                 Some(pose) => (pose, real.filter(|r| r.map_from_camera == pose)),
                 None => return Ok(()),
             },
+        };
+        // Without a real frame at the pose, the sensor is the camera the map was made with: an
+        // opened map's (as `webfusion simulate` renders it), the stream's for the live map. An
+        // opened map larger than the page's pool first gets a window holding this view.
+        if let Some((o, _)) = &mut self.opened {
+            let cone = crate::sim::sensor_cone(real.as_ref(), o.header.fused_camera());
+            o.map.prepare(gpu, &pose, &cone).map_err(|e| format!("virtual sensor: {e}"))?;
+        }
+        let (store, camera) = match (&self.opened, &self.pipeline) {
+            (Some((o, _)), _) => (o.map.map(), o.header.fused_camera()),
+            (None, Some(p)) => (p.fusion.volume(), Some(p.fusion.preprocessor().calibration().intrinsics)),
+            (None, None) => return Err("virtual sensor: no map yet (fuse a frame, or open a saved map)".to_owned()),
         };
         let ask_bridge = self.opened.as_ref().is_some_and(|(o, _)| o.from_bridge);
         self.sensor.render(gpu, store, pose, real, camera, ask_bridge)?;
@@ -806,7 +812,7 @@ impl FusionMode {
         // The old free view's canvas is let go before the new one configures it.
         self.opened = None;
         self.drop_pipeline(false);
-        let free = FreeView::new(gpu, &map.map)?;
+        let free = FreeView::new(gpu, map.map.map())?;
         self.orbit = Some(first_look(&map));
         self.opened = Some((map, free));
         self.free_dirty = true;
@@ -971,8 +977,11 @@ impl FusionMode {
             }
         }
         let occlusion_m = (2.0 * self.config.tsdf.voxel_size_m).max(PlaneConfig::default().label_min_distance_m);
+        if let Some((o, _)) = &mut self.opened {
+            o.map.prepare(gpu, &map_from_viewer, &ViewCone::for_camera(&FREE_VIEW, FREE_VIEW_RANGE_M.1)).map_err(|e| format!("the free view: {e}"))?;
+        }
         let (free, store) = match (&self.opened, &self.pipeline) {
-            (Some((o, free)), _) => (free, &o.map),
+            (Some((o, free)), _) => (free, o.map.map()),
             (None, Some(p)) if !self.trajectory.is_empty() => (&p.free, p.fusion.volume()),
             _ => return Ok(()),
         };

@@ -28,11 +28,11 @@ use web_time::Instant;
 use webfusion_core::camera::TUM_DEPTH_UNITS_PER_METRE;
 use webfusion_core::cpu::shared::voxel_anchor;
 use webfusion_core::map::file::{MapFileHeader, MapFrame, parse_map_bytes};
-use webfusion_core::map::{Map, resident_map};
+use webfusion_core::map::window::{ViewCone, ViewedMap};
 use webfusion_core::protocol::{RenderFailure, RenderOutcome, RenderRequest, WireDepth};
 use webfusion_core::sim::compare::{DepthComparison, compare_depth, difference_image};
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, VirtualSensor};
-use webfusion_core::tsdf::TsdfStore;
+use webfusion_core::tsdf::{TsdfConfig, TsdfStore};
 use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView};
 use webfusion_core::{Gpu, PinholeIntrinsics, Se3};
 
@@ -69,7 +69,9 @@ pub(crate) struct OpenedMap {
     pub(crate) blocks: usize,
     /// What a damaged file lost (its intact blocks were kept).
     pub(crate) damage: Option<String>,
-    pub(crate) map: Map,
+    /// On the GPU whole, or through a window when it has more blocks than the device's largest
+    /// pool (`map::window`): each render prepares it for its view first.
+    pub(crate) map: ViewedMap,
     /// Opened from the bridge (`serve --map`), which may mark unknown pixels.
     pub(crate) from_bridge: bool,
     /// Mean of its blocks' centres and their RMS distance from it, metres (the free view's
@@ -79,24 +81,26 @@ pub(crate) struct OpenedMap {
 }
 
 impl OpenedMap {
-    /// Parses a map file's bytes (keeping the intact blocks of a damaged one) and loads it
-    /// whole onto the GPU.
+    /// Parses a map file's bytes (keeping the intact blocks of a damaged one) and loads it onto
+    /// the GPU: whole when it fits the largest pool the device binds (65,536 blocks on a
+    /// 128 MiB binding), else through a window that follows the free view and the sensor.
     pub(crate) fn load(gpu: &Gpu, bytes: &[u8], name: &str, from_bridge: bool) -> Result<Self, String> {
-        let file = parse_map_bytes(bytes, name).map_err(|e| e.to_string())?;
+        let mut file = parse_map_bytes(bytes, name).map_err(|e| e.to_string())?;
         if file.blocks.is_empty() {
             return Err(format!("{name}: the map has no intact blocks"));
         }
-        let map = resident_map(gpu, &file.header, &file.blocks).map_err(|e| format!("{name}: {e}"))?;
         // Voxel (x, y, z) of the map lies at origin + ((x, y, z) - anchor) voxels (a sparse map's
         // coordinates are offset by half its addressable range).
-        let anchor = DVec3::from(voxel_anchor(&map.desc()).map(f64::from));
+        let blocks = file.blocks.len();
+        let anchor = DVec3::from(voxel_anchor(&TsdfConfig { kind: file.header.kind, dims_voxels: file.header.dims_voxels, voxel_size_m: file.header.voxel_size_m, ..TsdfConfig::default() }.desc(file.header.origin_in_world)).map(f64::from));
         let voxel_m = f64::from(file.header.voxel_size_m);
         let origin = DVec3::from(file.header.origin_in_world.map(f64::from));
         let centres: Vec<DVec3> = file.blocks.iter().map(|b| origin + (DVec3::from(b.coords.map(|c| f64::from(c) * 8.0 + 4.0)) - anchor) * voxel_m).collect();
         // The mean and RMS spread of the blocks: a few stray far blocks do not push the view out.
         let centre_m = centres.iter().sum::<DVec3>() / centres.len() as f64;
         let spread_m = (centres.iter().map(|c| c.distance_squared(centre_m)).sum::<f64>() / centres.len() as f64).sqrt();
-        Ok(Self { name: name.to_owned(), blocks: file.blocks.len(), damage: file.damage.map(|d| d.to_string()), header: file.header, map, from_bridge, centre_m, spread_m })
+        let map = ViewedMap::load(gpu, &file.header, std::mem::take(&mut file.blocks), None).map_err(|e| format!("{name}: {e}"))?;
+        Ok(Self { name: name.to_owned(), blocks, damage: file.damage.map(|d| d.to_string()), header: file.header, map, from_bridge, centre_m, spread_m })
     }
 
     pub(crate) fn status(&self) -> OpenedMapStatus {
@@ -109,7 +113,7 @@ impl OpenedMap {
                 MapFrame::FirstCamera => "first camera",
                 MapFrame::GivenPoses => "given poses",
             },
-            memory_bytes: self.map.memory_bytes(),
+            memory_bytes: self.map.map().memory_bytes(),
             damage: self.damage.clone(),
             centre_m: self.centre_m.to_array(),
             spread_m: self.spread_m,
@@ -299,7 +303,7 @@ impl SensorPanel {
     /// unknown mask ([`Self::bridge_request`]).
     pub(crate) fn render(&mut self, gpu: &Gpu, store: &dyn TsdfStore, map_from_camera: Se3, real: Option<RealFrame>, camera: Option<PinholeIntrinsics>, ask_bridge: bool) -> Result<(), String> {
         let key = SensorKey {
-            intrinsics: real.as_ref().map_or_else(|| camera.unwrap_or_else(|| PinholeIntrinsics::nominal_kinect(640, 480)), |r| r.intrinsics),
+            intrinsics: sensor_intrinsics(real.as_ref(), camera),
             units_per_metre: real.as_ref().map_or(TUM_DEPTH_UNITS_PER_METRE, |r| r.units_per_metre),
             noise_seed: self.noise_seed,
         };
@@ -446,6 +450,18 @@ impl SensorPanel {
 }
 
 /// Builds the sensor for `key` in `store` and its views' canvases.
+/// The sensor's camera: the real frame's at its pose, else `camera` (the map's), else the
+/// nominal Kinect.
+fn sensor_intrinsics(real: Option<&RealFrame>, camera: Option<PinholeIntrinsics>) -> PinholeIntrinsics {
+    real.map_or_else(|| camera.unwrap_or_else(|| PinholeIntrinsics::nominal_kinect(640, 480)), |r| r.intrinsics)
+}
+
+/// What a sensor render with `real` and `camera` (as [`SensorPanel::render`] takes them) reads
+/// of a map: the cone a windowed map must hold (`map::window`).
+pub(crate) fn sensor_cone(real: Option<&RealFrame>, camera: Option<PinholeIntrinsics>) -> ViewCone {
+    ViewCone::for_camera(&sensor_intrinsics(real, camera), SensorOptions::default().depth_range_m.1)
+}
+
 fn bind(gpu: &Gpu, store: &dyn TsdfStore, key: SensorKey) -> Result<Bound, String> {
     let options = SensorOptions { units_per_metre: key.units_per_metre, noise: key.noise_seed.map(|seed| (KinectModel::default(), seed)), ..SensorOptions::default() };
     let sensor = VirtualSensor::new(gpu, store, key.intrinsics, options).map_err(|e| format!("virtual sensor: {e}"))?;
