@@ -239,19 +239,8 @@ fn save_map(gpu: &webfusion_core::Gpu, mapper: &mut Mapper, config: &FusionConfi
         "refine": args.refine,
         "loaded_from": args.load_map.as_ref().map(|p| p.display().to_string()),
     });
-    let header = MapFileHeader {
-        kind: t.kind,
-        color: t.color,
-        voxel_size_m: t.voxel_size_m,
-        truncation_m: t.truncation_m,
-        noise_band_sigmas: t.noise_band_sigmas,
-        max_weight: t.max_weight,
-        dims_voxels: t.box_dims_voxels(),
-        origin_in_world: mapper.origin_in_world(),
-        frame: if args.pose_file().is_some() { MapFrame::GivenPoses } else { MapFrame::FirstCamera },
-        up_in_map: mean_camera_up(trajectory.iter().map(|p| &p.world_from_camera), loaded_up),
-        creation: creation.to_string(),
-    };
+    let frame = if args.pose_file().is_some() { MapFrame::GivenPoses } else { MapFrame::FirstCamera };
+    let header = MapFileHeader::for_map(t, mapper.origin_in_world(), frame, mean_camera_up(trajectory.iter().map(|p| &p.world_from_camera), loaded_up), creation.to_string());
     write_map_file(path, &header, &blocks).with_context(|| format!("saving the map to {}", path.display()))?;
     println!("map: {} blocks -> {} ({:.1} MiB)", blocks.len(), path.display(), std::fs::metadata(path).map_or(0, |m| m.len()) as f64 / 1048576.0);
     if t.kind == MapKind::Sparse {

@@ -93,6 +93,24 @@ pub struct MapFileHeader {
 }
 
 impl MapFileHeader {
+    /// The header of a map fused with `tsdf` whose box's voxel (0, 0, 0) corner lies at
+    /// `origin_in_world` of `frame`.
+    pub fn for_map(tsdf: &crate::tsdf::TsdfConfig, origin_in_world: [f32; 3], frame: MapFrame, up_in_map: Option<[f32; 3]>, creation: String) -> Self {
+        Self {
+            kind: tsdf.kind,
+            color: tsdf.color,
+            voxel_size_m: tsdf.voxel_size_m,
+            truncation_m: tsdf.truncation_m,
+            noise_band_sigmas: tsdf.noise_band_sigmas,
+            max_weight: tsdf.max_weight,
+            dims_voxels: tsdf.box_dims_voxels(),
+            origin_in_world,
+            frame,
+            up_in_map,
+            creation,
+        }
+    }
+
     /// The camera the map was fused from, as its creation parameters name it (`camera`:
     /// fx_px, fy_px, cx_px, cy_px, width_px, height_px; written by `reconstruct --save-map`),
     /// when it is there and valid: a virtual sensor renders what that camera would see unless

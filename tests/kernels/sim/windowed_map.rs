@@ -12,7 +12,7 @@ use webfusion_core::map::file::{MapFileHeader, MapFrame};
 use webfusion_core::map::window::{MapWindow, ViewCone, ViewedMap};
 use webfusion_core::map::{MapBlock, SparseMap};
 use webfusion_core::sim::sensor::{SensorOptions, VirtualSensor};
-use webfusion_core::tsdf::{MapKind, TsdfConfig, TsdfStore};
+use webfusion_core::tsdf::{TsdfConfig, TsdfStore};
 use webfusion_core::{Error, Gpu, Se3};
 use webfusion_tests::{finish, gpu};
 
@@ -21,20 +21,7 @@ use crate::synthetic::UNITS_PER_M;
 
 /// The header a saved copy of the fused room would carry.
 fn header(origin_in_world: [f32; 3]) -> MapFileHeader {
-    let t = TsdfConfig::sparse(VOXEL_M, 16384);
-    MapFileHeader {
-        kind: MapKind::Sparse,
-        color: t.color,
-        voxel_size_m: t.voxel_size_m,
-        truncation_m: t.truncation_m,
-        noise_band_sigmas: t.noise_band_sigmas,
-        max_weight: t.max_weight,
-        dims_voxels: t.box_dims_voxels(),
-        origin_in_world,
-        frame: MapFrame::GivenPoses,
-        up_in_map: None,
-        creation: "{}".to_owned(),
-    }
+    MapFileHeader::for_map(&TsdfConfig::sparse(VOXEL_M, 16384), origin_in_world, MapFrame::GivenPoses, None, "{}".to_owned())
 }
 
 /// The views: a full turn at the room's centre in 15° steps, then a walk towards a wall.
