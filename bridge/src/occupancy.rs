@@ -85,7 +85,7 @@ pub(crate) fn run(options: &GpuOptions, args: &ExportOccupancyArgs) -> anyhow::R
         let mut viewed = ViewedMap::load(&gpu, header, std::mem::take(&mut file.blocks), None).with_context(|| format!("loading {}", args.map.display()))?;
         let sensor_options = crate::simulate::kinect_sensor(CARVE_UNITS_PER_METRE, false, None, (Some(0.0), Some(args.max_depth)), false)?;
         let mut sensor = VirtualSensor::new(&gpu, viewed.map(), k, sensor_options)?;
-        let cone = ViewCone::for_camera(&k, sensor_options.depth_range_m.1);
+        let cone = ViewCone::for_camera(&k, sensor_options.depth_range_m);
         for batch in poses.chunks(CARVE_BATCH) {
             let rendering = std::time::Instant::now();
             let mut depths = Vec::with_capacity(batch.len());

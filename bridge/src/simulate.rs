@@ -234,7 +234,7 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
     let windowed = viewed.window().map(|w| format!(", rendered through a window of {} of them", w.capacity())).unwrap_or_default();
     println!("map {}: {n_blocks} blocks of {:.1} mm voxels ({} map, {:.1} MiB on the GPU{windowed}); {} poses, {}x{}, noise {:?}", args.map.display(), file.header.voxel_size_m * 1e3, file.header.kind.name(), viewed.map().memory_bytes() as f64 / 1048576.0, poses.len(), k.width_px, k.height_px, args.noise);
     let mut sensor = VirtualSensor::new(&gpu, viewed.map(), k, sensor_options)?;
-    let cone = ViewCone::for_camera(&k, sensor_options.depth_range_m.1);
+    let cone = ViewCone::for_camera(&k, sensor_options.depth_range_m);
     if args.bench {
         // One warm-up render, then each pose alone: (a new window where one is needed,) submit,
         // wait, read back.

@@ -459,7 +459,7 @@ fn sensor_intrinsics(real: Option<&RealFrame>, camera: Option<PinholeIntrinsics>
 /// What a sensor render with `real` and `camera` (as [`SensorPanel::render`] takes them) reads
 /// of a map: the cone a windowed map must hold (`map::window`).
 pub(crate) fn sensor_cone(real: Option<&RealFrame>, camera: Option<PinholeIntrinsics>) -> ViewCone {
-    ViewCone::for_camera(&sensor_intrinsics(real, camera), SensorOptions::default().depth_range_m.1)
+    ViewCone::for_camera(&sensor_intrinsics(real, camera), SensorOptions::default().depth_range_m)
 }
 
 fn bind(gpu: &Gpu, store: &dyn TsdfStore, key: SensorKey) -> Result<Bound, String> {

@@ -139,7 +139,7 @@ fn render(gpu: &Gpu, viewed: &mut ViewedMap, grid: Option<&OccupancyGrid>, senso
         Ok(options) => SensorOptions { hits: request.unknown, ..options },
         Err(e) => return failed(RenderFailure::InvalidRequest, format!("{e:#}")),
     };
-    match viewed.prepare(gpu, &request.world_from_camera, &ViewCone::for_camera(&k, options.depth_range_m.1)) {
+    match viewed.prepare(gpu, &request.world_from_camera, &ViewCone::for_camera(&k, options.depth_range_m)) {
         Ok(_) => {}
         // The view alone needs more than the pool: the request must ask for less.
         Err(e @ webfusion_core::Error::ViewExceedsPool { .. }) => return failed(RenderFailure::InvalidRequest, e.to_string()),

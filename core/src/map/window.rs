@@ -7,9 +7,12 @@
 //! the image's cone (half-angle θ: the widest pixel's ray) and stop at the sensor's farthest
 //! depth, i.e. within `max_depth / cos θ` of the centre; a trilinear sample or the colour
 //! lookup reads voxels at most one voxel beyond the ray. So a block whose bounding sphere,
-//! grown by two voxels, misses that truncated cone is never read, and a view renders exactly
-//! as it would with the whole map on the GPU. (The sensor model after the raycast, projector
-//! shadows included, works on the rendered images, not on the map.)
+//! grown by two voxels, misses that truncated cone is never read. Where each ray starts comes
+//! from its tile's depth interval (`raycast_range`), which a surface brick widens wherever the
+//! bounding rectangle of its projection reaches, so the window also holds every block whose
+//! footprint reaches the image: then a view renders exactly as it would with the whole map on
+//! the GPU. (The sensor model after the raycast, projector shadows included, works on the
+//! rendered images, not on the map.)
 //!
 //! [`ViewedMap::prepare`] checks the view's blocks against the window; when one is missing it
 //! uploads a new window: the view's blocks, then the others nearest the camera centre until
@@ -22,30 +25,50 @@ use glam::DVec3;
 
 use super::file::MapFileHeader;
 use super::{Map, MapBlock, SparseMap, max_pool_blocks, resident_map};
+use crate::cpu::fusion::raycast_range::brick_footprint;
 use crate::cpu::map::block_swap_out::block_centre;
+use crate::kernels::GpuIntrinsics;
 use crate::tsdf::{MapKind, TsdfConfig, TsdfStore, VolumeDesc};
 use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
 
 /// The part of space a view of a map can read: a cone about the optical axis, from the camera
-/// centre to `reach_m`.
+/// centre to `reach_m`, for a camera with `intrinsics` searching `depth_range_m`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewCone {
     /// The angle between the optical axis and the widest pixel ray, radians.
     pub half_angle_rad: f64,
     /// The farthest any ray goes, metres.
     pub reach_m: f64,
+    /// The camera.
+    pub intrinsics: PinholeIntrinsics,
+    /// The nearest and farthest depth (along the optical axis) the rays search, metres.
+    pub depth_range_m: (f32, f32),
 }
 
 impl ViewCone {
-    /// The cone of a camera with intrinsics `k` whose depth stops at `max_depth_m` (along the
-    /// optical axis): the widest ray through the image's outer pixel edges.
-    pub fn for_camera(k: &PinholeIntrinsics, max_depth_m: f32) -> Self {
+    /// The cone of a camera with intrinsics `k` searching depths `depth_range_m` (along the
+    /// optical axis): the widest ray through the image's outer pixel edges, as far as the
+    /// farthest depth along it.
+    pub fn for_camera(k: &PinholeIntrinsics, depth_range_m: (f32, f32)) -> Self {
         let (fx, fy) = (f64::from(k.fx_px), f64::from(k.fy_px));
         let xs = [-0.5, f64::from(k.width_px) - 0.5].map(|x| (x - f64::from(k.cx_px)) / fx);
         let ys = [-0.5, f64::from(k.height_px) - 0.5].map(|y| (y - f64::from(k.cy_px)) / fy);
         let tan = xs.iter().flat_map(|x| ys.iter().map(move |y| x.hypot(*y))).fold(0.0, f64::max);
         let half_angle_rad = tan.atan();
-        Self { half_angle_rad, reach_m: f64::from(max_depth_m) / half_angle_rad.cos() }
+        Self { half_angle_rad, reach_m: f64::from(depth_range_m.1) / half_angle_rad.cos(), intrinsics: *k, depth_range_m }
+    }
+
+    /// Whether `raycast_range` would let the box `lo`..`hi` (world metres) widen a tile of the
+    /// view from `camera_from_world` (its footprint, `cpu::fusion::raycast_range::brick_footprint`,
+    /// over an image a pixel wider on every side and a depth range 1 % wider, so that rounding
+    /// never leaves out a box the kernel counts). A box the cone misses can still cover a tile
+    /// with the bounding rectangle of its projection, and a tile's interval sets where its rays
+    /// start: the window holds such boxes too, so the rays march exactly as with the whole map.
+    fn widens_a_tile(&self, camera_from_world: &[[f32; 4]; 4], lo: [f32; 3], hi: [f32; 3]) -> bool {
+        let k = &self.intrinsics;
+        let grown = PinholeIntrinsics { cx_px: k.cx_px + 1.0, cy_px: k.cy_px + 1.0, width_px: k.width_px + 2, height_px: k.height_px + 2, ..*k };
+        let range = (0.99 * self.depth_range_m.0, 1.01 * self.depth_range_m.1);
+        brick_footprint(&GpuIntrinsics::from(grown), camera_from_world, range, lo, hi).is_some()
     }
 
     /// Whether a sphere of radius `radius_m` centred `v` from the camera centre (`axis` the
@@ -81,6 +104,8 @@ pub struct MapWindow {
     centres: Vec<DVec3>,
     /// Bounding-sphere radius of a block plus the two voxels beyond a ray a view reads, metres.
     radius_m: f64,
+    /// A block's edge, metres.
+    block_edge_m: f64,
     /// How many of `blocks` (a prefix) the pool holds.
     resident: usize,
     /// Blocks the pool holds at most.
@@ -102,7 +127,8 @@ impl MapWindow {
             .collect();
         let (_, half_diagonal_m) = block_centre(desc, [0; 3]);
         let radius_m = f64::from(half_diagonal_m) + 2.0 * f64::from(desc.voxel_size_m);
-        Self { blocks, centres, radius_m, resident: 0, capacity, uploads: 0 }
+        let block_edge_m = f64::from(desc.voxel_size_m) * f64::from(1u32 << crate::cpu::shared::BRICK_SHIFT);
+        Self { blocks, centres, radius_m, block_edge_m, resident: 0, capacity, uploads: 0 }
     }
 
     /// Which blocks the pool must hold for the view at `world_from_camera` bounded by `cone`: `None` when it holds
@@ -112,18 +138,28 @@ impl MapWindow {
     fn plan(&self, world_from_camera: &Se3, cone: &ViewCone) -> Result<Option<Vec<usize>>> {
         let centre = world_from_camera.translation_m;
         let axis = world_from_camera.rotation * DVec3::Z;
-        let miss: Vec<f64> = self.centres.iter().map(|&c| cone.miss_by(c - centre, axis, self.radius_m)).collect();
-        let needed = (0..self.blocks.len()).filter(|&i| miss[i] <= 0.0);
-        if self.uploads > 0 && needed.clone().all(|i| i < self.resident) {
+        let camera_from_world = world_from_camera.inverse().to_cols_f32();
+        let half_edge_m = 0.5 * self.block_edge_m;
+        // How far block i misses the view: 0 when the view may read it.
+        let miss = |i: usize| {
+            let c = self.centres[i];
+            let miss = cone.miss_by(c - centre, axis, self.radius_m);
+            let (lo, hi) = ((c - DVec3::splat(half_edge_m)).as_vec3().to_array(), (c + DVec3::splat(half_edge_m)).as_vec3().to_array());
+            if miss > 0.0 && cone.widens_a_tile(&camera_from_world, lo, hi) { 0.0 } else { miss.max(0.0) }
+        };
+        // The window holds the view when no block outside it is needed.
+        if self.uploads > 0 && (self.resident..self.blocks.len()).all(|i| miss(i) > 0.0) {
             return Ok(None);
         }
+        let miss: Vec<f64> = (0..self.blocks.len()).map(miss).collect();
+        let needed = (0..self.blocks.len()).filter(|&i| miss[i] <= 0.0);
         let view_blocks = needed.count();
         if view_blocks > self.capacity {
             return Err(Error::ViewExceedsPool { view_blocks, pool_blocks: self.capacity });
         }
         let mut order: Vec<usize> = (0..self.blocks.len()).collect();
         let distance = |i: usize| (self.centres[i] - centre).length_squared();
-        order.sort_by(|&a, &b| miss[a].max(0.0).total_cmp(&miss[b].max(0.0)).then(distance(a).total_cmp(&distance(b))));
+        order.sort_by(|&a, &b| miss[a].total_cmp(&miss[b]).then(distance(a).total_cmp(&distance(b))));
         order.truncate(self.capacity);
         Ok(Some(order))
     }
@@ -243,7 +279,7 @@ mod tests {
 
     #[test]
     fn the_cone_holds_the_corner_rays_and_the_farthest_depth() {
-        let cone = ViewCone::for_camera(&kinect(), 4.0);
+        let cone = ViewCone::for_camera(&kinect(), (0.4, 4.0));
         // The corner pixel's outer edge: 320 px and 240 px off the centre at f = 525.
         let corner = DVec3::new(320.0 / 525.0, 240.0 / 525.0, 1.0);
         assert!((cone.half_angle_rad - (corner.x.hypot(corner.y)).atan()).abs() < 1e-12);

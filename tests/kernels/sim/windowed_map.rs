@@ -4,7 +4,7 @@
 //! poses all around it and off its centre, once with every block on the GPU and once through a
 //! pool of 40 % of the blocks. The depth is word for word the same at every pose, turning
 //! uploads new windows and nearby views reuse them. A view that alone reaches more blocks
-//! than the pool is a typed error. Negative control: a window planned for too narrow a cone
+//! than the pool is a typed error. Negative control: a window planned for too short a range
 //! (so blocks the view reads stay on the host) renders other depth, and the comparison sees it.
 
 use glam::{DQuat, DVec3};
@@ -38,7 +38,7 @@ fn options() -> SensorOptions {
 /// The depth the sensor renders at every view of `views()` from `map`, preparing it first.
 fn render_all(gpu: &Gpu, map: &mut ViewedMap) -> Vec<Vec<u16>> {
     let mut sensor = VirtualSensor::new(gpu, map.map(), K, options()).expect("sensor");
-    let cone = ViewCone::for_camera(&K, options().depth_range_m.1);
+    let cone = ViewCone::for_camera(&K, options().depth_range_m);
     views()
         .iter()
         .enumerate()
@@ -77,31 +77,31 @@ fn a_windowed_map_renders_every_view_as_the_whole_map_does() {
 
     // A view that alone reaches more blocks than the pool: a typed error, nothing rendered.
     let mut tiny = ViewedMap::load(&gpu, &header, blocks.clone(), Some(8)).expect("load");
-    let err = tiny.prepare(&gpu, &views()[0], &ViewCone::for_camera(&K, options().depth_range_m.1)).expect_err("the view needs more than 8 blocks");
+    let err = tiny.prepare(&gpu, &views()[0], &ViewCone::for_camera(&K, options().depth_range_m)).expect_err("the view needs more than 8 blocks");
     assert!(matches!(err, Error::ViewExceedsPool { pool_blocks: 8, view_blocks } if view_blocks > 8), "{err}");
     finish(&gpu);
 
-    // Negative control: windows planned for a 5° cone leave blocks the 75° view reads on the
-    // host, and some view renders other depth.
+    // Negative control: windows planned for views that stop at 0.5 m leave blocks the sensor
+    // (to 8 m) reads on the host, and the views render other depth.
     let gpu = webfusion_tests::gpu();
-    let narrow = narrow_window_depths(&gpu, &header, blocks, pool);
-    let missed = differing(&narrow, &reference);
+    let short = short_range_window_depths(&gpu, &header, blocks, pool);
+    let missed = differing(&short, &reference);
     assert!(missed.iter().map(|&(_, n)| n).sum::<usize>() > K.pixel_count() / 10, "a window missing blocks must change the depth: {missed:?}");
     finish(&gpu);
 }
 
-/// The depth of every view through a window of `pool` blocks planned for a 5° cone.
-fn narrow_window_depths(gpu: &Gpu, header: &MapFileHeader, blocks: Vec<MapBlock>, pool: u32) -> Vec<Vec<u16>> {
+/// The depth of every view through a window of `pool` blocks planned for views to 0.5 m.
+fn short_range_window_depths(gpu: &Gpu, header: &MapFileHeader, blocks: Vec<MapBlock>, pool: u32) -> Vec<Vec<u16>> {
     let config = TsdfConfig { swap: false, ..TsdfConfig::sparse(VOXEL_M, pool) };
     let sparse = SparseMap::new(gpu, config, header.origin_in_world).expect("pool");
-    let cone = ViewCone { half_angle_rad: 5f64.to_radians(), ..ViewCone::for_camera(&K, options().depth_range_m.1) };
+    let cone = ViewCone::for_camera(&K, (options().depth_range_m.0, 0.5));
     let mut window = MapWindow::new(&sparse.desc(), blocks, pool as usize);
     let mut sensor = VirtualSensor::new(gpu, &sparse, K, options()).expect("sensor");
     views()
         .iter()
         .enumerate()
         .map(|(i, pose)| {
-            window.prepare(gpu, &sparse, pose, &cone).expect("the narrow view fits");
+            window.prepare(gpu, &sparse, pose, &cone).expect("the short view fits");
             pollster::block_on(sensor.render(gpu, &sparse, pose, i as u32)).expect("render").depth_units
         })
         .collect()

@@ -2,6 +2,7 @@
 //! CPU reference of `shaders/wgsl/fusion/raycast_range.wgsl`.
 
 use crate::cpu::shared::{BRICK_SHIFT, MAP_SPARSE, block_of_key, brick_dims, transform_point, voxel_anchor};
+use crate::kernels::GpuIntrinsics;
 use crate::kernels::raycast_range::{CameraPose, RaycastRangeParams};
 
 /// Twin of `TILE_UNUSED`: the far word of a tile no ray reads (`raycast_hint_tiles`).
@@ -32,55 +33,11 @@ pub fn raycast_range(params: &RaycastRangeParams, pose: &CameraPose, surface_bri
         let anchor = voxel_anchor(d).map(|a| a as i32);
         let lo: [f32; 3] = std::array::from_fn(|i| origin[i] + (lo_voxel[i] as i32 - anchor[i]) as f32 * d.voxel_size_m);
         let hi: [f32; 3] = std::array::from_fn(|i| origin[i] + ((lo_voxel[i] + (1 << BRICK_SHIFT)).min(dims[i]) as i32 - anchor[i]) as f32 * d.voxel_size_m);
-        let mut corners = [[0.0f32; 3]; 8];
-        let (mut z_near, mut z_far) = (1e30f32, -1e30f32);
-        for corner in 0..8u32 {
-            let pick = |axis: usize| if corner & (1 << axis) != 0 { hi[axis] } else { lo[axis] };
-            let p = transform_point(&pose.camera_from_world, [pick(0), pick(1), pick(2)]);
-            corners[corner as usize] = p;
-            z_near = z_near.min(p[2]);
-            z_far = z_far.max(p[2]);
-        }
-        if z_far < params.min_depth_m || z_near > params.max_depth_m {
+        let Some(([px_lo, px_hi], (z_near, z_far))) = brick_footprint(k, &pose.camera_from_world, (params.min_depth_m, params.max_depth_m), lo, hi) else {
             continue;
-        }
-        // The box clipped at the near plane: its corners in front and its edges' crossings.
-        let z_clip = params.min_depth_m.max(MIN_CLIP_DEPTH_M);
-        let (mut uv_min, mut uv_max) = ([1e30f32; 2], [-1e30f32; 2]);
-        let mut include = |uv: [f32; 2]| {
-            for i in 0..2 {
-                uv_min[i] = uv_min[i].min(uv[i]);
-                uv_max[i] = uv_max[i].max(uv[i]);
-            }
         };
-        for corner in 0..8usize {
-            let p = corners[corner];
-            if p[2] >= z_clip {
-                include([k.fx_px * p[0] / p[2] + k.cx_px, k.fy_px * p[1] / p[2] + k.cy_px]);
-            }
-            for axis in 0..3 {
-                let other = corner | (1 << axis);
-                if other != corner {
-                    let q = corners[other];
-                    if (p[2] < z_clip) != (q[2] < z_clip) {
-                        let t = (z_clip - p[2]) / (q[2] - p[2]);
-                        let c: [f32; 3] = std::array::from_fn(|i| p[i] * (1.0 - t) + q[i] * t);
-                        include([k.fx_px * c[0] / z_clip + k.cx_px, k.fy_px * c[1] / z_clip + k.cy_px]);
-                    }
-                }
-            }
-        }
-        if uv_min[0] > uv_max[0] {
-            continue;
-        }
-        let px_lo = [0.0f32.max(uv_min[0].floor() - 1.0), 0.0f32.max(uv_min[1].floor() - 1.0)];
-        let px_hi = [((k.width_px - 1) as f32).min(uv_max[0].ceil() + 1.0), ((k.height_px - 1) as f32).min(uv_max[1].ceil() + 1.0)];
-        if px_lo[0] > px_hi[0] || px_lo[1] > px_hi[1] {
-            continue;
-        }
-        let z_near = z_near.max(z_clip);
         let near_word = !z_near.to_bits();
-        let far_word = z_far.min(params.max_depth_m).to_bits();
+        let far_word = z_far.to_bits();
         let (tx0, ty0) = (px_lo[0] as u32 / params.tile_px, px_lo[1] as u32 / params.tile_px);
         let (tx1, ty1) = (px_hi[0] as u32 / params.tile_px, px_hi[1] as u32 / params.tile_px);
         for ty in ty0..=ty1 {
@@ -94,6 +51,62 @@ pub fn raycast_range(params: &RaycastRangeParams, pose: &CameraPose, surface_bri
             }
         }
     }
+}
+
+/// Where the box `lo`..`hi` (world metres) may be seen in an image with intrinsics `k` from
+/// `camera_from_world` searching depths `depth_range_m`, as each kernel invocation finds it:
+/// the pixel rectangle (first, last; clamped to the image) holding the projection of the box
+/// clipped at the near plane, widened by a pixel, and the box's camera-depth interval clipped
+/// to the near plane and the farthest depth; `None` when the box adds nothing to any tile.
+pub fn brick_footprint(k: &GpuIntrinsics, camera_from_world: &[[f32; 4]; 4], depth_range_m: (f32, f32), lo: [f32; 3], hi: [f32; 3]) -> Option<([[f32; 2]; 2], (f32, f32))> {
+    let (min_depth_m, max_depth_m) = depth_range_m;
+    let mut corners = [[0.0f32; 3]; 8];
+    let (mut z_near, mut z_far) = (1e30f32, -1e30f32);
+    for corner in 0..8u32 {
+        let pick = |axis: usize| if corner & (1 << axis) != 0 { hi[axis] } else { lo[axis] };
+        let p = transform_point(camera_from_world, [pick(0), pick(1), pick(2)]);
+        corners[corner as usize] = p;
+        z_near = z_near.min(p[2]);
+        z_far = z_far.max(p[2]);
+    }
+    if z_far < min_depth_m || z_near > max_depth_m {
+        return None;
+    }
+    // The box clipped at the near plane: its corners in front and its edges' crossings.
+    let z_clip = min_depth_m.max(MIN_CLIP_DEPTH_M);
+    let (mut uv_min, mut uv_max) = ([1e30f32; 2], [-1e30f32; 2]);
+    let mut include = |uv: [f32; 2]| {
+        for i in 0..2 {
+            uv_min[i] = uv_min[i].min(uv[i]);
+            uv_max[i] = uv_max[i].max(uv[i]);
+        }
+    };
+    for corner in 0..8usize {
+        let p = corners[corner];
+        if p[2] >= z_clip {
+            include([k.fx_px * p[0] / p[2] + k.cx_px, k.fy_px * p[1] / p[2] + k.cy_px]);
+        }
+        for axis in 0..3 {
+            let other = corner | (1 << axis);
+            if other != corner {
+                let q = corners[other];
+                if (p[2] < z_clip) != (q[2] < z_clip) {
+                    let t = (z_clip - p[2]) / (q[2] - p[2]);
+                    let c: [f32; 3] = std::array::from_fn(|i| p[i] * (1.0 - t) + q[i] * t);
+                    include([k.fx_px * c[0] / z_clip + k.cx_px, k.fy_px * c[1] / z_clip + k.cy_px]);
+                }
+            }
+        }
+    }
+    if uv_min[0] > uv_max[0] {
+        return None;
+    }
+    let px_lo = [0.0f32.max(uv_min[0].floor() - 1.0), 0.0f32.max(uv_min[1].floor() - 1.0)];
+    let px_hi = [((k.width_px - 1) as f32).min(uv_max[0].ceil() + 1.0), ((k.height_px - 1) as f32).min(uv_max[1].ceil() + 1.0)];
+    if px_lo[0] > px_hi[0] || px_lo[1] > px_hi[1] {
+        return None;
+    }
+    Some(([px_lo, px_hi], (z_near.max(z_clip), z_far.min(max_depth_m))))
 }
 
 /// A tile's depth interval (nearest, farthest camera z, metres) from its two words, or `None`
