@@ -33,11 +33,11 @@ pub fn raycast_range(params: &RaycastRangeParams, pose: &CameraPose, surface_bri
         let anchor = voxel_anchor(d).map(|a| a as i32);
         let lo: [f32; 3] = std::array::from_fn(|i| origin[i] + (lo_voxel[i] as i32 - anchor[i]) as f32 * d.voxel_size_m);
         let hi: [f32; 3] = std::array::from_fn(|i| origin[i] + ((lo_voxel[i] + (1 << BRICK_SHIFT)).min(dims[i]) as i32 - anchor[i]) as f32 * d.voxel_size_m);
-        let Some(([px_lo, px_hi], (z_near, z_far))) = brick_footprint(k, &pose.camera_from_world, (params.min_depth_m, params.max_depth_m), lo, hi) else {
+        let Some(BrickFootprint { px_lo, px_hi, z_near_m, z_far_m }) = brick_footprint(k, &pose.camera_from_world, (params.min_depth_m, params.max_depth_m), lo, hi) else {
             continue;
         };
-        let near_word = !z_near.to_bits();
-        let far_word = z_far.to_bits();
+        let near_word = !z_near_m.to_bits();
+        let far_word = z_far_m.to_bits();
         let (tx0, ty0) = (px_lo[0] as u32 / params.tile_px, px_lo[1] as u32 / params.tile_px);
         let (tx1, ty1) = (px_hi[0] as u32 / params.tile_px, px_hi[1] as u32 / params.tile_px);
         for ty in ty0..=ty1 {
@@ -58,7 +58,7 @@ pub fn raycast_range(params: &RaycastRangeParams, pose: &CameraPose, surface_bri
 /// the pixel rectangle (first, last; clamped to the image) holding the projection of the box
 /// clipped at the near plane, widened by a pixel, and the box's camera-depth interval clipped
 /// to the near plane and the farthest depth; `None` when the box adds nothing to any tile.
-pub fn brick_footprint(k: &GpuIntrinsics, camera_from_world: &[[f32; 4]; 4], depth_range_m: (f32, f32), lo: [f32; 3], hi: [f32; 3]) -> Option<([[f32; 2]; 2], (f32, f32))> {
+pub fn brick_footprint(k: &GpuIntrinsics, camera_from_world: &[[f32; 4]; 4], depth_range_m: (f32, f32), lo: [f32; 3], hi: [f32; 3]) -> Option<BrickFootprint> {
     let (min_depth_m, max_depth_m) = depth_range_m;
     let mut corners = [[0.0f32; 3]; 8];
     let (mut z_near, mut z_far) = (1e30f32, -1e30f32);
@@ -106,7 +106,20 @@ pub fn brick_footprint(k: &GpuIntrinsics, camera_from_world: &[[f32; 4]; 4], dep
     if px_lo[0] > px_hi[0] || px_lo[1] > px_hi[1] {
         return None;
     }
-    Some(([px_lo, px_hi], (z_near.max(z_clip), z_far.min(max_depth_m))))
+    Some(BrickFootprint { px_lo, px_hi, z_near_m: z_near.max(z_clip), z_far_m: z_far.min(max_depth_m) })
+}
+
+/// Where a brick may be seen ([`brick_footprint`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BrickFootprint {
+    /// First pixel (x, y) of the rectangle, in the image.
+    pub px_lo: [f32; 2],
+    /// Last pixel (x, y) of the rectangle, in the image.
+    pub px_hi: [f32; 2],
+    /// Nearest camera depth, metres.
+    pub z_near_m: f32,
+    /// Farthest camera depth, metres.
+    pub z_far_m: f32,
 }
 
 /// A tile's depth interval (nearest, farthest camera z, metres) from its two words, or `None`
