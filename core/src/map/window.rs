@@ -131,10 +131,11 @@ impl MapWindow {
         Self { blocks, centres, radius_m, block_edge_m, resident: 0, capacity, uploads: 0 }
     }
 
-    /// Which blocks the pool must hold for the view at `world_from_camera` bounded by `cone`: `None` when it holds
-    /// them already, else the new window as indices into `blocks`: the view's blocks, then the
-    /// others by how far they miss its cone ([`ViewCone::miss_by`]; the nearer first among
-    /// equals), up to the capacity. Errors when the view alone needs more than the pool holds.
+    /// Which blocks the pool must hold for the view at `world_from_camera` bounded by `cone`:
+    /// `None` when it holds them already, else the new window as indices into `blocks`: the
+    /// view's blocks, then the others by how far they miss its cone ([`ViewCone::miss_by`]; the
+    /// nearer first among equals), up to the capacity. Errors when the view alone needs more
+    /// than the pool holds.
     fn plan(&self, world_from_camera: &Se3, cone: &ViewCone) -> Result<Option<Vec<usize>>> {
         let centre = world_from_camera.translation_m;
         let axis = world_from_camera.rotation * DVec3::Z;
@@ -184,7 +185,11 @@ impl MapWindow {
             return Ok(false);
         };
         self.reorder(&window);
-        map.upload_blocks(gpu, &self.blocks[..self.resident])?;
+        if let Err(e) = map.upload_blocks(gpu, &self.blocks[..self.resident]) {
+            // The pool was emptied: nothing is resident, and the next view plans again.
+            self.resident = 0;
+            return Err(e);
+        }
         self.uploads += 1;
         Ok(true)
     }
