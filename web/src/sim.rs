@@ -28,11 +28,12 @@ use web_time::Instant;
 use webfusion_core::camera::TUM_DEPTH_UNITS_PER_METRE;
 use webfusion_core::cpu::shared::voxel_anchor;
 use webfusion_core::map::file::{MapFileHeader, MapFrame, parse_map_bytes};
+use webfusion_core::map::saved_map_config;
 use webfusion_core::map::window::{ViewCone, ViewedMap};
 use webfusion_core::protocol::{RenderFailure, RenderOutcome, RenderRequest, WireDepth};
 use webfusion_core::sim::compare::{DepthComparison, compare_depth, difference_image};
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, VirtualSensor};
-use webfusion_core::tsdf::{TsdfConfig, TsdfStore};
+use webfusion_core::tsdf::TsdfStore;
 use webfusion_core::view::{DEFAULT_DEPTH_VIEW_MAX_M, DepthView};
 use webfusion_core::{Gpu, PinholeIntrinsics, Se3};
 
@@ -92,7 +93,7 @@ impl OpenedMap {
         // Voxel (x, y, z) of the map lies at origin + ((x, y, z) - anchor) voxels (a sparse map's
         // coordinates are offset by half its addressable range).
         let blocks = file.blocks.len();
-        let anchor = DVec3::from(voxel_anchor(&TsdfConfig { kind: file.header.kind, dims_voxels: file.header.dims_voxels, voxel_size_m: file.header.voxel_size_m, ..TsdfConfig::default() }.desc(file.header.origin_in_world)).map(f64::from));
+        let anchor = DVec3::from(voxel_anchor(&saved_map_config(&file.header, 1).desc(file.header.origin_in_world)).map(f64::from));
         let voxel_m = f64::from(file.header.voxel_size_m);
         let origin = DVec3::from(file.header.origin_in_world.map(f64::from));
         let centres: Vec<DVec3> = file.blocks.iter().map(|b| origin + (DVec3::from(b.coords.map(|c| f64::from(c) * 8.0 + 4.0)) - anchor) * voxel_m).collect();

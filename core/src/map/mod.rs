@@ -589,15 +589,31 @@ pub async fn mesh_of_blocks(gpu: &Gpu, config: &TsdfConfig, origin_in_world: [f3
     Ok(crate::mesh::Mesh::from_triangle_soup(&soup))
 }
 
+/// The configuration a saved map (`header`) is loaded with: its kind, voxels, band, weights and
+/// colour; a dense map's box, or a sparse map's pool of `pool_blocks` blocks (no swapping).
+pub fn saved_map_config(header: &file::MapFileHeader, pool_blocks: u32) -> TsdfConfig {
+    TsdfConfig {
+        kind: header.kind,
+        dims_voxels: header.dims_voxels,
+        voxel_size_m: header.voxel_size_m,
+        truncation_m: header.truncation_m,
+        noise_band_sigmas: header.noise_band_sigmas,
+        max_weight: header.max_weight,
+        color: header.color,
+        swap: false,
+        pool_blocks,
+        ..TsdfConfig::default()
+    }
+}
+
 /// A map holding every one of `blocks` on the GPU, with the settings and placement of a saved
 /// map's `header`: a sparse map's pool just large enough for them (one binding), a dense box as
 /// it was saved. What a virtual sensor renders from. A sparse map larger than one binding is
 /// [`Error::InvalidConfig`] naming the sizes.
 pub fn resident_map(gpu: &Gpu, header: &file::MapFileHeader, blocks: &[MapBlock]) -> Result<Map> {
-    let base = TsdfConfig { voxel_size_m: header.voxel_size_m, truncation_m: header.truncation_m, noise_band_sigmas: header.noise_band_sigmas, max_weight: header.max_weight, color: header.color, swap: false, ..TsdfConfig::default() };
     match header.kind {
         MapKind::Dense => {
-            let config = TsdfConfig { kind: MapKind::Dense, dims_voxels: header.dims_voxels, ..base };
+            let config = saved_map_config(header, 1);
             let map = Map::new(gpu, config, header.origin_in_world)?;
             let Map::Dense(dense) = &map else { unreachable!("a dense config makes a dense map") };
             upload_dense_blocks(gpu, dense, blocks)?;
@@ -605,7 +621,7 @@ pub fn resident_map(gpu: &Gpu, header: &file::MapFileHeader, blocks: &[MapBlock]
         }
         MapKind::Sparse => {
             let n = u32::try_from(blocks.len()).unwrap_or(u32::MAX).max(1);
-            let config = TsdfConfig { kind: MapKind::Sparse, pool_blocks: n, ..base };
+            let config = saved_map_config(header, n);
             if config.validate(gpu.limits.max_storage_buffer_binding_size).is_err() {
                 return Err(Error::InvalidConfig(format!(
                     "the map's {} blocks do not fit one GPU binding of this device ({} blocks of {} KiB at most, {} MiB): rendering it needs it all on the GPU (fuse it with larger voxels, a shorter --max-depth, or --noise-band-sigmas 0, whose narrower band at far range takes fewer blocks)",

@@ -28,7 +28,6 @@ use glam::DVec3;
 use crate::cpu::shared::{voxel_anchor, voxel_in_block, voxel_tsdf, voxel_weight};
 use crate::map::MapBlock;
 use crate::map::file::MapFileHeader;
-use crate::tsdf::TsdfConfig;
 use crate::{Error, PinholeIntrinsics, Result, Se3};
 
 /// A cell the map observed a surface in (or just behind one).
@@ -270,8 +269,7 @@ pub fn occupancy_grid(header: &MapFileHeader, blocks: &[MapBlock], spec: &GridSp
 
 /// Marks the cells the TSDF observed: occupied near or behind a surface, free farther in front.
 fn apply_tsdf(header: &MapFileHeader, blocks: &[MapBlock], spec: &GridSpec, cells: &mut [u8]) {
-    let config = TsdfConfig { kind: header.kind, dims_voxels: header.dims_voxels, voxel_size_m: header.voxel_size_m, truncation_m: header.truncation_m, ..TsdfConfig::default() };
-    let anchor = voxel_anchor(&config.desc(header.origin_in_world));
+    let anchor = voxel_anchor(&crate::map::saved_map_config(header, 1).desc(header.origin_in_world));
     let voxel_m = f64::from(header.voxel_size_m);
     let mu_m = f64::from(header.truncation_m);
     let origin = DVec3::from_array(header.origin_in_world.map(f64::from));

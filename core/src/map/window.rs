@@ -24,11 +24,11 @@
 use glam::DVec3;
 
 use super::file::MapFileHeader;
-use super::{Map, MapBlock, SparseMap, max_pool_blocks, resident_map};
+use super::{Map, MapBlock, SparseMap, max_pool_blocks, resident_map, saved_map_config};
 use crate::cpu::fusion::raycast_range::brick_footprint;
 use crate::cpu::map::block_swap_out::block_centre;
 use crate::kernels::GpuIntrinsics;
-use crate::tsdf::{MapKind, TsdfConfig, TsdfStore, VolumeDesc};
+use crate::tsdf::{MapKind, TsdfStore, VolumeDesc};
 use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
 
 /// The part of space a view of a map can read: a cone about the optical axis, from the camera
@@ -230,18 +230,7 @@ impl ViewedMap {
         if header.kind == MapKind::Dense || blocks.len() <= capacity as usize {
             return Ok(Self { map: resident_map(gpu, header, &blocks)?, blocks, window: None });
         }
-        let config = TsdfConfig {
-            kind: MapKind::Sparse,
-            voxel_size_m: header.voxel_size_m,
-            truncation_m: header.truncation_m,
-            noise_band_sigmas: header.noise_band_sigmas,
-            max_weight: header.max_weight,
-            color: header.color,
-            swap: false,
-            pool_blocks: capacity,
-            ..TsdfConfig::default()
-        };
-        let sparse = SparseMap::new(gpu, config, header.origin_in_world)?;
+        let sparse = SparseMap::new(gpu, saved_map_config(header, capacity), header.origin_in_world)?;
         let window = MapWindow::new(&sparse.desc(), blocks, capacity as usize);
         Ok(Self { map: Map::Sparse(sparse), blocks: Vec::new(), window: Some(window) })
     }
