@@ -85,3 +85,30 @@ fn two_real_frames_match_like_the_twin() {
     eprintln!("{close} of {} keypoints within 40 bits", b.keypoint_count());
     assert!(close * 3 > b.keypoint_count(), "{close} close matches of {}", b.keypoint_count());
 }
+
+#[test]
+fn ties_go_to_the_lowest_train_slot_across_tiles() {
+    // 150 train slots (the kernel reads them in tiles of 64), every third one empty. Slots
+    // 70.. hold the first query's descriptor (zero) exactly, the others are 5 bits away from it;
+    // slot 149 alone is 1 bit from the second query, every other slot 2 or more.
+    let n = 150;
+    let mut train = Features::with_slots(n);
+    for i in (0..n).filter(|i| i % 3 != 0) {
+        train.keypoints[i][3] = 1.0;
+        if i < 70 {
+            train.descriptors[8 * i] = 0b1_1111;
+        }
+    }
+    train.descriptors[8 * 149 + 7] = 1 << 31;
+    let mut query = Features::with_slots(2);
+    query.keypoints[0][3] = 1.0;
+    query.keypoints[1][3] = 1.0;
+    query.descriptors[8 + 7] = (1 << 31) | 1;
+    let (g, c) = run(&query, &train);
+    assert_exact_with_controls("ties", &g, &c);
+    // The nearest is the lowest of the equal slots (70; 69 is empty), the second equally near.
+    assert_eq!(g[0], [70, 0, 0, 0]);
+    // Slot 149 (1 bit), then the zero descriptors of slots 70.. (2 bits), not a slot below 70
+    // (7 bits).
+    assert_eq!(g[1], [149, 1, 2, 0]);
+}
