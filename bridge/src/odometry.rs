@@ -183,6 +183,11 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
     // pyramid or the vertex and normal maps: only the image stages run (`images_only`).
     let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig { gradient_smoothing: None, ..PreprocessConfig::default() })?;
     let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config)?.images_only();
+    if !args.frame_to_frame {
+        // Keyframe odometry's second path, through the previous tracked frame, is matched and
+        // estimated in each frame's own submission.
+        extractor = extractor.matching_previous();
+    }
     // None before the first frame.
     let mut keyframe: Option<Keyframe> = None;
     let mut recent = RecentFrames::default();
@@ -206,14 +211,9 @@ pub(crate) fn run(options: &GpuOptions, args: &OdometryArgs) -> anyhow::Result<(
             Some(kf) => {
                 let direct = result.motion.clone().context("the extractor holds a reference, so it estimated a motion")?;
                 // With keyframes, the path through the previous tracked frame too (none while
-                // the keyframe is the previous frame); frame to frame only when the keyframe
-                // failed.
-                let mut through_previous = None;
-                if !args.frame_to_frame || direct.rigid.is_none() {
-                    let rematch = Stopwatch::start();
-                    through_previous = pollster::block_on(extractor.rematch_previous(&gpu, keypoints, seed))?.filter(|e| e.rigid.is_some());
-                    times.record("rematch previous (wall)", rematch.ms());
-                }
+                // the keyframe is the previous frame; frame to frame, the reference is always
+                // the previous frame).
+                let through_previous = result.motion_previous.clone().filter(|e| e.rigid.is_some());
                 let reported = if direct.rigid.is_some() { &direct } else { through_previous.as_ref().unwrap_or(&direct) };
                 entry["matches"] = reported.matches.into();
                 entry["inliers"] = reported.inliers().into();

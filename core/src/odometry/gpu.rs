@@ -4,9 +4,10 @@
 //! `orb_describe` per level), matching against the reference frame (`hamming_match`,
 //! current → reference and back, then `match_select`'s filters and 3D pairs) and the robust
 //! motion estimate (`ransac_hypotheses`, `ransac_refine`). Three keypoint sets rotate through three roles: the
-//! reference (a keyframe, or the last tracked frame), the previous tracked frame (matched on
-//! request when the reference fails, [`FeatureExtractor::rematch_previous`]) and the frame
-//! being written; [`FeatureExtractor::accept`] promotes the current frame.
+//! reference (a keyframe, or the last tracked frame), the previous tracked frame (matched and
+//! estimated too, in the same submission, when [`FeatureExtractor::matching_previous`] asks
+//! for it and it is not the reference) and the frame being written;
+//! [`FeatureExtractor::accept`] promotes the current frame.
 //!
 //! Keyframes for relocalisation are copies of a processed frame's keypoints and descriptors
 //! ([`FeatureExtractor::store_keyframe`]); [`FeatureExtractor::match_keyframes`] matches the
@@ -122,6 +123,9 @@ pub struct FrameFeatures {
     pub backward: Vec<[u32; 4]>,
     /// The motion against the reference (`None` without a reference).
     pub motion: Option<MotionEstimate>,
+    /// The motion against the previous tracked frame, when the extractor matches it
+    /// ([`FeatureExtractor::matching_previous`]) and it is not the reference.
+    pub motion_previous: Option<MotionEstimate>,
     /// GPU milliseconds per stage of [`STAGES`] (`None` without timestamp queries).
     pub gpu_ms: Option<[f64; 5]>,
     /// Host milliseconds from upload to the readback's arrival.
@@ -132,6 +136,9 @@ pub struct FrameFeatures {
 struct FeatureTag {
     /// The frame was matched against a reference (its matches and estimate were copied).
     has_reference: bool,
+    /// The frame was matched against the previous tracked frame too (its estimate was copied
+    /// after the reference's).
+    has_previous: bool,
     /// The stages timed into the slot, when the frame was the extractor's own submission.
     stages: Option<Vec<&'static str>>,
     /// When the frame began.
@@ -153,6 +160,9 @@ pub struct FeatureExtractor {
     match_params: wgpu::Buffer,
     /// At `current * SETS + reference`: `match_select` of two different sets into `estimate`.
     select: Vec<Option<wgpu::BindGroup>>,
+    /// At `current * SETS + previous`: (forward, backward) matching into buffers of their own
+    /// (the reference's matches are read back), and `match_select` into `previous_estimate`.
+    matching_previous: Vec<Option<[wgpu::BindGroup; 3]>>,
     select_params: wgpu::Buffer,
     /// RANSAC's parameters for the frame's estimate and for relocalisation candidates (their
     /// seeds are written before each submission).
@@ -161,6 +171,12 @@ pub struct FeatureExtractor {
     /// Held for the bind groups that use it.
     _scratch: EstimateScratch,
     estimate: EstimateTarget,
+    /// The estimate against the previous tracked frame (same RANSAC seed as the frame's).
+    previous_estimate: EstimateTarget,
+    /// Whether frames are matched against the previous tracked frame too.
+    match_previous: bool,
+    /// The previous matching's forward and backward matches.
+    _previous_matches: [wgpu::Buffer; 2],
     candidate_estimates: Vec<EstimateTarget>,
     _pattern: wgpu::Buffer,
     readback: ReadbackRing<FeatureTag>,
@@ -261,6 +277,8 @@ impl FeatureExtractor {
         let candidate_ransac_params = gpu.uniform_buffer("core.ransac.candidate_params", &odometry.ransac.params(focal_px(&k0), 0));
         let scratch = EstimateScratch::new(gpu, slots);
         let estimate = scratch.target(gpu, "frame", slots, &ransac_params);
+        let previous_estimate = scratch.target(gpu, "previous", slots, &ransac_params);
+        let previous_matches = ["forward", "backward"].map(|d| gpu.storage_buffer::<[u32; 4]>(&format!("core.hamming_match.previous.{d}"), slots));
         let candidate_estimates = (0..RELOCALISATION_CANDIDATES).map(|c| scratch.target(gpu, &format!("candidate{c}"), slots, &candidate_ransac_params)).collect();
         let select = (0..SETS * SETS)
             .map(|i| {
@@ -282,7 +300,33 @@ impl FeatureExtractor {
                 })
             })
             .collect();
-        let readback = ReadbackRing::new(gpu, "core.features", SLOT_BYTES * slots as u64 + ESTIMATE_BYTES + StageTimer::BYTES, 1);
+        let matching_previous = (0..SETS * SETS)
+            .map(|i| {
+                let (cur, previous) = (i / SETS, i % SETS);
+                (cur != previous).then(|| {
+                    let (c, p) = (&sets[cur], &sets[previous]);
+                    let [forward, backward] = &previous_matches;
+                    let fwd = hamming_match::Bindings { params: &match_params, query_keypoints: &c.keypoints, query_descriptors: &c.descriptors, train_keypoints: &p.keypoints, train_descriptors: &p.descriptors, matches: forward }.bind_group(gpu);
+                    let bwd = hamming_match::Bindings { params: &match_params, query_keypoints: &p.keypoints, query_descriptors: &p.descriptors, train_keypoints: &c.keypoints, train_descriptors: &c.descriptors, matches: backward }.bind_group(gpu);
+                    let select = match_select::Bindings {
+                        params: &select_params,
+                        forward,
+                        backward,
+                        current_keypoints: &c.keypoints,
+                        current_points: &c.points,
+                        reference_keypoints: &p.keypoints,
+                        reference_points: &p.points,
+                        pairs: &previous_estimate.pairs,
+                        estimate: &previous_estimate.estimate,
+                    }
+                    .bind_group(gpu);
+                    [fwd, bwd, select]
+                })
+            })
+            .collect();
+        // Per frame: the slots' parts, the reference's estimate, the previous frame's, the
+        // timestamps.
+        let readback = ReadbackRing::new(gpu, "core.features", SLOT_BYTES * slots as u64 + ESTIMATE_BYTES + (ESTIMATE_BYTES + (PAIR_BYTES + 4) * slots as u64) + StageTimer::BYTES, 1);
         let timer = StageTimer::new(gpu, "core.features");
         let candidate_matches = (0..RELOCALISATION_CANDIDATES)
             .map(|c| ["forward", "backward"].map(|d| gpu.storage_buffer::<[u32; 4]>(&format!("core.hamming_match.candidate[{c}].{d}"), slots)))
@@ -300,10 +344,14 @@ impl FeatureExtractor {
             match_params,
             select,
             select_params,
+            matching_previous,
             ransac_params,
             candidate_ransac_params,
             _scratch: scratch,
             estimate,
+            previous_estimate,
+            match_previous: false,
+            _previous_matches: previous_matches,
             candidate_estimates,
             _pattern: pattern,
             readback,
@@ -324,6 +372,19 @@ impl FeatureExtractor {
     pub fn images_only(mut self) -> Self {
         self.images_only = true;
         self
+    }
+
+    /// Each frame is matched against the previous tracked frame too, when that is not the
+    /// reference, and the motion estimated against it ([`FrameFeatures::motion_previous`]),
+    /// in the frame's own submission: keyframe odometry's second path costs no host wait.
+    pub fn matching_previous(mut self) -> Self {
+        self.match_previous = true;
+        self
+    }
+
+    /// The previous tracked frame's set, when the current frame is matched against it.
+    fn previous_matched(&self) -> Option<usize> {
+        self.previous.filter(|p| self.match_previous && self.reference.is_some() && Some(*p) != self.reference)
     }
 
     /// The settings.
@@ -400,10 +461,17 @@ impl FeatureExtractor {
             if let Some(r) = self.reference {
                 self.encode_matching(gpu, &mut pass, r);
             }
+            if let Some(p) = self.previous_matched() {
+                let [forward, backward, select] = self.matching_previous[self.current * SETS + p].as_ref().expect("the current set is never the previous");
+                self.dispatch_matching(gpu, &mut pass, forward, backward, select);
+            }
         }
         let mut pass = fe.stage("estimation");
         if self.reference.is_some() {
             self.encode_estimate(gpu, &mut pass, &self.estimate);
+        }
+        if self.previous_matched().is_some() {
+            self.encode_estimate(gpu, &mut pass, &self.previous_estimate);
         }
     }
 
@@ -462,26 +530,6 @@ impl FeatureExtractor {
         let pairs: Vec<FeaturePair> = bytemuck::pod_collect_to_vec(&bytes[e..e + PAIR_BYTES as usize * n]);
         let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[e + PAIR_BYTES as usize * n..e + (PAIR_BYTES as usize + 4) * n]);
         motion_from_estimate(keypoints, &estimate, &pairs, &flags, self.f_px)
-    }
-
-    /// Matches the last processed frame (of `keypoints` keypoints) against the previous tracked
-    /// frame (when there is one other than the reference), estimates the motion with `seed`
-    /// and waits for it.
-    pub async fn rematch_previous(&mut self, gpu: &Gpu, keypoints: usize, seed: u32) -> Result<Option<MotionEstimate>> {
-        let Some(p) = self.previous.filter(|p| Some(*p) != self.reference) else { return Ok(None) };
-        self.set_seed(gpu, seed);
-        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.features.rematch") });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("matching"), timestamp_writes: None });
-            self.encode_matching(gpu, &mut pass, p);
-            self.encode_estimate(gpu, &mut pass, &self.estimate);
-        }
-        let (slot, buffer) = self.readback.free_slot().ok_or_else(|| Error::Poll("the feature readback is still in flight".into()))?;
-        self.copy_estimate(&mut encoder, &self.estimate, buffer, 0);
-        let submission = gpu.submit([encoder.finish()]);
-        self.readback.start(gpu, slot, submission, FeatureTag { has_reference: true, stages: None, started: Instant::now() });
-        let done = self.readback.wait_oldest(gpu).await?.ok_or_else(|| Error::Poll("the feature readback vanished".into()))?;
-        Ok(Some(self.read_estimate(&done.bytes, keypoints)))
     }
 
     /// Copies the last processed frame's keypoints and descriptors into keyframe slot `slot`
@@ -598,19 +646,22 @@ impl FeatureExtractor {
             fe.encoder().copy_buffer_to_buffer(b, 0, buffer, i as u64 * n, n);
         }
         self.copy_estimate(fe.encoder(), &self.estimate, buffer, 5 * n);
+        if self.previous_matched().is_some() {
+            self.copy_estimate(fe.encoder(), &self.previous_estimate, buffer, 5 * n + self.estimate_bytes());
+        }
         Ok(slot)
     }
 
     /// Where [`Self::process`] has the frame's timestamps written in its readback slot.
     fn timestamps_offset(&self) -> u64 {
-        5 * self.slots as u64 * 16 + self.estimate_bytes()
+        5 * self.slots as u64 * 16 + 2 * self.estimate_bytes()
     }
 
     /// The submission that holds the frame [`Self::encode_frame`] recorded into `slot`: its
     /// readback starts. `stages` are the stages timed into the slot (only when the frame is
     /// this extractor's own submission); `started` is when the frame began, for its wall time.
     pub fn frame_submitted(&mut self, gpu: &Gpu, slot: usize, submission: wgpu::SubmissionIndex, stages: Option<Vec<&'static str>>, started: Instant) {
-        let tag = FeatureTag { has_reference: self.reference.is_some(), stages, started };
+        let tag = FeatureTag { has_reference: self.reference.is_some(), has_previous: self.previous_matched().is_some(), stages, started };
         self.readback.start(gpu, slot, submission, tag);
     }
 
@@ -629,6 +680,7 @@ impl FeatureExtractor {
         let features = Features { keypoints: bytemuck::pod_collect_to_vec(part(0)), features: bytemuck::pod_collect_to_vec(part(1)), points: bytemuck::pod_collect_to_vec(part(2)), descriptors: Vec::new() };
         let (forward, backward) = if tag.has_reference { (bytemuck::pod_collect_to_vec(part(3)), bytemuck::pod_collect_to_vec(part(4))) } else { (Vec::new(), Vec::new()) };
         let motion = tag.has_reference.then(|| self.read_estimate(&bytes[5 * n as usize..], features.keypoint_count()));
+        let motion_previous = tag.has_previous.then(|| self.read_estimate(&bytes[(5 * n + self.estimate_bytes()) as usize..], features.keypoint_count()));
         let gpu_ms = self.timer.as_ref().zip(tag.stages).map(|(timer, stages)| {
             let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[self.timestamps_offset() as usize..][..16 * stages.len()]);
             let times = timer.stage_times(&stages, &ticks);
@@ -640,6 +692,6 @@ impl FeatureExtractor {
             }
             out
         });
-        Ok(FrameFeatures { features, forward, backward, motion, gpu_ms, wall_ms: tag.started.elapsed().as_secs_f64() * 1e3 })
+        Ok(FrameFeatures { features, forward, backward, motion, motion_previous, gpu_ms, wall_ms: tag.started.elapsed().as_secs_f64() * 1e3 })
     }
 }

@@ -67,7 +67,7 @@ fn the_composed_pipeline_matches_the_twins_through_its_set_rotation() {
     let calibration = sample_frame(0).0;
     let preprocessor = DepthPreprocessor::new(&gpu, calibration, PreprocessConfig::default()).expect("preprocessor");
     let config = OdometryConfig::default();
-    let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config).expect("extractor");
+    let mut extractor = FeatureExtractor::new(&gpu, &preprocessor, config).expect("extractor").matching_previous();
     let c: Vec<Features> = (0..4).map(cpu_features).collect();
     let process = |extractor: &mut FeatureExtractor, index: usize| pollster::block_on(extractor.process(&gpu, &preprocessor, &sample_frame(index).1, index as u32)).expect("process");
     let k0 = calibration.intrinsics;
@@ -75,7 +75,7 @@ fn the_composed_pipeline_matches_the_twins_through_its_set_rotation() {
 
     // Frame 0: no reference, no matches.
     let f0 = process(&mut extractor, 0);
-    assert!(f0.forward.is_empty() && f0.motion.is_none());
+    assert!(f0.forward.is_empty() && f0.motion.is_none() && f0.motion_previous.is_none());
     assert_keypoints_close("frame 0", &f0.features, &c[0]);
     extractor.accept(true);
     // Frame 1 against 0, then rejected: the reference stays frame 0.
@@ -84,17 +84,18 @@ fn the_composed_pipeline_matches_the_twins_through_its_set_rotation() {
     assert_matches_close("1 -> 0", &f1.forward, &cpu_matches(&c[1], &c[0]));
     assert_matches_close("0 -> 1", &f1.backward, &cpu_matches(&c[0], &c[1]));
     assert_motions_close("motion 1 -> 0", f1.motion.as_ref().expect("a motion"), &cpu_motion(1, 0));
-    // Frame 2 against 0; the previous tracked frame is the reference itself: no rematch.
+    // Frame 2 against 0; the previous tracked frame is the reference itself: no second path.
     let f2 = process(&mut extractor, 2);
     assert_matches_close("2 -> 0", &f2.forward, &cpu_matches(&c[2], &c[0]));
-    assert!(pollster::block_on(extractor.rematch_previous(&gpu, f2.features.keypoint_count(), 2)).expect("rematch").is_none());
-    // Frame 2 tracked but not a keyframe: frame 3 is matched against 0, and on request 2.
+    assert!(f2.motion_previous.is_none());
+    // Frame 2 tracked but not a keyframe: frame 3 is matched against 0 and, in the same
+    // submission, against 2 (the reference's matches are the ones read back).
     extractor.accept(false);
     let f3 = process(&mut extractor, 3);
     assert_keypoints_close("frame 3", &f3.features, &c[3]);
     assert_matches_close("3 -> 0", &f3.forward, &cpu_matches(&c[3], &c[0]));
     assert_motions_close("motion 3 -> 0", f3.motion.as_ref().expect("a motion"), &cpu_motion(3, 0));
-    let again = pollster::block_on(extractor.rematch_previous(&gpu, f3.features.keypoint_count(), 3)).expect("rematch").expect("a previous frame");
-    assert_motions_close("motion 3 -> 2", &again, &cpu_motion(3, 2));
+    assert_matches_close("0 -> 3", &f3.backward, &cpu_matches(&c[0], &c[3]));
+    assert_motions_close("motion 3 -> 2", f3.motion_previous.as_ref().expect("a motion against the previous frame"), &cpu_motion(3, 2));
     finish(&gpu);
 }
