@@ -15,7 +15,10 @@
 //      frame with seed 000's metrics, exact and with Kinect noise, downloaded as a 16-bit PNG;
 //      then the native run's saved map, offered by `serve --map`, opened in a fresh page without
 //      fusing, shown in the free view, and rendered at a pose of the native trajectory as
-//      `webfusion simulate` renders it there; finally a map fused at the ground-truth poses,
+//      `webfusion simulate` renders it there; then again in a page whose map memory
+//      (?map_mib=) holds 90 % of its blocks: the free view shows the nearest of them and says
+//      how far it is complete, the sensor's render, through a window, is the same as before;
+//      finally a map fused at the ground-truth poses,
 //      opened with its occupancy grid (`serve --occupancy`), the streamed frames compared with
 //      it at their ground truth, and the last render's unknown marks (asked of the bridge)
 //      those `simulate --occupancy` writes at that pose;
@@ -57,11 +60,11 @@ const watchdog = setTimeout(() => {
 
 /** A fresh page of `bridge` that opens the bridge's map (`serve --map`): the page, its page
  * errors, and its status once the map is open (or the page has said why not). */
-async function openBridgeMap(browser, bridge) {
+async function openBridgeMap(browser, bridge, query = '') {
   const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
   const errors = [];
   page.on('pageerror', (e) => errors.push(String(e)));
-  await page.goto(`http://${bridge.addr}/`);
+  await page.goto(`http://${bridge.addr}/${query}`);
   await waitFor(page, 'the link', (s) => s.link === 'connected', 60_000);
   await page.click('#map-from-bridge');
   const opened = await waitFor(page, 'the opened map', (s) => s.sensor?.map || s.message, 120_000);
@@ -358,20 +361,44 @@ try {
   await waitFor(third, 'the render at the native pose', (s) => s.sensor?.rendered >= 2 && s.sensor.in_flight === 0, 120_000);
   const [placedDownload] = await Promise.all([third.waitForEvent('download', { timeout: 60_000 }), third.click('#sim-download')]);
   const placed = decodePng(readFileSync(await placedDownload.path())).depth16;
-  let onlyOne = 0, both = 0, close = 0, valid = 0;
-  for (let i = 0; i < placed.length; i++) {
-    const [a, b] = [placed[i], nativeSim[i]];
-    if (a > 0 || b > 0) valid++;
-    if ((a > 0) !== (b > 0)) onlyOne++;
-    else if (a > 0) { both++; if (Math.abs(a - b) <= 2) close++; }
+  /** Pixels valid in both depth images, within 2 units of each other, and valid in only one. */
+  function agreement(placed) {
+    let onlyOne = 0, both = 0, close = 0, valid = 0;
+    for (let i = 0; i < placed.length; i++) {
+      const [a, b] = [placed[i], nativeSim[i]];
+      if (a > 0 || b > 0) valid++;
+      if ((a > 0) !== (b > 0)) onlyOne++;
+      else if (a > 0) { both++; if (Math.abs(a - b) <= 2) close++; }
+    }
+    const ok = placed.length === nativeSim.length && both > 0.3 * placed.length && onlyOne <= 0.02 * valid && close >= 0.99 * both;
+    return { ok, text: `${both} pixels valid in both, ${(100 * close / Math.max(both, 1)).toFixed(2)} % within 2 units (0.4 mm); ${onlyOne} valid in only one (${(100 * onlyOne / Math.max(valid, 1)).toFixed(2)} %)` };
   }
-  check('the placed virtual sensor renders what simulate does', placed.length === nativeSim.length && both > 0.3 * placed.length && onlyOne <= 0.02 * valid && close >= 0.99 * both,
-    `${both} pixels valid in both, ${(100 * close / Math.max(both, 1)).toFixed(2)} % within 2 units (0.4 mm); ${onlyOne} valid in only one (${(100 * onlyOne / Math.max(valid, 1)).toFixed(2)} %)`);
+  const placedAgreement = agreement(placed);
+  check('the placed virtual sensor renders what simulate does', placedAgreement.ok, placedAgreement.text);
   await third.fill('#sim-pose', '1 2');
   await third.click('#sim-render');
   const refused = await waitFor(third, 'the refused pose', (s) => /7 numbers/.test(s.message), 30_000);
   check('a malformed sensor pose is named, not rendered', refused.sensor.rendered === 2 && thirdErrors.length === 0, `message "${refused.message}"${thirdErrors.length ? '; page errors: ' + thirdErrors.join(' | ') : ''}`);
   await within(third.close(), 30_000);
+
+  // The same map in a page whose map memory holds 90 % of its blocks (the sensor's view at the
+  // native pose reaches about 80 %; the free view's first look, all of them): the map is
+  // windowed, the free view shows its nearest blocks and says how far it is complete, and the
+  // sensor's render at the native pose, through a window that holds all of its view, is what
+  // simulate renders there.
+  const windowedMib = (0.9 * om.memory_bytes / 1048576).toFixed(4);
+  const { page: small, errors: smallErrors, opened: smallOpened } = await openBridgeMap(browser, bridge, `?map_mib=${windowedMib}`);
+  const freeNearest = await waitFor(small, 'the free view through a window', (s) => s.sensor?.map?.free_view_complete_within_m != null || s.message, 120_000);
+  await small.fill('#sim-pose', poseLine.split(/\s+/).slice(1, 8).join(' '));
+  await small.click('#sim-render');
+  const smallRendered = await waitFor(small, 'the windowed render at the native pose', (s) => (s.sensor?.rendered >= 1 && s.sensor.in_flight === 0) || /sensor/.test(s.message ?? ''), 120_000);
+  const [smallDownload] = await Promise.all([small.waitForEvent('download', { timeout: 60_000 }), small.click('#sim-download')]);
+  const windowedAgreement = agreement(decodePng(readFileSync(await smallDownload.path())).depth16);
+  const sm = smallRendered.sensor.map;
+  const fm = freeNearest.sensor?.map;
+  check('a map larger than the page\'s map memory is shown and rendered through a window', smallOpened.sensor?.map?.blocks === mapBlocks && sm.pool_blocks < mapBlocks && sm.windows >= 1 && fm?.free_view_left_out > 0 && fm.free_view_complete_within_m > 0 && windowedAgreement.ok && smallErrors.length === 0,
+    `map memory ${windowedMib} MiB: pool ${sm.pool_blocks} of ${mapBlocks} blocks, ${sm.windows} windows; the free view left ${fm?.free_view_left_out} blocks out, complete within ${fm?.free_view_complete_within_m?.toFixed(2)} m${freeNearest.message ? ' (message: ' + freeNearest.message + ')' : ''}; the sensor through the window: ${windowedAgreement.text}${smallErrors.length ? '; page errors: ' + smallErrors.join(' | ') : ''}`);
+  await within(small.close(), 30_000);
 
   // 9. Seed 000's experiment, live: a map fused natively at the sample's ground-truth poses,
   // opened from the bridge; the frames then streamed are not fused but compared, each at its

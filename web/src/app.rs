@@ -660,7 +660,9 @@ impl App {
     /// Opens a saved map's bytes: playback pauses, the fused run is dropped and the free view
     /// and the virtual sensor show the map.
     fn open_map(&mut self, bytes: &[u8], name: &str, from_bridge: bool) {
-        match OpenedMap::load(&self.gpu, bytes, name, from_bridge).and_then(|map| self.mode.open_map(&self.gpu, map)) {
+        // The map memory setting bounds an opened map's GPU pool too: a larger map is shown
+        // through a window (`map::window`).
+        match OpenedMap::load(&self.gpu, bytes, name, from_bridge, self.settings.config.tsdf.pool_blocks).and_then(|map| self.mode.open_map(&self.gpu, map)) {
             Ok(()) => {
                 if self.playing {
                     self.playing = false;

@@ -978,7 +978,9 @@ impl FusionMode {
         }
         let occlusion_m = (2.0 * self.config.tsdf.voxel_size_m).max(PlaneConfig::default().label_min_distance_m);
         if let Some((o, _)) = &mut self.opened {
-            o.map.prepare(gpu, &map_from_viewer, &ViewCone::for_camera(&FREE_VIEW, FREE_VIEW_RANGE_M)).map_err(|e| format!("the free view: {e}"))?;
+            // A map larger than its pool shows the nearest of the free view's blocks when they
+            // do not all fit (the status says how far the image is complete).
+            o.free_view_window = Some(o.map.prepare_nearest(gpu, &map_from_viewer, &ViewCone::for_camera(&FREE_VIEW, FREE_VIEW_RANGE_M)).map_err(|e| format!("the free view: {e}"))?);
         }
         let (free, store) = match (&self.opened, &self.pipeline) {
             (Some((o, free)), _) => (free, o.map.map()),

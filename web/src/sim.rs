@@ -29,7 +29,7 @@ use webfusion_core::camera::TUM_DEPTH_UNITS_PER_METRE;
 use webfusion_core::cpu::shared::voxel_anchor;
 use webfusion_core::map::file::{MapFileHeader, MapFrame, parse_map_bytes};
 use webfusion_core::map::saved_map_config;
-use webfusion_core::map::window::{ViewCone, ViewedMap};
+use webfusion_core::map::window::{NearestWindow, ViewCone, ViewedMap};
 use webfusion_core::protocol::{RenderFailure, RenderOutcome, RenderRequest, WireDepth};
 use webfusion_core::sim::compare::{DepthComparison, compare_depth, difference_image};
 use webfusion_core::sim::sensor::{KinectModel, SensorOptions, VirtualSensor};
@@ -73,6 +73,9 @@ pub(crate) struct OpenedMap {
     /// On the GPU whole, or through a window when it has more blocks than the device's largest
     /// pool (`map::window`): each render prepares it for its view first.
     pub(crate) map: ViewedMap,
+    /// What the free view's last window left out (it takes the nearest of its blocks when they
+    /// do not all fit; the sensor's renders never do).
+    pub(crate) free_view_window: Option<NearestWindow>,
     /// Opened from the bridge (`serve --map`), which may mark unknown pixels.
     pub(crate) from_bridge: bool,
     /// Mean of its blocks' centres and their RMS distance from it, metres (the free view's
@@ -83,9 +86,10 @@ pub(crate) struct OpenedMap {
 
 impl OpenedMap {
     /// Parses a map file's bytes (keeping the intact blocks of a damaged one) and loads it onto
-    /// the GPU: whole when it fits the largest pool the device binds (65,536 blocks on a
-    /// 128 MiB binding), else through a window that follows the free view and the sensor.
-    pub(crate) fn load(gpu: &Gpu, bytes: &[u8], name: &str, from_bridge: bool) -> Result<Self, String> {
+    /// the GPU: whole when it fits a pool of `max_pool_blocks` (the page's map memory; at most
+    /// the largest pool the device binds, 65,536 blocks on a 128 MiB binding), else through a
+    /// window that follows the free view and the sensor.
+    pub(crate) fn load(gpu: &Gpu, bytes: &[u8], name: &str, from_bridge: bool, max_pool_blocks: u32) -> Result<Self, String> {
         let mut file = parse_map_bytes(bytes, name).map_err(|e| e.to_string())?;
         if file.blocks.is_empty() {
             return Err(format!("{name}: the map has no intact blocks"));
@@ -100,8 +104,8 @@ impl OpenedMap {
         // The mean and RMS spread of the blocks: a few stray far blocks do not push the view out.
         let centre_m = centres.iter().sum::<DVec3>() / centres.len() as f64;
         let spread_m = (centres.iter().map(|c| c.distance_squared(centre_m)).sum::<f64>() / centres.len() as f64).sqrt();
-        let map = ViewedMap::load(gpu, &file.header, std::mem::take(&mut file.blocks), None).map_err(|e| format!("{name}: {e}"))?;
-        Ok(Self { name: name.to_owned(), blocks, damage: file.damage.map(|d| d.to_string()), header: file.header, map, from_bridge, centre_m, spread_m })
+        let map = ViewedMap::load(gpu, &file.header, std::mem::take(&mut file.blocks), Some(max_pool_blocks)).map_err(|e| format!("{name}: {e}"))?;
+        Ok(Self { name: name.to_owned(), blocks, damage: file.damage.map(|d| d.to_string()), header: file.header, map, free_view_window: None, from_bridge, centre_m, spread_m })
     }
 
     pub(crate) fn status(&self) -> OpenedMapStatus {
@@ -119,6 +123,10 @@ impl OpenedMap {
             centre_m: self.centre_m.to_array(),
             spread_m: self.spread_m,
             up_in_map: self.header.up_in_map,
+            pool_blocks: self.map.window().map(|w| w.capacity()),
+            windows: self.map.window().map_or(0, |w| w.uploads()),
+            free_view_left_out: self.free_view_window.map_or(0, |w| w.left_out),
+            free_view_complete_within_m: self.free_view_window.map(|w| w.complete_within_m).filter(|m| m.is_finite()),
         }
     }
 }
@@ -530,7 +538,12 @@ impl SensorStatus {
     pub(crate) fn line(&self) -> Option<String> {
         let map = self.map.as_ref().map(|m| {
             let damage = m.damage.as_ref().map(|d| format!(" (damaged: {d}; its intact blocks kept)")).unwrap_or_default();
-            format!("opened map {}: {} map, {} blocks of {:.1} mm, {:.0} MiB, {} frame{damage}", m.name, m.kind, m.blocks, m.voxel_size_m * 1e3, m.memory_bytes as f64 / 1048576.0, m.frame)
+            let window = match (m.pool_blocks, m.free_view_complete_within_m) {
+                (Some(pool), Some(within)) => format!(" · larger than its GPU pool of {pool} blocks: the free view shows the nearest of its blocks, complete within {within:.1} m ({} further blocks left out)", m.free_view_left_out),
+                (Some(pool), None) => format!(" · through a window of {pool} blocks ({} uploaded)", m.windows),
+                _ => String::new(),
+            };
+            format!("opened map {}: {} map, {} blocks of {:.1} mm, {:.0} MiB, {} frame{damage}{window}", m.name, m.kind, m.blocks, m.voxel_size_m * 1e3, m.memory_bytes as f64 / 1048576.0, m.frame)
         });
         let unknown = match (&self.unknown.unavailable, self.unknown.marked_percent) {
             (Some(why), _) => format!(" · no unknown marks: {why}"),
@@ -560,6 +573,15 @@ pub(crate) struct OpenedMapStatus {
     spread_m: f64,
     /// The up direction its file names (the free view orbits about it), if any.
     up_in_map: Option<[f32; 3]>,
+    /// The GPU pool's blocks when the map is larger (rendered through a window), else `None`.
+    pool_blocks: Option<usize>,
+    /// Windows uploaded so far.
+    windows: u64,
+    /// Blocks the free view's last window could not hold (0: it was exact).
+    free_view_left_out: usize,
+    /// How far from the free view's camera its last image is exact, metres, when blocks were
+    /// left out.
+    free_view_complete_within_m: Option<f64>,
 }
 
 /// The virtual sensor's part of the status.

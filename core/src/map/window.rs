@@ -20,6 +20,12 @@
 //! find theirs resident and cost nothing more. A view that by itself reaches more blocks than
 //! the pool holds is a typed error ([`Error::ViewExceedsPool`]), never a silently partial
 //! image. A map that fits the pool is uploaded once, as before.
+//!
+//! A view for looking at the map (the page's free view of a map too big for the device) may
+//! instead ask for the nearest of its blocks ([`ViewedMap::prepare_nearest`]): the pool then
+//! holds the view's blocks nearest the camera centre, and the view is exact within a reported
+//! distance ([`NearestWindow::complete_within_m`]): a ray's samples within that distance of the
+//! centre read only resident blocks. Beyond it surfaces may be missing; the caller says so.
 
 use glam::DVec3;
 
@@ -112,6 +118,40 @@ pub struct MapWindow {
     capacity: usize,
     /// Windows uploaded so far.
     uploads: u64,
+    /// The view the resident window was planned for when it could not hold all of that view's
+    /// blocks ([`Self::prepare_nearest`]); `None` when it holds every block of its view.
+    partial: Option<PartialView>,
+}
+
+/// A view a window holds only the nearest blocks of.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PartialView {
+    world_from_camera: Se3,
+    cone: ViewCone,
+    window: NearestWindow,
+}
+
+/// What [`MapWindow::prepare_nearest`] made resident for a view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NearestWindow {
+    /// Whether a new window was uploaded.
+    pub uploaded: bool,
+    /// Blocks the view may read that the pool could not hold (0: the view is exact).
+    pub left_out: usize,
+    /// Every block the view's rays read within this distance of the camera centre is resident,
+    /// metres (infinite when nothing was left out): the view is exact for surfaces nearer.
+    pub complete_within_m: f64,
+}
+
+impl NearestWindow {
+    const COMPLETE: Self = Self { uploaded: false, left_out: 0, complete_within_m: f64::INFINITY };
+}
+
+/// A new window: the blocks (indices, in upload order) and what of the view it leaves out.
+struct Plan {
+    order: Vec<usize>,
+    left_out: usize,
+    complete_within_m: f64,
 }
 
 impl MapWindow {
@@ -128,15 +168,16 @@ impl MapWindow {
         let (_, half_diagonal_m) = block_centre(desc, [0; 3]);
         let radius_m = f64::from(half_diagonal_m) + 2.0 * f64::from(desc.voxel_size_m);
         let block_edge_m = f64::from(desc.voxel_size_m) * f64::from(1u32 << crate::cpu::shared::BRICK_SHIFT);
-        Self { blocks, centres, radius_m, block_edge_m, resident: 0, capacity, uploads: 0 }
+        Self { blocks, centres, radius_m, block_edge_m, resident: 0, capacity, uploads: 0, partial: None }
     }
 
     /// Which blocks the pool must hold for the view at `world_from_camera` bounded by `cone`:
     /// `None` when it holds them already, else the new window as indices into `blocks`: the
     /// view's blocks, then the others by how far they miss its cone ([`ViewCone::miss_by`]; the
     /// nearer first among equals), up to the capacity. Errors when the view alone needs more
-    /// than the pool holds.
-    fn plan(&self, world_from_camera: &Se3, cone: &ViewCone) -> Result<Option<Vec<usize>>> {
+    /// than the pool holds, unless `nearest_first`: then the window holds the view's blocks
+    /// nearest the camera centre, as many as fit.
+    fn plan(&self, world_from_camera: &Se3, cone: &ViewCone, nearest_first: bool) -> Result<Option<Plan>> {
         let centre = world_from_camera.translation_m;
         let axis = world_from_camera.rotation * DVec3::Z;
         let camera_from_world = world_from_camera.inverse().to_cols_f32();
@@ -155,14 +196,22 @@ impl MapWindow {
         let miss: Vec<f64> = (0..self.blocks.len()).map(miss).collect();
         let needed = (0..self.blocks.len()).filter(|&i| miss[i] <= 0.0);
         let view_blocks = needed.count();
-        if view_blocks > self.capacity {
+        if view_blocks > self.capacity && !nearest_first {
             return Err(Error::ViewExceedsPool { view_blocks, pool_blocks: self.capacity });
         }
         let mut order: Vec<usize> = (0..self.blocks.len()).collect();
         let distance = |i: usize| (self.centres[i] - centre).length_squared();
         order.sort_by(|&a, &b| miss[a].total_cmp(&miss[b]).then(distance(a).total_cmp(&distance(b))));
+        // The view's blocks come first, nearest first: those past the capacity are left out,
+        // and the nearest of them bounds where the view is complete (a sample within
+        // `radius_m` of a block's centre may read it).
+        let left_out = view_blocks.saturating_sub(self.capacity);
+        let complete_within_m = match left_out {
+            0 => f64::INFINITY,
+            _ => (distance(order[self.capacity]).sqrt() - self.radius_m).max(0.0),
+        };
         order.truncate(self.capacity);
-        Ok(Some(order))
+        Ok(Some(Plan { order, left_out, complete_within_m }))
     }
 
     /// Puts the blocks of `window` (indices) first, in that order, and the rest after them.
@@ -181,17 +230,41 @@ impl MapWindow {
     /// Makes the pool of `map` hold every block the view at `world_from_camera` bounded by
     /// `cone` may read, uploading a new window when it does not. Returns whether it uploaded.
     pub fn prepare(&mut self, gpu: &Gpu, map: &SparseMap, world_from_camera: &Se3, cone: &ViewCone) -> Result<bool> {
-        let Some(window) = self.plan(world_from_camera, cone)? else {
+        let Some(plan) = self.plan(world_from_camera, cone, false)? else {
             return Ok(false);
         };
-        self.reorder(&window);
+        self.upload(gpu, map, &plan.order)?;
+        self.partial = None;
+        Ok(true)
+    }
+
+    /// Like [`Self::prepare`], but a view that alone reaches more blocks than the pool holds
+    /// gets the nearest of them (see [`NearestWindow`]) instead of an error. The same view
+    /// asked for again keeps its window.
+    pub fn prepare_nearest(&mut self, gpu: &Gpu, map: &SparseMap, world_from_camera: &Se3, cone: &ViewCone) -> Result<NearestWindow> {
+        if let Some(p) = self.partial.filter(|p| p.world_from_camera == *world_from_camera && p.cone == *cone) {
+            return Ok(NearestWindow { uploaded: false, ..p.window });
+        }
+        let Some(plan) = self.plan(world_from_camera, cone, true)? else {
+            return Ok(NearestWindow::COMPLETE);
+        };
+        self.upload(gpu, map, &plan.order)?;
+        let window = NearestWindow { uploaded: true, left_out: plan.left_out, complete_within_m: plan.complete_within_m };
+        self.partial = (plan.left_out > 0).then_some(PartialView { world_from_camera: *world_from_camera, cone: *cone, window });
+        Ok(window)
+    }
+
+    /// Makes `window` (indices into `blocks`) the pool's content.
+    fn upload(&mut self, gpu: &Gpu, map: &SparseMap, window: &[usize]) -> Result<()> {
+        self.reorder(window);
         if let Err(e) = map.upload_blocks(gpu, &self.blocks[..self.resident]) {
             // The pool was emptied: nothing is resident, and the next view plans again.
             self.resident = 0;
+            self.partial = None;
             return Err(e);
         }
         self.uploads += 1;
-        Ok(true)
+        Ok(())
     }
 
     /// Windows uploaded so far.
@@ -241,6 +314,15 @@ impl ViewedMap {
         match (&mut self.window, &self.map) {
             (Some(window), Map::Sparse(sparse)) => window.prepare(gpu, sparse, world_from_camera, cone),
             _ => Ok(false),
+        }
+    }
+
+    /// Like [`Self::prepare`], for a view that only looks at the map: when it alone reaches more
+    /// blocks than the pool holds, the pool holds the nearest of them ([`NearestWindow`]).
+    pub fn prepare_nearest(&mut self, gpu: &Gpu, world_from_camera: &Se3, cone: &ViewCone) -> Result<NearestWindow> {
+        match (&mut self.window, &self.map) {
+            (Some(window), Map::Sparse(sparse)) => window.prepare_nearest(gpu, sparse, world_from_camera, cone),
+            _ => Ok(NearestWindow::COMPLETE),
         }
     }
 

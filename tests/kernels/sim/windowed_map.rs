@@ -4,12 +4,15 @@
 //! poses all around it and off its centre, once with every block on the GPU and once through a
 //! pool of 40 % of the blocks. The depth is word for word the same at every pose, turning
 //! uploads new windows and nearby views reuse them. A view that alone reaches more blocks
-//! than the pool is a typed error. Negative control: a window planned for too short a range
-//! (so blocks the view reads stay on the host) renders other depth, and the comparison sees it.
+//! than the pool is a typed error; a view that only looks at the map may take the nearest of
+//! its blocks instead, and is then word for word the same for every surface nearer than the
+//! distance it reports (and loses surfaces beyond it). Negative control: a window planned for
+//! too short a range (so blocks the view reads stay on the host) renders other depth, and the
+//! comparison sees it.
 
 use glam::{DQuat, DVec3};
 use webfusion_core::map::file::{MapFileHeader, MapFrame};
-use webfusion_core::map::window::{MapWindow, ViewCone, ViewedMap};
+use webfusion_core::map::window::{MapWindow, NearestWindow, ViewCone, ViewedMap};
 use webfusion_core::map::{MapBlock, SparseMap};
 use webfusion_core::sim::sensor::{SensorOptions, VirtualSensor};
 use webfusion_core::tsdf::{TsdfConfig, TsdfStore};
@@ -78,7 +81,9 @@ fn a_windowed_map_renders_every_view_as_the_whole_map_does() {
     // A view that alone reaches more blocks than the pool: a typed error, nothing rendered.
     let mut tiny = ViewedMap::load(&gpu, &header, blocks.clone(), Some(8)).expect("load");
     let err = tiny.prepare(&gpu, &views()[0], &ViewCone::for_camera(&K, options().depth_range_m)).expect_err("the view needs more than 8 blocks");
-    assert!(matches!(err, Error::ViewExceedsPool { pool_blocks: 8, view_blocks } if view_blocks > 8), "{err}");
+    let Error::ViewExceedsPool { pool_blocks: 8, view_blocks } = err else { panic!("{err}") };
+    assert!(view_blocks > 8, "{view_blocks} blocks in view");
+    nearest_blocks_render_the_near_surfaces_exactly(&gpu, &header, blocks.clone(), view_blocks, &reference[0]);
     finish(&gpu);
 
     // Negative control: windows planned for views that stop at 0.5 m leave blocks the sensor
@@ -105,4 +110,44 @@ fn short_range_window_depths(gpu: &Gpu, header: &MapFileHeader, blocks: Vec<MapB
             pollster::block_on(sensor.render(gpu, &sparse, pose, i as u32)).expect("render").depth_units
         })
         .collect()
+}
+
+/// The first view through a pool of a third of its blocks, nearest first: identical to
+/// `reference` wherever the surface is nearer than the distance the window reports, and
+/// missing surfaces beyond it.
+fn nearest_blocks_render_the_near_surfaces_exactly(gpu: &Gpu, header: &MapFileHeader, blocks: Vec<MapBlock>, view_blocks: usize, reference: &[u16]) {
+    let pose = views()[0];
+    let cone = ViewCone::for_camera(&K, options().depth_range_m);
+    let pool = view_blocks / 3;
+    let mut near = ViewedMap::load(gpu, header, blocks, Some(pool as u32)).expect("load");
+    let window = near.prepare_nearest(gpu, &pose, &cone).expect("the nearest blocks");
+    assert!(window.uploaded && window.left_out == view_blocks - pool, "{window:?} for {view_blocks} blocks in view, pool {pool}");
+    assert!(window.complete_within_m > 0.5 && window.complete_within_m < cone.reach_m, "{window:?}");
+    // The same view again keeps its window.
+    assert_eq!(near.prepare_nearest(gpu, &pose, &cone).expect("again"), NearestWindow { uploaded: false, ..window });
+    let mut sensor = VirtualSensor::new(gpu, near.map(), K, options()).expect("sensor");
+    let depth = pollster::block_on(sensor.render(gpu, near.map(), &pose, 0)).expect("render").depth_units;
+    // Per pixel of the whole map's render: whether its surface lies within the complete
+    // distance (the ray's length to it, from its planar depth).
+    let (mut near_px, mut near_same, mut far_px, mut far_same) = (0usize, 0usize, 0usize, 0usize);
+    for (i, (&r, &d)) in reference.iter().zip(&depth).enumerate() {
+        if r == 0 {
+            continue;
+        }
+        let (u, v) = ((i % K.width_px as usize) as f64, (i / K.width_px as usize) as f64);
+        let ray = DVec3::new((u - f64::from(K.cx_px)) / f64::from(K.fx_px), (v - f64::from(K.cy_px)) / f64::from(K.fy_px), 1.0);
+        let t_m = f64::from(r) / f64::from(UNITS_PER_M) * ray.length();
+        if t_m < window.complete_within_m {
+            near_px += 1;
+            near_same += usize::from(d == r);
+        } else {
+            far_px += 1;
+            far_same += usize::from(d == r);
+        }
+    }
+    eprintln!("nearest {pool} of {view_blocks} blocks, complete within {:.2} m: {near_same} of {near_px} near pixels the same, {far_same} of {far_px} beyond", window.complete_within_m);
+    assert!(near_px > K.pixel_count() / 20, "the window holds a part of the view worth comparing ({near_px} pixels)");
+    assert_eq!(near_same, near_px, "surfaces within the complete distance render as with the whole map");
+    // Negative control: beyond it surfaces are lost, so the same comparison there fails.
+    assert!(far_same < far_px * 9 / 10, "a third of the view's blocks must lose far surfaces ({far_same} of {far_px} the same)");
 }
