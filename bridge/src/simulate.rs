@@ -297,7 +297,7 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
     dir.finish(calibration, &poses)?;
     let elapsed = started.elapsed().as_secs_f64();
     if let Some(w) = viewed.window() {
-        println!("windows: {} uploaded for {} frames (a pool of {} of the map's {} blocks)", w.uploads(), poses.len(), w.capacity(), w.blocks());
+        println!("windows: {} uploaded for {} frames (a pool of {} of the map's {} blocks; {} blocks written, each window writing only the blocks entering it)", w.uploads(), poses.len(), w.capacity(), w.blocks(), w.blocks_written());
     }
     if let Some(marked) = marked {
         println!("{:.2} % of the pixels looked through never-observed space (unknown/)", 100.0 * marked as f64 / (poses.len() as f64 * k.pixel_count() as f64));

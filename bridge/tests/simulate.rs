@@ -41,7 +41,7 @@ fn a_map_simulated_along_a_known_trajectory_replays_tracks_back_and_compares() {
     let budget_mib = 0.7 * blocks as f64 * webfusion_core::map::BLOCK_BYTES_WITH_COLOR as f64 / f64::from(1 << 20);
     let windowed = dir.join("windowed");
     let out = ok(&["simulate", "--map", s(&map), "--poses", s(&used), "--out", s(&windowed), "--image-size", "160x120", "--color", "--map-budget-mib", &format!("{budget_mib:.3}")]);
-    assert!(out.contains("rendered through a window of") && out.contains(&format!("uploaded for {FRAMES} frames (a pool of")) && out.contains(&format!("of the map's {blocks} blocks)")), "{out}");
+    assert!(out.contains("rendered through a window of") && out.contains(&format!("uploaded for {FRAMES} frames (a pool of")) && out.contains(&format!("of the map's {blocks} blocks;")) && out.contains("blocks written"), "{out}");
     let listed = std::fs::read_to_string(sim.join("rgbd_assoc.txt")).expect("list");
     let files: Vec<&str> = listed.lines().filter(|l| !l.starts_with('#')).flat_map(|l| [l.split_whitespace().nth(1), l.split_whitespace().nth(3)]).flatten().collect();
     assert_eq!(files.len(), 2 * FRAMES.parse::<usize>().expect("n"), "depth and colour per frame");

@@ -410,6 +410,16 @@ impl PoolImage {
     /// coordinates) in the table as swapped out, so allocation leaves them alone and swapping
     /// brings them back.
     pub fn with_swapped(desc: VolumeDesc, color: bool, blocks: &[MapBlock], swapped: &[[u32; 3]]) -> Result<Self> {
+        Self::lay_out(desc, color, blocks, swapped, true)
+    }
+
+    /// The table, keys and surface words of [`Self::from_blocks`], with the voxel and colour
+    /// words left empty (what [`SparseMap::replace_blocks`] writes whole).
+    fn index_only(desc: VolumeDesc, color: bool, blocks: &[MapBlock]) -> Result<Self> {
+        Self::lay_out(desc, color, blocks, &[], false)
+    }
+
+    fn lay_out(desc: VolumeDesc, color: bool, blocks: &[MapBlock], swapped: &[[u32; 3]], with_voxels: bool) -> Result<Self> {
         let d = desc;
         let bad = |why: String| Error::InvalidConfig(format!("uploading {} map blocks: {why}", blocks.len()));
         if blocks.len() > d.pool_blocks as usize {
@@ -436,17 +446,20 @@ impl PoolImage {
         };
         let mut keys = vec![EMPTY_KEY; d.pool_blocks as usize];
         let voxel_words = BLOCK_VOXELS as usize;
-        let mut voxels = vec![0u32; blocks.len() * voxel_words];
-        let mut colors = vec![0u32; if color { blocks.len() * voxel_words } else { 0 }];
+        let copied = if with_voxels { blocks.len() } else { 0 };
+        let mut voxels = vec![0u32; copied * voxel_words];
+        let mut colors = vec![0u32; if color { copied * voxel_words } else { 0 }];
         let mut surface = vec![0u32; blocks.len()];
         for (i, block) in blocks.iter().enumerate() {
             if block.voxels.len() != voxel_words || (color && block.colors.len() != voxel_words) {
                 return Err(bad(format!("block {:?} has {} voxel and {} colour words, not {voxel_words}", block.coords, block.voxels.len(), block.colors.len())));
             }
             keys[i] = insert(block.coords, i as u32)?;
-            voxels[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.voxels);
-            if color {
-                colors[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.colors);
+            if with_voxels {
+                voxels[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.voxels);
+                if color {
+                    colors[i * voxel_words..(i + 1) * voxel_words].copy_from_slice(&block.colors);
+                }
             }
             surface[i] = surface_word(&block.voxels);
         }
@@ -456,6 +469,7 @@ impl PoolImage {
         Ok(Self { desc, table, keys, voxels, colors, surface })
     }
 }
+
 
 impl SparseMap {
     /// Replaces the map's contents with `blocks` (as [`Self::download_blocks`] gives them; any
@@ -478,6 +492,34 @@ impl SparseMap {
             gpu.write_buffer(&self.colors, &image.colors);
         }
         gpu.write_buffer(&self.surface_bricks, &image.surface);
+        let mut counters = [0u32; MAP_COUNTERS];
+        counters[MAP_COUNTER_BLOCKS_USED] = blocks.len() as u32;
+        gpu.write_buffer(&self.counters, &counters);
+        Ok(())
+    }
+
+    /// Makes the pool hold `blocks` (block `i` in pool block `i`) when it held them already
+    /// except at the pool blocks `replaced`: writes the hash table, keys and surface words
+    /// whole, and the voxels (and colours) of the replaced blocks only. A window moving over a
+    /// larger map ([`window::MapWindow`]) keeps most of its blocks; this writes what changed.
+    /// The same errors as [`Self::upload_blocks`]; after one the pool's contents are undefined
+    /// (upload it whole again).
+    pub fn replace_blocks(&self, gpu: &Gpu, blocks: &[MapBlock], replaced: &[usize]) -> Result<()> {
+        // Checks every block's word counts too.
+        let image = PoolImage::index_only(self.desc, self.config.color, blocks)?;
+        if let Some(&i) = replaced.iter().find(|&&i| i >= blocks.len()) {
+            return Err(Error::InvalidConfig(format!("replacing pool block {i} of {}", blocks.len())));
+        }
+        gpu.write_buffer(&self.block_table, &image.table);
+        gpu.write_buffer(&self.block_coords, &image.keys);
+        gpu.write_buffer(&self.surface_bricks, &image.surface);
+        let block_bytes = u64::from(BLOCK_VOXELS) * 4;
+        for &i in replaced {
+            gpu.queue.write_buffer(&self.voxels, i as u64 * block_bytes, bytemuck::cast_slice(&blocks[i].voxels));
+            if self.config.color {
+                gpu.queue.write_buffer(&self.colors, i as u64 * block_bytes, bytemuck::cast_slice(&blocks[i].colors));
+            }
+        }
         let mut counters = [0u32; MAP_COUNTERS];
         counters[MAP_COUNTER_BLOCKS_USED] = blocks.len() as u32;
         gpu.write_buffer(&self.counters, &counters);

@@ -17,7 +17,9 @@
 //! [`ViewedMap::prepare`] checks the view's blocks against the window; when one is missing it
 //! uploads a new window: the view's blocks, then the others nearest the camera centre until
 //! the pool is full, so the next views of a trajectory (or a planner's nearby queries) usually
-//! find theirs resident and cost nothing more. A view that by itself reaches more blocks than
+//! find theirs resident and cost nothing more. A new window keeps the blocks it shares with
+//! the old one in their pool blocks and writes only the voxels of the blocks that enter
+//! ([`SparseMap::replace_blocks`]; the hash table, keys and surface words are written whole). A view that by itself reaches more blocks than
 //! the pool holds is a typed error ([`Error::ViewExceedsPool`]), never a silently partial
 //! image. A map that fits the pool is uploaded once, as before.
 //!
@@ -118,6 +120,9 @@ pub struct MapWindow {
     capacity: usize,
     /// Windows uploaded so far.
     uploads: u64,
+    /// Blocks whose voxels were written to the pool so far (a new window writes only the blocks
+    /// that enter it).
+    blocks_written: u64,
     /// The view the resident window was planned for when it could not hold all of that view's
     /// blocks ([`Self::prepare_nearest`]); `None` when it holds every block of its view.
     partial: Option<PartialView>,
@@ -168,7 +173,7 @@ impl MapWindow {
         let (_, half_diagonal_m) = block_centre(desc, [0; 3]);
         let radius_m = f64::from(half_diagonal_m) + 2.0 * f64::from(desc.voxel_size_m);
         let block_edge_m = f64::from(desc.voxel_size_m) * f64::from(1u32 << crate::cpu::shared::BRICK_SHIFT);
-        Self { blocks, centres, radius_m, block_edge_m, resident: 0, capacity, uploads: 0, partial: None }
+        Self { blocks, centres, radius_m, block_edge_m, resident: 0, capacity, uploads: 0, blocks_written: 0, partial: None }
     }
 
     /// Which blocks the pool must hold for the view at `world_from_camera` bounded by `cone`:
@@ -254,11 +259,22 @@ impl MapWindow {
         Ok(window)
     }
 
-    /// Makes `window` (indices into `blocks`) the pool's content.
+    /// Makes `window` (indices into `blocks`) the pool's content: when the pool is full and
+    /// stays full, the blocks it keeps stay in their pool blocks and only those entering are
+    /// written; otherwise the pool is uploaded whole.
     fn upload(&mut self, gpu: &Gpu, map: &SparseMap, window: &[usize]) -> Result<()> {
-        self.reorder(window);
-        if let Err(e) = map.upload_blocks(gpu, &self.blocks[..self.resident]) {
-            // The pool was emptied: nothing is resident, and the next view plans again.
+        let result = if self.resident == self.capacity && window.len() == self.capacity {
+            let replaced = self.reorder_keeping(window);
+            self.blocks_written += replaced.len() as u64;
+            map.replace_blocks(gpu, &self.blocks[..self.resident], &replaced)
+        } else {
+            self.reorder(window);
+            self.blocks_written += self.resident as u64;
+            map.upload_blocks(gpu, &self.blocks[..self.resident])
+        };
+        if let Err(e) = result {
+            // The pool's contents are undefined (an upload empties it first): nothing is
+            // resident, and the next view plans again and uploads whole.
             self.resident = 0;
             self.partial = None;
             return Err(e);
@@ -267,9 +283,44 @@ impl MapWindow {
         Ok(())
     }
 
+    /// Like [`Self::reorder`] for a full pool that stays full: a block of `window` already
+    /// resident keeps its place, and the blocks entering take the places of those leaving.
+    /// Returns those places (the pool blocks to write).
+    fn reorder_keeping(&mut self, window: &[usize]) -> Vec<usize> {
+        let mut in_window = vec![false; self.blocks.len()];
+        for &i in window {
+            in_window[i] = true;
+        }
+        let mut entering = window.iter().copied().filter(|&i| i >= self.resident);
+        let mut order: Vec<usize> = Vec::with_capacity(self.blocks.len());
+        let mut replaced = Vec::new();
+        for (slot, &kept) in in_window.iter().enumerate().take(self.resident) {
+            if kept {
+                order.push(slot);
+            } else {
+                order.push(entering.next().expect("as many blocks enter as leave"));
+                replaced.push(slot);
+            }
+        }
+        let mut placed = vec![false; self.blocks.len()];
+        for &i in &order {
+            placed[i] = true;
+        }
+        order.extend((0..self.blocks.len()).filter(|&i| !placed[i]));
+        let mut blocks: Vec<Option<MapBlock>> = std::mem::take(&mut self.blocks).into_iter().map(Some).collect();
+        self.blocks = order.iter().map(|&i| blocks[i].take().expect("each index once")).collect();
+        self.centres = order.iter().map(|&i| self.centres[i]).collect();
+        replaced
+    }
+
     /// Windows uploaded so far.
     pub fn uploads(&self) -> u64 {
         self.uploads
+    }
+
+    /// Blocks whose voxels were written to the pool so far.
+    pub fn blocks_written(&self) -> u64 {
+        self.blocks_written
     }
 
     /// Blocks the pool holds at most.

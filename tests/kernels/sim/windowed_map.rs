@@ -3,7 +3,7 @@
 //! analytic room the swapping test fuses from its centre, rendered by the virtual sensor at
 //! poses all around it and off its centre, once with every block on the GPU and once through a
 //! pool of 40 % of the blocks. The depth is word for word the same at every pose, turning
-//! uploads new windows and nearby views reuse them. A view that alone reaches more blocks
+//! uploads new windows (each writing only the blocks entering it) and nearby views reuse them. A view that alone reaches more blocks
 //! than the pool is a typed error; a view that only looks at the map may take the nearest of
 //! its blocks instead, and is then word for word the same for every surface nearer than the
 //! distance it reports (and loses surfaces beyond it). Negative control: a window planned for
@@ -73,8 +73,10 @@ fn a_windowed_map_renders_every_view_as_the_whole_map_does() {
     let window = windowed.window().expect("more blocks than the pool: windowed");
     assert_eq!((window.blocks(), window.capacity()), (blocks.len(), pool as usize));
     let rendered = render_all(&gpu, &mut windowed);
-    let uploads = windowed.window().expect("windowed").uploads();
-    eprintln!("room: {} blocks, pool {pool}: {uploads} windows for {} views", blocks.len(), views().len());
+    let (uploads, written) = windowed.window().map(|w| (w.uploads(), w.blocks_written())).expect("windowed");
+    eprintln!("room: {} blocks, pool {pool}: {uploads} windows for {} views, {written} blocks written", blocks.len(), views().len());
+    // After the first window each writes only the blocks entering it.
+    assert!(written < u64::from(pool) * uploads / 2, "windows after the first write only what enters ({written} blocks for {uploads} windows of {pool})");
     assert_eq!(differing(&rendered, &reference), [], "views through the window differ from the whole map's");
     assert!(uploads > 1 && uploads < views().len() as u64 / 2, "turning uploads new windows, nearby views reuse them ({uploads})");
 
@@ -124,7 +126,7 @@ fn nearest_blocks_render_the_near_surfaces_exactly(gpu: &Gpu, header: &MapFileHe
     assert!(window.uploaded && window.left_out == view_blocks - pool, "{window:?} for {view_blocks} blocks in view, pool {pool}");
     assert!(window.complete_within_m > 0.5 && window.complete_within_m < cone.reach_m, "{window:?}");
     // The same view again keeps its window.
-    assert_eq!(near.prepare_nearest(gpu, &pose, &cone).expect("again"), NearestWindow { uploaded: false, ..window });
+    assert_eq!(near.prepare_nearest(gpu, &pose, &cone).expect("again"), NearestWindow { uploaded: false, ..window }, "the same view keeps its window");
     let mut sensor = VirtualSensor::new(gpu, near.map(), K, options()).expect("sensor");
     let depth = pollster::block_on(sensor.render(gpu, near.map(), &pose, 0)).expect("render").depth_units;
     // Per pixel of the whole map's render: whether its surface lies within the complete
