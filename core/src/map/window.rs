@@ -19,9 +19,10 @@
 //! the pool is full, so the next views of a trajectory (or a planner's nearby queries) usually
 //! find theirs resident and cost nothing more. A new window keeps the blocks it shares with
 //! the old one in their pool blocks and writes only the voxels of the blocks that enter
-//! ([`SparseMap::replace_blocks`]; the hash table, keys and surface words are written whole). A view that by itself reaches more blocks than
-//! the pool holds is a typed error ([`Error::ViewExceedsPool`]), never a silently partial
-//! image. A map that fits the pool is uploaded once, as before.
+//! ([`SparseMap::replace_blocks`]; the hash table, keys and surface words are written whole).
+//! A view that by itself reaches more blocks than the pool holds is a typed error
+//! ([`Error::ViewExceedsPool`]), never a silently partial image. A map that fits the pool is
+//! uploaded once, as before.
 //!
 //! A view for looking at the map (the page's free view of a map too big for the device) may
 //! instead ask for the nearest of its blocks ([`ViewedMap::prepare_nearest`]): the pool then
