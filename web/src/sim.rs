@@ -26,7 +26,7 @@ use std::rc::Rc;
 use glam::{DQuat, DVec3};
 use web_time::Instant;
 use webfusion_core::camera::TUM_DEPTH_UNITS_PER_METRE;
-use webfusion_core::cpu::shared::voxel_anchor;
+use webfusion_core::cpu::map::block_swap_out::block_centre;
 use webfusion_core::map::file::{MapFileHeader, MapFrame, parse_map_bytes};
 use webfusion_core::map::saved_map_config;
 use webfusion_core::map::window::{NearestWindow, ViewCone, ViewedMap};
@@ -94,13 +94,9 @@ impl OpenedMap {
         if file.blocks.is_empty() {
             return Err(format!("{name}: the map has no intact blocks"));
         }
-        // Voxel (x, y, z) of the map lies at origin + ((x, y, z) - anchor) voxels (a sparse map's
-        // coordinates are offset by half its addressable range).
         let blocks = file.blocks.len();
-        let anchor = DVec3::from(voxel_anchor(&saved_map_config(&file.header, 1).desc(file.header.origin_in_world)).map(f64::from));
-        let voxel_m = f64::from(file.header.voxel_size_m);
-        let origin = DVec3::from(file.header.origin_in_world.map(f64::from));
-        let centres: Vec<DVec3> = file.blocks.iter().map(|b| origin + (DVec3::from(b.coords.map(|c| f64::from(c) * 8.0 + 4.0)) - anchor) * voxel_m).collect();
+        let desc = saved_map_config(&file.header, 1).desc(file.header.origin_in_world);
+        let centres: Vec<DVec3> = file.blocks.iter().map(|b| DVec3::from(block_centre(&desc, b.coords).0.map(f64::from))).collect();
         // The mean and RMS spread of the blocks: a few stray far blocks do not push the view out.
         let centre_m = centres.iter().sum::<DVec3>() / centres.len() as f64;
         let spread_m = (centres.iter().map(|c| c.distance_squared(centre_m)).sum::<f64>() / centres.len() as f64).sqrt();
