@@ -99,6 +99,56 @@ impl EstimateScratch {
     }
 }
 
+/// What matching reads of a keypoint set: a frame's set or a keyframe's copy.
+#[derive(Clone, Copy)]
+struct MatchSide<'a> {
+    keypoints: &'a wgpu::Buffer,
+    points: &'a wgpu::Buffer,
+    descriptors: &'a wgpu::Buffer,
+}
+
+impl Set {
+    fn side(&self) -> MatchSide<'_> {
+        MatchSide { keypoints: &self.keypoints, points: &self.points, descriptors: &self.descriptors }
+    }
+}
+
+impl StoredSet {
+    fn side(&self) -> MatchSide<'_> {
+        MatchSide { keypoints: &self.keypoints, points: &self.points, descriptors: &self.descriptors }
+    }
+}
+
+/// The bind groups that match a current set against a reference set: `hamming_match` both
+/// ways into (forward, backward), and `match_select` of those into an estimate target.
+struct PairMatching {
+    forward: wgpu::BindGroup,
+    backward: wgpu::BindGroup,
+    select: wgpu::BindGroup,
+}
+
+impl PairMatching {
+    fn new(gpu: &Gpu, match_params: &wgpu::Buffer, select_params: &wgpu::Buffer, current: MatchSide<'_>, reference: MatchSide<'_>, [forward, backward]: [&wgpu::Buffer; 2], target: &EstimateTarget) -> Self {
+        let (c, r) = (current, reference);
+        Self {
+            forward: hamming_match::Bindings { params: match_params, query_keypoints: c.keypoints, query_descriptors: c.descriptors, train_keypoints: r.keypoints, train_descriptors: r.descriptors, matches: forward }.bind_group(gpu),
+            backward: hamming_match::Bindings { params: match_params, query_keypoints: r.keypoints, query_descriptors: r.descriptors, train_keypoints: c.keypoints, train_descriptors: c.descriptors, matches: backward }.bind_group(gpu),
+            select: match_select::Bindings {
+                params: select_params,
+                forward,
+                backward,
+                current_keypoints: c.keypoints,
+                current_points: c.points,
+                reference_keypoints: r.keypoints,
+                reference_points: r.points,
+                pairs: &target.pairs,
+                estimate: &target.estimate,
+            }
+            .bind_group(gpu),
+        }
+    }
+}
+
 struct Level {
     layout: LevelLayout,
     _params: Vec<wgpu::Buffer>,
@@ -155,14 +205,13 @@ pub struct FeatureExtractor {
     sets: [Set; SETS],
     forward: wgpu::Buffer,
     backward: wgpu::Buffer,
-    /// At `current * SETS + reference`: (forward, backward) matching of two different sets.
-    matching: Vec<Option<[wgpu::BindGroup; 2]>>,
+    /// At `current * SETS + reference`: the frame's matching of two different sets
+    /// ([`PairMatching`]) into `forward`, `backward` and `estimate`.
+    matching: Vec<Option<PairMatching>>,
     match_params: wgpu::Buffer,
-    /// At `current * SETS + reference`: `match_select` of two different sets into `estimate`.
-    select: Vec<Option<wgpu::BindGroup>>,
-    /// At `current * SETS + previous`: (forward, backward) matching into buffers of their own
-    /// (the reference's matches are read back), and `match_select` into `previous_estimate`.
-    matching_previous: Vec<Option<[wgpu::BindGroup; 3]>>,
+    /// At `current * SETS + previous`: the same into buffers of their own (the reference's
+    /// matches are read back) and `previous_estimate`.
+    matching_previous: Vec<Option<PairMatching>>,
     select_params: wgpu::Buffer,
     /// RANSAC's parameters for the frame's estimate and for relocalisation candidates (their
     /// seeds are written before each submission).
@@ -261,17 +310,6 @@ impl FeatureExtractor {
         let forward = gpu.storage_buffer::<[u32; 4]>("core.hamming_match.forward", slots);
         let backward = gpu.storage_buffer::<[u32; 4]>("core.hamming_match.backward", slots);
         let match_params = gpu.uniform_buffer("core.hamming_match.params", &hamming_match::HammingMatchParams { query_count: slots as u32, train_count: slots as u32 });
-        let matching = (0..SETS * SETS)
-            .map(|i| {
-                let (cur, reference) = (i / SETS, i % SETS);
-                (cur != reference).then(|| {
-            let (c, r) = (&sets[cur], &sets[reference]);
-            let fwd = hamming_match::Bindings { params: &match_params, query_keypoints: &c.keypoints, query_descriptors: &c.descriptors, train_keypoints: &r.keypoints, train_descriptors: &r.descriptors, matches: &forward }.bind_group(gpu);
-            let bwd = hamming_match::Bindings { params: &match_params, query_keypoints: &r.keypoints, query_descriptors: &r.descriptors, train_keypoints: &c.keypoints, train_descriptors: &c.descriptors, matches: &backward }.bind_group(gpu);
-            [fwd, bwd]
-                })
-            })
-            .collect();
         let select_params = gpu.uniform_buffer("core.match_select.params", &odometry.matching.select_params(slots as u32));
         let ransac_params = gpu.uniform_buffer("core.ransac.params", &odometry.ransac.params(focal_px(&k0), 0));
         let candidate_ransac_params = gpu.uniform_buffer("core.ransac.candidate_params", &odometry.ransac.params(focal_px(&k0), 0));
@@ -280,50 +318,19 @@ impl FeatureExtractor {
         let previous_estimate = scratch.target(gpu, "previous", slots, &ransac_params);
         let previous_matches = ["forward", "backward"].map(|d| gpu.storage_buffer::<[u32; 4]>(&format!("core.hamming_match.previous.{d}"), slots));
         let candidate_estimates = (0..RELOCALISATION_CANDIDATES).map(|c| scratch.target(gpu, &format!("candidate{c}"), slots, &candidate_ransac_params)).collect();
-        let select = (0..SETS * SETS)
-            .map(|i| {
-                let (cur, reference) = (i / SETS, i % SETS);
-                (cur != reference).then(|| {
-                    let (c, r) = (&sets[cur], &sets[reference]);
-                    match_select::Bindings {
-                        params: &select_params,
-                        forward: &forward,
-                        backward: &backward,
-                        current_keypoints: &c.keypoints,
-                        current_points: &c.points,
-                        reference_keypoints: &r.keypoints,
-                        reference_points: &r.points,
-                        pairs: &estimate.pairs,
-                        estimate: &estimate.estimate,
-                    }
-                    .bind_group(gpu)
+        // Bind groups of the frame's matching of every ordered pair of different sets, against
+        // the reference and against the previous tracked frame.
+        let pair_matchings = |matches: [&wgpu::Buffer; 2], target: &EstimateTarget| -> Vec<Option<PairMatching>> {
+            (0..SETS * SETS)
+                .map(|i| {
+                    let (cur, other) = (i / SETS, i % SETS);
+                    (cur != other).then(|| PairMatching::new(gpu, &match_params, &select_params, sets[cur].side(), sets[other].side(), matches, target))
                 })
-            })
-            .collect();
-        let matching_previous = (0..SETS * SETS)
-            .map(|i| {
-                let (cur, previous) = (i / SETS, i % SETS);
-                (cur != previous).then(|| {
-                    let (c, p) = (&sets[cur], &sets[previous]);
-                    let [forward, backward] = &previous_matches;
-                    let fwd = hamming_match::Bindings { params: &match_params, query_keypoints: &c.keypoints, query_descriptors: &c.descriptors, train_keypoints: &p.keypoints, train_descriptors: &p.descriptors, matches: forward }.bind_group(gpu);
-                    let bwd = hamming_match::Bindings { params: &match_params, query_keypoints: &p.keypoints, query_descriptors: &p.descriptors, train_keypoints: &c.keypoints, train_descriptors: &c.descriptors, matches: backward }.bind_group(gpu);
-                    let select = match_select::Bindings {
-                        params: &select_params,
-                        forward,
-                        backward,
-                        current_keypoints: &c.keypoints,
-                        current_points: &c.points,
-                        reference_keypoints: &p.keypoints,
-                        reference_points: &p.points,
-                        pairs: &previous_estimate.pairs,
-                        estimate: &previous_estimate.estimate,
-                    }
-                    .bind_group(gpu);
-                    [fwd, bwd, select]
-                })
-            })
-            .collect();
+                .collect()
+        };
+        let matching = pair_matchings([&forward, &backward], &estimate);
+        let [previous_forward, previous_backward] = &previous_matches;
+        let matching_previous = pair_matchings([previous_forward, previous_backward], &previous_estimate);
         // Per frame: the slots' parts, the reference's estimate, the previous frame's, the
         // timestamps.
         let readback = ReadbackRing::new(gpu, "core.features", SLOT_BYTES * slots as u64 + ESTIMATE_BYTES + (ESTIMATE_BYTES + (PAIR_BYTES + 4) * slots as u64) + StageTimer::BYTES, 1);
@@ -342,7 +349,6 @@ impl FeatureExtractor {
             backward,
             matching,
             match_params,
-            select,
             select_params,
             matching_previous,
             ransac_params,
@@ -462,8 +468,7 @@ impl FeatureExtractor {
                 self.encode_matching(gpu, &mut pass, r);
             }
             if let Some(p) = self.previous_matched() {
-                let [forward, backward, select] = self.matching_previous[self.current * SETS + p].as_ref().expect("the current set is never the previous");
-                self.dispatch_matching(gpu, &mut pass, forward, backward, select);
+                self.dispatch_matching(gpu, &mut pass, self.matching_previous[self.current * SETS + p].as_ref().expect("the current set is never the previous"));
             }
         }
         let mut pass = fe.stage("estimation");
@@ -484,19 +489,16 @@ impl FeatureExtractor {
     /// Matching of the current set against set `reference` and `match_select` into the frame's
     /// estimate target.
     fn encode_matching(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, reference: usize) {
-        let at = self.current * SETS + reference;
-        let [forward, backward] = self.matching[at].as_ref().expect("the current set is never a reference");
-        let select = self.select[at].as_ref().expect("the current set is never a reference");
-        self.dispatch_matching(gpu, pass, forward, backward, select);
+        self.dispatch_matching(gpu, pass, self.matching[self.current * SETS + reference].as_ref().expect("the current set is never a reference"));
     }
 
     /// Both matching directions (`hamming_match`, one invocation per slot) and `match_select`
-    /// (one workgroup) with these bind groups.
-    fn dispatch_matching(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, forward: &wgpu::BindGroup, backward: &wgpu::BindGroup, select: &wgpu::BindGroup) {
+    /// (one workgroup) of one pair of sets.
+    fn dispatch_matching(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>, pair: &PairMatching) {
         let n = self.slots as u32;
-        gpu.kernels.hamming_match.dispatch_in(pass, forward, [n, 1, 1]);
-        gpu.kernels.hamming_match.dispatch_in(pass, backward, [n, 1, 1]);
-        gpu.kernels.match_select.dispatch_in(pass, select, [gpu.kernels.match_select.kernel.workgroup_size[0], 1, 1]);
+        gpu.kernels.hamming_match.dispatch_in(pass, &pair.forward, [n, 1, 1]);
+        gpu.kernels.hamming_match.dispatch_in(pass, &pair.backward, [n, 1, 1]);
+        gpu.kernels.match_select.dispatch_in(pass, &pair.select, [gpu.kernels.match_select.kernel.workgroup_size[0], 1, 1]);
     }
 
     /// RANSAC and the refinement of `target`'s pairs (one workgroup per hypothesis, then one).
@@ -572,21 +574,8 @@ impl FeatureExtractor {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("matching"), timestamp_writes: None });
             for (i, &k) in slots.iter().enumerate() {
                 let (kf, [forward, backward], target) = (&self.keyframes[k], &self.candidate_matches[i], &self.candidate_estimates[i]);
-                let fwd = hamming_match::Bindings { params: &self.match_params, query_keypoints: &c.keypoints, query_descriptors: &c.descriptors, train_keypoints: &kf.keypoints, train_descriptors: &kf.descriptors, matches: forward }.bind_group(gpu);
-                let bwd = hamming_match::Bindings { params: &self.match_params, query_keypoints: &kf.keypoints, query_descriptors: &kf.descriptors, train_keypoints: &c.keypoints, train_descriptors: &c.descriptors, matches: backward }.bind_group(gpu);
-                let select = match_select::Bindings {
-                    params: &self.select_params,
-                    forward,
-                    backward,
-                    current_keypoints: &c.keypoints,
-                    current_points: &c.points,
-                    reference_keypoints: &kf.keypoints,
-                    reference_points: &kf.points,
-                    pairs: &target.pairs,
-                    estimate: &target.estimate,
-                }
-                .bind_group(gpu);
-                self.dispatch_matching(gpu, &mut pass, &fwd, &bwd, &select);
+                let pair = PairMatching::new(gpu, &self.match_params, &self.select_params, c.side(), kf.side(), [forward, backward], target);
+                self.dispatch_matching(gpu, &mut pass, &pair);
                 self.encode_estimate(gpu, &mut pass, target);
             }
         }
