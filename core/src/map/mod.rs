@@ -470,7 +470,6 @@ impl PoolImage {
     }
 }
 
-
 impl SparseMap {
     /// Replaces the map's contents with `blocks` (as [`Self::download_blocks`] gives them; any
     /// order): block `i` goes to pool block `i`, its key into the hash table by the probing the
@@ -485,17 +484,23 @@ impl SparseMap {
     pub fn upload_blocks_swapped(&self, gpu: &Gpu, blocks: &[MapBlock], swapped: &[[u32; 3]]) -> Result<()> {
         self.reset(gpu);
         let image = PoolImage::with_swapped(self.desc, self.config.color, blocks, swapped)?;
-        gpu.write_buffer(&self.block_table, &image.table);
-        gpu.write_buffer(&self.block_coords, &image.keys);
         gpu.write_buffer(&self.voxels, &image.voxels);
         if self.config.color {
             gpu.write_buffer(&self.colors, &image.colors);
         }
+        self.write_index(gpu, &image, blocks.len());
+        Ok(())
+    }
+
+    /// Writes an image's hash table, keys and surface words, and `blocks_used` as the pool's
+    /// used count (its other counters zero).
+    fn write_index(&self, gpu: &Gpu, image: &PoolImage, blocks_used: usize) {
+        gpu.write_buffer(&self.block_table, &image.table);
+        gpu.write_buffer(&self.block_coords, &image.keys);
         gpu.write_buffer(&self.surface_bricks, &image.surface);
         let mut counters = [0u32; MAP_COUNTERS];
-        counters[MAP_COUNTER_BLOCKS_USED] = blocks.len() as u32;
+        counters[MAP_COUNTER_BLOCKS_USED] = blocks_used as u32;
         gpu.write_buffer(&self.counters, &counters);
-        Ok(())
     }
 
     /// Makes the pool hold `blocks` (block `i` in pool block `i`) when it held them already
@@ -510,9 +515,7 @@ impl SparseMap {
         if let Some(&i) = replaced.iter().find(|&&i| i >= blocks.len()) {
             return Err(Error::InvalidConfig(format!("replacing pool block {i} of {}", blocks.len())));
         }
-        gpu.write_buffer(&self.block_table, &image.table);
-        gpu.write_buffer(&self.block_coords, &image.keys);
-        gpu.write_buffer(&self.surface_bricks, &image.surface);
+        self.write_index(gpu, &image, blocks.len());
         let block_bytes = u64::from(BLOCK_VOXELS) * 4;
         for &i in replaced {
             gpu.queue.write_buffer(&self.voxels, i as u64 * block_bytes, bytemuck::cast_slice(&blocks[i].voxels));
@@ -520,9 +523,6 @@ impl SparseMap {
                 gpu.queue.write_buffer(&self.colors, i as u64 * block_bytes, bytemuck::cast_slice(&blocks[i].colors));
             }
         }
-        let mut counters = [0u32; MAP_COUNTERS];
-        counters[MAP_COUNTER_BLOCKS_USED] = blocks.len() as u32;
-        gpu.write_buffer(&self.counters, &counters);
         Ok(())
     }
 

@@ -220,17 +220,19 @@ impl MapWindow {
         Ok(Some(Plan { order, left_out, complete_within_m }))
     }
 
-    /// Puts the blocks of `window` (indices) first, in that order, and the rest after them.
-    fn reorder(&mut self, window: &[usize]) {
-        let mut in_window = vec![false; self.blocks.len()];
-        for &i in window {
-            in_window[i] = true;
+    /// Puts the blocks `resident` (indices, each once) first in that order, the others after
+    /// them in their present order, and makes the first ones the resident prefix.
+    fn make_resident(&mut self, resident: Vec<usize>) {
+        let mut first = vec![false; self.blocks.len()];
+        for &i in &resident {
+            first[i] = true;
         }
-        let order: Vec<usize> = window.iter().copied().chain((0..self.blocks.len()).filter(|&i| !in_window[i])).collect();
+        self.resident = resident.len();
+        let mut order = resident;
+        order.extend((0..self.blocks.len()).filter(|&i| !first[i]));
         let mut blocks: Vec<Option<MapBlock>> = std::mem::take(&mut self.blocks).into_iter().map(Some).collect();
         self.blocks = order.iter().map(|&i| blocks[i].take().expect("each index once")).collect();
         self.centres = order.iter().map(|&i| self.centres[i]).collect();
-        self.resident = window.len();
     }
 
     /// Makes the pool of `map` hold every block the view at `world_from_camera` bounded by
@@ -269,7 +271,7 @@ impl MapWindow {
             self.blocks_written += replaced.len() as u64;
             map.replace_blocks(gpu, &self.blocks[..self.resident], &replaced)
         } else {
-            self.reorder(window);
+            self.make_resident(window.to_vec());
             self.blocks_written += self.resident as u64;
             map.upload_blocks(gpu, &self.blocks[..self.resident])
         };
@@ -284,7 +286,7 @@ impl MapWindow {
         Ok(())
     }
 
-    /// Like [`Self::reorder`] for a full pool that stays full: a block of `window` already
+    /// Like [`Self::make_resident`] for a full pool that stays full: a block of `window` already
     /// resident keeps its place, and the blocks entering take the places of those leaving.
     /// Returns those places (the pool blocks to write).
     fn reorder_keeping(&mut self, window: &[usize]) -> Vec<usize> {
@@ -293,24 +295,17 @@ impl MapWindow {
             in_window[i] = true;
         }
         let mut entering = window.iter().copied().filter(|&i| i >= self.resident);
-        let mut order: Vec<usize> = Vec::with_capacity(self.blocks.len());
+        let mut resident = Vec::with_capacity(self.resident);
         let mut replaced = Vec::new();
         for (slot, &kept) in in_window.iter().enumerate().take(self.resident) {
             if kept {
-                order.push(slot);
+                resident.push(slot);
             } else {
-                order.push(entering.next().expect("as many blocks enter as leave"));
+                resident.push(entering.next().expect("as many blocks enter as leave"));
                 replaced.push(slot);
             }
         }
-        let mut placed = vec![false; self.blocks.len()];
-        for &i in &order {
-            placed[i] = true;
-        }
-        order.extend((0..self.blocks.len()).filter(|&i| !placed[i]));
-        let mut blocks: Vec<Option<MapBlock>> = std::mem::take(&mut self.blocks).into_iter().map(Some).collect();
-        self.blocks = order.iter().map(|&i| blocks[i].take().expect("each index once")).collect();
-        self.centres = order.iter().map(|&i| self.centres[i]).collect();
+        self.make_resident(resident);
         replaced
     }
 
