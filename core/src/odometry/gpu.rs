@@ -480,8 +480,8 @@ impl FeatureExtractor {
         }
     }
 
-    /// The seed of the next frame's (or rematch's) RANSAC sample stream: each frame draws its
-    /// own samples, reproducibly.
+    /// The seed of the next frame's RANSAC sample stream (its estimates against the reference
+    /// and the previous frame): each frame draws its own samples, reproducibly.
     pub fn set_seed(&self, gpu: &Gpu, seed: u32) {
         gpu.write_buffer(&self.ransac_params, &[self.config.ransac.params(self.f_px, seed)]);
     }
