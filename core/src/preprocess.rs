@@ -289,7 +289,7 @@ impl DepthPreprocessor {
         if let (Some(b), Some(unfiltered)) = (config.bilateral, &depth_unfiltered_m) {
             let params = gpu.uniform_buffer("core.bilateral_filter.params", &b.params(&k0));
             let bg = bilateral_filter::Bindings { params: &params, depth_in_m: unfiltered, depth_out_m: &levels[0].depth_m }.bind_group(gpu);
-            push(GEOMETRY, "bilateral_filter".into(), |k| &k.bilateral_filter, params, bg, [w0, h0, 1]);
+            push(GEOMETRY, "bilateral_filter".into(), |k| &k.bilateral_filter, params, bg, bilateral_filter::invocations(w0, h0));
         }
         for l in 1..levels.len() {
             let (fine, coarse) = (&levels[l - 1], &levels[l]);
@@ -308,13 +308,13 @@ impl DepthPreprocessor {
             if let (Some(p), Some([grad_x, grad_y])) = (config.vertex_gradients_params(&k), &gradients) {
                 let params = gpu.uniform_buffer("core.vertex_gradients.params", &p);
                 let bg = vertex_gradients::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x, grad_y }.bind_group(gpu);
-                push(GEOMETRY, format!("vertex_gradients[{l}]"), |k| &k.vertex_gradients, params, bg, inv);
+                push(GEOMETRY, format!("vertex_gradients[{l}]"), |k| &k.vertex_gradients, params, bg, vertex_gradients::invocations(k.width_px, k.height_px));
             }
             let params = gpu.uniform_buffer("core.vertex_normals.params", &config.vertex_normals_params(&k));
             // Without smoothing the gradient bindings are unread: the vertices stand in.
             let [grad_x, grad_y] = gradients.as_ref().map_or([&level.vertex_in_camera; 2], |[x, y]| [x, y]);
             let bg = vertex_normals::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x, grad_y, normal_in_camera: &level.normal_in_camera }.bind_group(gpu);
-            push(GEOMETRY, format!("vertex_normals[{l}]"), |k| &k.vertex_normals, params, bg, inv);
+            push(GEOMETRY, format!("vertex_normals[{l}]"), |k| &k.vertex_normals, params, bg, vertex_normals::invocations(k.width_px, k.height_px));
         }
         let params = gpu.uniform_buffer("core.color_to_float.params", &ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() });
         let bg = color_to_float::Bindings { params: &params, rgb8: &rgb8, color: &color, intensity: &intensity }.bind_group(gpu);

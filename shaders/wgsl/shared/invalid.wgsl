@@ -21,3 +21,8 @@ fn invalid_vec4() -> vec4<f32> {
 fn is_valid_f32(x: f32) -> bool {
     return (bitcast<u32>(x) & EXPONENT_MASK) != EXPONENT_MASK;
 }
+
+// `is_valid_f32` of each component.
+fn is_valid_vec4(v: vec4<f32>) -> vec4<bool> {
+    return (bitcast<vec4<u32>>(v) & vec4<u32>(EXPONENT_MASK)) != vec4<u32>(EXPONENT_MASK);
+}

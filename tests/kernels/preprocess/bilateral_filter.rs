@@ -3,7 +3,7 @@
 //! depths near 1-5 m then differs by well under a micrometre.
 
 use webfusion_core::cpu;
-use webfusion_core::kernels::bilateral_filter::BilateralFilterParams;
+use webfusion_core::kernels::bilateral_filter::{self, BilateralFilterParams};
 use webfusion_tests::{Tolerance, assert_negative_control, cast, compare_f32, finish, gpu, run_kernel, sample_frame};
 
 use crate::synthetic::{K_SMALL, UNITS_PER_M, step_scene};
@@ -14,7 +14,7 @@ const TOL: Tolerance = Tolerance { absolute: 2e-6, relative: 1e-6 };
 fn run(params: &BilateralFilterParams, depth_m: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let gpu = gpu();
     let n = depth_m.len();
-    let out = run_kernel(&gpu, &gpu.kernels.bilateral_filter, params, &[bytemuck::cast_slice(depth_m)], &[4 * n], [params.width_px, params.height_px, 1]);
+    let out = run_kernel(&gpu, &gpu.kernels.bilateral_filter, params, &[bytemuck::cast_slice(depth_m)], &[4 * n], bilateral_filter::invocations(params.width_px, params.height_px));
     let mut cpu_out = vec![0.0; n];
     cpu::bilateral_filter(params, depth_m, &mut cpu_out);
     finish(&gpu);
@@ -64,5 +64,26 @@ fn real_frame_matches_cpu() {
     let (g, c) = run(&params(k.width_px, k.height_px), &depth_m);
     let cmp = compare_f32("depth_out_m", &g, &c, TOL).unwrap();
     eprintln!("bilateral real frame: {cmp:?}");
+    assert_negative_control("depth_out_m", &g, &c, TOL);
+}
+
+#[test]
+fn width_not_a_multiple_of_the_invocation_matches_cpu() {
+    // Each invocation filters PIXELS_PER_INVOCATION pixels: a width of 4k + 1 leaves the last
+    // invocation of each row one pixel, and the window still ends at the image's right edge.
+    let (calib, frame) = sample_frame(0);
+    let k = calib.intrinsics;
+    let (w, h) = (4 * 19 + 1, 41);
+    assert_ne!(w % bilateral_filter::PIXELS_PER_INVOCATION, 0);
+    let depth_m: Vec<f32> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x + 300, y + 200)))
+        .map(|(x, y)| frame.depth.units[(y * k.width_px + x) as usize])
+        .enumerate()
+        // Holes at every 17th pixel, so some windows skip neighbours and some centres are invalid.
+        .map(|(i, u)| if u == 0 || i % 17 == 0 { f32::NAN } else { u as f32 * calib.metres_per_depth_unit() })
+        .collect();
+    assert!(depth_m.iter().any(|d| d.is_nan()) && depth_m.iter().any(|d| !d.is_nan()), "the crop must hold holes and depth");
+    let (g, c) = run(&params(w, h), &depth_m);
+    compare_f32("depth_out_m", &g, &c, TOL).unwrap();
     assert_negative_control("depth_out_m", &g, &c, TOL);
 }
