@@ -151,7 +151,7 @@ pub(crate) fn kinect_sensor(units_per_metre: f32, radial: bool, noise_seed: Opti
     let far = range_m.1.unwrap_or(model.max_depth_m);
     anyhow::ensure!(near.is_finite() && far.is_finite() && near >= 0.0 && far > near, "--min-depth {near} / --max-depth {far}: an empty range");
     let model = KinectModel { min_depth_m: near.max(0.01), ..model };
-    Ok(SensorOptions { units_per_metre, radial, noise: noise_seed.map(|seed| (model, seed)), depth_range_m: (near, far), color, hits: false })
+    Ok(SensorOptions { units_per_metre, radial, noise: noise_seed.map(|seed| (model, seed)), depth_range_m: (near, far), color, hits: false, timed: false })
 }
 
 /// A TUM-layout directory being written: depth (and colour) image folders with their lists, the
@@ -219,7 +219,7 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 
 pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<()> {
     let poses = poses(args)?;
-    let sensor_options = SensorOptions { hits: args.occupancy.is_some(), ..sensor_options(args)? };
+    let sensor_options = SensorOptions { hits: args.occupancy.is_some(), timed: args.bench, ..sensor_options(args)? };
     anyhow::ensure!(args.bench || args.out.is_some(), "--out DIR is needed (or --bench)");
     let mut file = if args.skip_corrupt { read_map_file_recovering(&args.map) } else { read_map_file(&args.map) }.with_context(|| format!("reading the map {}", args.map.display()))?;
     if let Some(damage) = &file.damage {
@@ -242,19 +242,33 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
         pollster::block_on(sensor.render(&gpu, viewed.map(), &poses[0].world_from_camera, 0))?;
         let mut ms = Vec::with_capacity(poses.len());
         let mut window_ms = Vec::new();
+        let mut stage_ms: Vec<(&'static str, Vec<f64>)> = Vec::new();
         let started = std::time::Instant::now();
         for (i, p) in poses.iter().enumerate() {
             let t = std::time::Instant::now();
             if viewed.prepare(&gpu, &p.world_from_camera, &cone)? {
                 window_ms.push(t.elapsed().as_secs_f64() * 1e3);
             }
-            pollster::block_on(sensor.render(&gpu, viewed.map(), &p.world_from_camera, i as u32))?;
+            let frame = pollster::block_on(sensor.render(&gpu, viewed.map(), &p.world_from_camera, i as u32))?;
             ms.push(t.elapsed().as_secs_f64() * 1e3);
+            for stage in frame.stages {
+                match stage_ms.iter_mut().find(|(name, _)| *name == stage.name) {
+                    Some((_, v)) => v.push(stage.gpu_ms),
+                    None => stage_ms.push((stage.name, vec![stage.gpu_ms])),
+                }
+            }
         }
         let total_s = started.elapsed().as_secs_f64();
         let mut sorted = ms.clone();
         sorted.sort_by(f64::total_cmp);
         println!("simulated {} frames in {total_s:.2} s: {:.1} frames/s; per frame median {:.1} ms, p95 {:.1} ms (render + readback, noise {:?})", poses.len(), poses.len() as f64 / total_s, percentile(&sorted, 0.5), percentile(&sorted, 0.95), args.noise);
+        if stage_ms.is_empty() {
+            println!("(no GPU stage times: the device has no timestamp queries)");
+        }
+        for (name, mut v) in stage_ms {
+            v.sort_by(f64::total_cmp);
+            println!("  {name:<12} GPU median {:6.1} ms, p95 {:6.1} ms", percentile(&v, 0.5), percentile(&v, 0.95));
+        }
         if viewed.window().is_some() {
             window_ms.sort_by(f64::total_cmp);
             println!("windows: {} uploaded for {} frames (median {:.0} ms each, in the frame times above)", window_ms.len(), poses.len(), if window_ms.is_empty() { 0.0 } else { percentile(&window_ms, 0.5) });

@@ -5,8 +5,8 @@
 //! small ring and read back a frame late, so the GPU renders the next pose while the host writes
 //! the last one.
 
-use crate::engine::ReadbackRing;
-use crate::fusion::predictor::RaycastTarget;
+use crate::engine::{FrameEncoder, ReadbackRing, StageTime, StageTimer};
+use crate::fusion::predictor::{RaycastPart, RaycastTarget};
 use crate::kernels::GpuIntrinsics;
 use crate::kernels::depth_sensor::{self, DepthSensorParams};
 use crate::kernels::projector_shadow::{self, ProjectorShadowParams};
@@ -94,12 +94,15 @@ pub struct SensorOptions {
     /// Also read back the exact hit of each pixel's ray (the raycast's depth along z, before
     /// any noise): what marking rays through never-observed space needs.
     pub hits: bool,
+    /// Time each stage of a frame on the GPU ([`SimulatedFrame::stages`]), where the device
+    /// has timestamp queries: what `simulate --bench` reports.
+    pub timed: bool,
 }
 
 impl Default for SensorOptions {
     fn default() -> Self {
         let m = KinectModel::default();
-        Self { units_per_metre: crate::camera::TUM_DEPTH_UNITS_PER_METRE, radial: false, noise: None, depth_range_m: (m.min_depth_m, m.max_depth_m), color: false, hits: false }
+        Self { units_per_metre: crate::camera::TUM_DEPTH_UNITS_PER_METRE, radial: false, noise: None, depth_range_m: (m.min_depth_m, m.max_depth_m), color: false, hits: false, timed: false }
     }
 }
 
@@ -131,6 +134,9 @@ pub struct SimulatedFrame {
     /// The exact hit of each pixel's ray, depth along z in metres (NaN: none within the range),
     /// when asked for ([`SensorOptions::hits`]).
     pub hit_m: Option<Vec<f32>>,
+    /// GPU time of each stage (range tiles, rays, normals with noise, sensor) when the sensor
+    /// is timed ([`SensorOptions::timed`]) and the device has timestamps; empty otherwise.
+    pub stages: Vec<StageTime>,
 }
 
 /// Frames rendered and not yet read back, at most.
@@ -148,6 +154,9 @@ pub struct VirtualSensor {
     shadow: Option<(wgpu::Buffer, wgpu::Buffer, wgpu::BindGroup)>,
     options: SensorOptions,
     readback: ReadbackRing<u64>,
+    /// With [`SensorOptions::timed`] on a device with timestamps: the frame's stage timer, and
+    /// the names of the stages it times (in the order their timestamps are read back).
+    timer: Option<(StageTimer, Vec<&'static str>)>,
 }
 
 impl VirtualSensor {
@@ -184,12 +193,14 @@ impl VirtualSensor {
             depth_raw: &depth_raw,
         }
         .bind_group(gpu);
-        let bytes = Self::readback_bytes(n, options.color, options.hits);
+        let timer = options.timed.then(|| StageTimer::new(gpu, "core.sensor")).flatten().map(|t| (t, Vec::new()));
+        let bytes = Self::readback_bytes(n, options.color, options.hits) + if timer.is_some() { StageTimer::BYTES } else { 0 };
         let readback = ReadbackRing::new(gpu, "core.sensor", bytes, IN_FLIGHT);
-        Ok(Self { target, params, params_buffer, depth_raw, bind_group, shadow, options, readback })
+        Ok(Self { target, params, params_buffer, depth_raw, bind_group, shadow, options, readback, timer })
     }
 
-    /// The readback layout: depth words, then colour (RGBA8 per pixel), then hits (f32).
+    /// The readback layout: depth words, then colour (RGBA8 per pixel), then hits (f32), then
+    /// (timed) the stages' timestamps.
     fn readback_bytes(pixels: usize, color: bool, hits: bool) -> u64 {
         4 * pixels.div_ceil(2) as u64 + if color { 4 * pixels as u64 } else { 0 } + if hits { 4 * pixels as u64 } else { 0 }
     }
@@ -220,15 +231,39 @@ impl VirtualSensor {
     pub fn encode(&mut self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, store: &dyn TsdfStore, world_from_camera: &Se3, frame_index: u32) -> Result<()> {
         // Only the noise model reads the normals (the incidence angle).
         self.target.render(gpu, encoder, store, world_from_camera, self.options.depth_range_m, self.options.noise.is_some())?;
+        self.set_frame(gpu, frame_index);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.depth_sensor"), timestamp_writes: None });
+        self.dispatch_sensor(gpu, &mut pass);
+        Ok(())
+    }
+
+    /// The same render as [`Self::encode`], each part in a stage of its own: range tiles,
+    /// rays, (with noise) normals, sensor.
+    fn encode_stages(&mut self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, store: &dyn TsdfStore, world_from_camera: &Se3, frame_index: u32) -> Result<()> {
+        self.target.set_params(gpu, store, self.options.depth_range_m);
+        self.target.set_pose(gpu, world_from_camera)?;
+        self.target.encode_part(gpu, frame, "range tiles", RaycastPart::RangeTiles);
+        self.target.encode_part(gpu, frame, "rays", RaycastPart::Rays);
+        if self.options.noise.is_some() {
+            self.target.encode_part(gpu, frame, "normals", RaycastPart::Normals);
+        }
+        self.set_frame(gpu, frame_index);
+        self.dispatch_sensor(gpu, &mut frame.stage("sensor"));
+        Ok(())
+    }
+
+    fn set_frame(&mut self, gpu: &Gpu, frame_index: u32) {
         self.params.frame_index = frame_index;
         gpu.write_buffer(&self.params_buffer, std::slice::from_ref(&self.params));
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("core.depth_sensor"), timestamp_writes: None });
+    }
+
+    /// Records `projector_shadow` (with noise) and `depth_sensor` into an open pass.
+    fn dispatch_sensor(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
         if let Some((_, _, shadow)) = &self.shadow {
-            gpu.kernels.projector_shadow.dispatch_in(&mut pass, shadow, [self.target.intrinsics.height_px, 1, 1]);
+            gpu.kernels.projector_shadow.dispatch_in(pass, shadow, [self.target.intrinsics.height_px, 1, 1]);
         }
         let words = self.target.intrinsics.pixel_count().div_ceil(2) as u32;
-        gpu.kernels.depth_sensor.dispatch_in(&mut pass, &self.bind_group, [words, 1, 1]);
-        Ok(())
+        gpu.kernels.depth_sensor.dispatch_in(pass, &self.bind_group, [words, 1, 1]);
     }
 
     /// Records the render at `world_from_camera` and copies its raw depth into `pre`'s (the
@@ -262,19 +297,25 @@ impl VirtualSensor {
         if !self.can_submit() {
             return Err(Error::InvalidConfig("every simulated frame slot is in flight: collect one first".into()));
         }
-        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("core.sensor.frame") });
-        self.encode(gpu, &mut encoder, store, world_from_camera, frame_index)?;
+        let timer = self.timer.take();
+        let mut frame = FrameEncoder::new(gpu, "core.sensor.frame", timer.as_ref().map(|(t, _)| t));
+        let recorded = self.encode_stages(gpu, &mut frame, store, world_from_camera, frame_index);
         let (slot, buffer) = self.readback.free_slot().expect("checked");
+        let encoder = frame.encoder();
         let depth_bytes = self.depth_raw.size();
         encoder.copy_buffer_to_buffer(&self.depth_raw, 0, buffer, 0, depth_bytes);
         let color_bytes = if self.options.color { self.target.color_rgba8.size() } else { 0 };
         if self.options.color {
             encoder.copy_buffer_to_buffer(&self.target.color_rgba8, 0, buffer, depth_bytes, color_bytes);
         }
+        let hits_bytes = if self.options.hits { self.target.depth_m.size() } else { 0 };
         if self.options.hits {
-            encoder.copy_buffer_to_buffer(&self.target.depth_m, 0, buffer, depth_bytes + color_bytes, self.target.depth_m.size());
+            encoder.copy_buffer_to_buffer(&self.target.depth_m, 0, buffer, depth_bytes + color_bytes, hits_bytes);
         }
-        let submission = gpu.submit([encoder.finish()]);
+        let (commands, stages) = frame.finish(Some((buffer, depth_bytes + color_bytes + hits_bytes)));
+        self.timer = timer.map(|(t, _)| (t, stages));
+        recorded?;
+        let submission = gpu.submit([commands]);
         self.readback.start(gpu, slot, submission, tag);
         Ok(())
     }
@@ -314,6 +355,11 @@ impl VirtualSensor {
         });
         let hits_at = depth_bytes + if self.options.color { 4 * n } else { 0 };
         let hit_m = self.options.hits.then(|| bytes[hits_at..hits_at + 4 * n].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect());
-        SimulatedFrame { tag, depth_units, color_rgb8, hit_m }
+        let stages = self.timer.as_ref().map_or_else(Vec::new, |(timer, names)| {
+            let at = hits_at + if self.options.hits { 4 * n } else { 0 };
+            let ticks: Vec<u64> = bytes[at..at + 16 * names.len()].chunks_exact(8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
+            timer.stage_times(names, &ticks)
+        });
+        SimulatedFrame { tag, depth_units, color_rgb8, hit_m, stages }
     }
 }
