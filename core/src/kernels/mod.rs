@@ -81,6 +81,13 @@ impl DeferredPipeline {
         self.cell.get().is_some()
     }
 
+    /// The kernel compiled with its `override` constants set to `constants`
+    /// ([`KernelPipeline::specialised`]), bound by the same bind groups; the default pipeline
+    /// is not compiled for it.
+    pub fn specialised(&self, constants: &[(&str, f64)]) -> KernelPipeline {
+        KernelPipeline::specialised(&self.device, self.spec.0, self.layout.clone(), constants)
+    }
+
     /// A bind group of `entries`, without compiling the pipeline (a stage binds its deferred
     /// kernels when it is built, and may never dispatch them: swapping, meshing).
     pub fn bind_group(&self, device: &wgpu::Device, entries: &[wgpu::BindGroupEntry]) -> wgpu::BindGroup {
@@ -125,6 +132,15 @@ impl KernelPipeline {
 
     /// Compiles `kernel` for `device` with bind group 0 laid out by `bind_group_layout`.
     pub fn with_layout(device: &wgpu::Device, kernel: &'static webfusion_shaders::Kernel, bind_group_layout: wgpu::BindGroupLayout) -> Self {
+        Self::specialised(device, kernel, bind_group_layout, &[])
+    }
+
+    /// Compiles `kernel` with its WGSL `override` constants set to `constants` (name, value;
+    /// booleans as 0 or 1; those not given keep their defaults) and bind group 0 laid out by
+    /// `bind_group_layout`, so bind groups of the kernel's layout bind it too. A use of a
+    /// kernel that never takes one of its branches compiles a pipeline of its own without it:
+    /// CPU adapters (lavapipe, SwiftShader) run the code of every branch, taken or not.
+    pub fn specialised(device: &wgpu::Device, kernel: &'static webfusion_shaders::Kernel, bind_group_layout: wgpu::BindGroupLayout, constants: &[(&str, f64)]) -> Self {
         let label = format!("core.{}", kernel.name);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(&label), source: wgpu::ShaderSource::Wgsl(kernel.source.into()) });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -137,7 +153,7 @@ impl KernelPipeline {
             layout: Some(&layout),
             module: &module,
             entry_point: Some(kernel.entry_point),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
             cache: None,
         });
         Self { kernel, bind_group_layout, pipeline }

@@ -7,7 +7,7 @@
 
 use crate::engine::{FrameEncoder, ReadbackRing, StageTime, StageTimer};
 use crate::fusion::predictor::{RaycastPart, RaycastTarget};
-use crate::kernels::GpuIntrinsics;
+use crate::kernels::{GpuIntrinsics, KernelPipeline};
 use crate::kernels::depth_sensor::{self, DepthSensorParams};
 use crate::kernels::projector_shadow::{self, ProjectorShadowParams};
 use crate::preprocess::DepthPreprocessor;
@@ -157,6 +157,8 @@ pub struct VirtualSensor {
     /// With [`SensorOptions::timed`] on a device with timestamps: the frame's stage timer, and
     /// the names of the stages it times (in the order their timestamps are read back).
     timer: Option<(StageTimer, Vec<&'static str>)>,
+    /// `depth_sensor` without its noise model, for a sensor of exact depth.
+    exact: Option<KernelPipeline>,
 }
 
 impl VirtualSensor {
@@ -196,7 +198,8 @@ impl VirtualSensor {
         let timer = options.timed.then(|| StageTimer::new(gpu, "core.sensor")).flatten().map(|t| (t, Vec::new()));
         let bytes = Self::readback_bytes(n, options.color, options.hits) + if timer.is_some() { StageTimer::BYTES } else { 0 };
         let readback = ReadbackRing::new(gpu, "core.sensor", bytes, IN_FLIGHT);
-        Ok(Self { target, params, params_buffer, depth_raw, bind_group, shadow, options, readback, timer })
+        let exact = options.noise.is_none().then(|| gpu.kernels.depth_sensor.specialised(&[("NOISE_MODEL", 0.0)]));
+        Ok(Self { target, params, params_buffer, depth_raw, bind_group, shadow, options, readback, timer, exact })
     }
 
     /// The readback layout: depth words, then colour (RGBA8 per pixel), then hits (f32), then
@@ -263,7 +266,8 @@ impl VirtualSensor {
             gpu.kernels.projector_shadow.dispatch_in(pass, shadow, [self.target.intrinsics.height_px, 1, 1]);
         }
         let words = self.target.intrinsics.pixel_count().div_ceil(2) as u32;
-        gpu.kernels.depth_sensor.dispatch_in(pass, &self.bind_group, [words, 1, 1]);
+        let kernel: &KernelPipeline = self.exact.as_ref().unwrap_or(&gpu.kernels.depth_sensor);
+        kernel.dispatch_in(pass, &self.bind_group, [words, 1, 1]);
     }
 
     /// Records the render at `world_from_camera` and copies its raw depth into `pre`'s (the

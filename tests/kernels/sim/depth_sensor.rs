@@ -112,12 +112,18 @@ fn params(k: GpuIntrinsics, noise: bool, seed: u32) -> DepthSensorParams {
 }
 
 fn run(p: &DepthSensorParams, s: &Scene) -> (Vec<u16>, Vec<u16>) {
+    run_with(p, s, None)
+}
+
+/// [`run`] through the pipeline compiled with `constants` (the kernel's default when `None`).
+fn run_with(p: &DepthSensorParams, s: &Scene, constants: Option<&[(&str, f64)]>) -> (Vec<u16>, Vec<u16>) {
     let gpu = gpu();
     let n = (p.intrinsics.width_px * p.intrinsics.height_px) as usize;
     let words = n.div_ceil(2);
+    let specialised = constants.map(|c| gpu.kernels.depth_sensor.specialised(c));
     let out = run_kernel_slots(
         &gpu,
-        &gpu.kernels.depth_sensor,
+        specialised.as_ref().unwrap_or(&gpu.kernels.depth_sensor),
         p,
         &[Slot::In(bytemuck::bytes_of(&s.pose)), Slot::In(bytemuck::cast_slice(&s.depth_m)), Slot::In(bytemuck::cast_slice(&s.vertex)), Slot::In(bytemuck::cast_slice(&s.normal)), Slot::In(bytemuck::cast_slice(&s.shadow)), Slot::Out(4 * words)],
         [words as u32, 1, 1],
@@ -193,6 +199,27 @@ fn exact_depth_is_the_model_depth_planar_or_radial() {
     let (g, _) = run(&p, &s);
     assert_eq!(g[(BOX_ROWS.start * W + BOX_COLUMNS.start) as usize], 5000, "the box at 1 m");
     assert_eq!(g[(200 * W + 300) as usize], 0, "the wall beyond max depth gives no return");
+}
+
+#[test]
+fn the_exact_sensors_pipeline_is_the_kernel_without_its_noise_model() {
+    // A sensor of exact depth compiles `depth_sensor` with NOISE_MODEL off: the same exact
+    // depth as the twin, planar and radial.
+    let s = wall_and_box();
+    let exact: &[(&str, f64)] = &[("NOISE_MODEL", 0.0)];
+    for radial in [0, 1] {
+        let p = DepthSensorParams { radial, ..params(s.k, false, 0) };
+        let (g, c) = run_with(&p, &s, Some(exact));
+        compare_raw("exact pipeline", &g, &c, u16::from(radial == 1), MIN_EXACT).unwrap();
+        assert_negative_control("exact pipeline", &g, &c, u16::from(radial == 1), MIN_EXACT);
+    }
+    // The noise model is compiled out, not merely off: asked for noise, this pipeline still
+    // renders exact depth, which the twin's noisy image does not match.
+    let noisy = params(s.k, true, 7);
+    let (g, c) = run_with(&noisy, &s, Some(exact));
+    let (exact_g, _) = run(&params(s.k, false, 0), &s);
+    assert_eq!(g, exact_g, "the exact pipeline ignores the noise flag");
+    assert!(compare_raw("noise compiled out", &g, &c, 0, 1.0).is_err(), "the exact pipeline must differ from the noisy twin");
 }
 
 #[test]
