@@ -456,8 +456,8 @@ impl FeatureExtractor {
         {
             let mut pass = fe.stage("description");
             for l in &self.levels {
-                for smooth in &l.smooth {
-                    gpu.kernels.feature_smooth.dispatch_in(&mut pass, smooth, [l.layout.width_px, l.layout.height_px, 1]);
+                for (axis, smooth) in (0..).zip(&l.smooth) {
+                    gpu.kernels.feature_smooth.dispatch_in(&mut pass, smooth, feature_smooth::invocations(l.layout.width_px, l.layout.height_px, axis));
                 }
                 gpu.kernels.orb_describe.dispatch_in(&mut pass, &l.describe[s], [l.layout.slot_count(), 1, 1]);
             }

@@ -4,14 +4,14 @@
 //! and a real frame.
 
 use webfusion_core::cpu;
-use webfusion_core::kernels::feature_smooth::FeatureSmoothParams;
+use webfusion_core::kernels::feature_smooth::{self, FeatureSmoothParams};
 use webfusion_tests::{Slot, Tolerance, assert_negative_control, cast, compare_f32, finish, gpu, run_kernel_slots, sample_frame};
 
 const TOL: Tolerance = Tolerance { absolute: 1e-7, relative: 1e-6 };
 
 fn run(p: &FeatureSmoothParams, intensity: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let gpu = gpu();
-    let out = run_kernel_slots(&gpu, &gpu.kernels.feature_smooth, p, &[Slot::In(bytemuck::cast_slice(intensity)), Slot::Out(4 * intensity.len())], [p.width_px, p.height_px, 1]);
+    let out = run_kernel_slots(&gpu, &gpu.kernels.feature_smooth, p, &[Slot::In(bytemuck::cast_slice(intensity)), Slot::Out(4 * intensity.len())], feature_smooth::invocations(p.width_px, p.height_px, p.axis));
     finish(&gpu);
     let mut c = vec![0.0; intensity.len()];
     cpu::feature_smooth(p, intensity, &mut c);
@@ -54,6 +54,19 @@ fn an_impulse_spreads_into_the_binomial_kernel() {
     corner[0] = 256.0;
     let g = both_passes("corner impulse", w, h, &corner);
     assert_eq!((g[0], g[1], g[2], g[w as usize]), (11.0 * 11.0, 5.0 * 11.0, 11.0, 11.0 * 5.0));
+}
+
+#[test]
+fn sizes_the_invocations_do_not_divide_smooth_like_the_twin() {
+    // Four pixels per invocation along the pass's axis: 4k + 1, 4k + 2 and 4k + 3 pixels leave
+    // the last invocation of a row (x pass) or column (y pass) one to three.
+    let (calibration, frame) = sample_frame(0);
+    let pre = webfusion_core::cpu::preprocess::chain::preprocess(&calibration, &Default::default(), &frame);
+    let k = calibration.intrinsics;
+    for (w, h) in [(33u32, 18u32), (18, 35), (7, 5)] {
+        let crop: Vec<f32> = (0..h).flat_map(|y| (0..w).map(move |x| ((y + 100) * k.width_px + x + 200) as usize)).map(|i| pre.intensity[i]).collect();
+        both_passes(&format!("{w}x{h} crop"), w, h, &crop);
+    }
 }
 
 #[test]
