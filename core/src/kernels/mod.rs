@@ -139,7 +139,8 @@ impl KernelPipeline {
     /// booleans as 0 or 1; those not given keep their defaults) and bind group 0 laid out by
     /// `bind_group_layout`, so bind groups of the kernel's layout bind it too. A use of a
     /// kernel that never takes one of its branches compiles a pipeline of its own without it:
-    /// CPU adapters (lavapipe, SwiftShader) run the code of every branch, taken or not.
+    /// lavapipe (Mesa 22.3's llvmpipe) runs an `if` as masked code, so every branch costs its
+    /// full time, taken or not; only loops end early.
     pub fn specialised(device: &wgpu::Device, kernel: &'static webfusion_shaders::Kernel, bind_group_layout: wgpu::BindGroupLayout, constants: &[(&str, f64)]) -> Self {
         let label = format!("core.{}", kernel.name);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(&label), source: wgpu::ShaderSource::Wgsl(kernel.source.into()) });

@@ -126,9 +126,8 @@ fn to_units(x: i32, y: i32, z_m: f32) -> u32 {
 }
 
 // Whether this pipeline has the noise model at all: the sensor of exact depth compiles its
-// own pipeline with it off (then `noise` must be 0), since a CPU adapter runs the code of
-// every branch, taken or not (on lavapipe the untaken noise model costs 4 of the kernel's
-// 5 ms at 640x480).
+// own pipeline with it off (then `noise` must be 0), since lavapipe runs the code of every
+// branch, taken or not (the untaken noise model cost 4 of the kernel's 5 ms at 640x480).
 override NOISE_MODEL: bool = true;
 
 // The raw depth of pixel index `ix`.
