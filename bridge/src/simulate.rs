@@ -267,7 +267,7 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
         }
         for (name, mut v) in stage_ms {
             v.sort_by(f64::total_cmp);
-            println!("  {name:<12} GPU median {:6.1} ms, p95 {:6.1} ms", percentile(&v, 0.5), percentile(&v, 0.95));
+            println!("  {name:<16} GPU median {:6.1} ms, p95 {:6.1} ms", percentile(&v, 0.5), percentile(&v, 0.95));
         }
         if viewed.window().is_some() {
             window_ms.sort_by(f64::total_cmp);

@@ -134,8 +134,9 @@ pub struct SimulatedFrame {
     /// The exact hit of each pixel's ray, depth along z in metres (NaN: none within the range),
     /// when asked for ([`SensorOptions::hits`]).
     pub hit_m: Option<Vec<f32>>,
-    /// GPU time of each stage (range tiles, rays, normals with noise, sensor) when the sensor
-    /// is timed ([`SensorOptions::timed`]) and the device has timestamps; empty otherwise.
+    /// GPU time of each stage (range tiles, rays, with noise normals and projector shadow,
+    /// sensor) when the sensor is timed ([`SensorOptions::timed`]) and the device has
+    /// timestamps; empty otherwise.
     pub stages: Vec<StageTime>,
 }
 
@@ -241,7 +242,7 @@ impl VirtualSensor {
     }
 
     /// The same render as [`Self::encode`], each part in a stage of its own: range tiles,
-    /// rays, (with noise) normals, sensor.
+    /// rays, (with noise) normals and projector shadow, sensor.
     fn encode_stages(&mut self, gpu: &Gpu, frame: &mut FrameEncoder<'_>, store: &dyn TsdfStore, world_from_camera: &Se3, frame_index: u32) -> Result<()> {
         self.target.set_params(gpu, store, self.options.depth_range_m);
         self.target.set_pose(gpu, world_from_camera)?;
@@ -251,7 +252,10 @@ impl VirtualSensor {
             self.target.encode_part(gpu, frame, "normals", RaycastPart::Normals);
         }
         self.set_frame(gpu, frame_index);
-        self.dispatch_sensor(gpu, &mut frame.stage("sensor"));
+        if self.shadow.is_some() {
+            self.dispatch_shadow(gpu, &mut frame.stage("projector shadow"));
+        }
+        self.dispatch_depth(gpu, &mut frame.stage("sensor"));
         Ok(())
     }
 
@@ -262,9 +266,19 @@ impl VirtualSensor {
 
     /// Records `projector_shadow` (with noise) and `depth_sensor` into an open pass.
     fn dispatch_sensor(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
+        self.dispatch_shadow(gpu, pass);
+        self.dispatch_depth(gpu, pass);
+    }
+
+    /// Records `projector_shadow` into an open pass (with noise; nothing without).
+    fn dispatch_shadow(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
         if let Some((_, _, shadow)) = &self.shadow {
             gpu.kernels.projector_shadow.dispatch_in(pass, shadow, [self.target.intrinsics.height_px, 1, 1]);
         }
+    }
+
+    /// Records `depth_sensor` into an open pass.
+    fn dispatch_depth(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass<'_>) {
         let words = self.target.intrinsics.pixel_count().div_ceil(2) as u32;
         let kernel: &KernelPipeline = self.exact.as_ref().unwrap_or(&gpu.kernels.depth_sensor);
         kernel.dispatch_in(pass, &self.bind_group, [words, 1, 1]);
