@@ -18,6 +18,8 @@ use webfusion_core::sim::sensor::{KinectModel, SensorOptions, SimulatedFrame, Vi
 use webfusion_core::tsdf::TsdfStore as _;
 use webfusion_core::{ColorImage, DepthImage, Gpu, GpuOptions, PinholeIntrinsics, RgbdCalibration};
 
+use crate::timing::StageTimes;
+
 /// Frame period given to poses without timestamps (`--robot-poses` in frame order): 30 Hz.
 const FRAME_PERIOD_NS: i64 = 33_333_333;
 
@@ -242,7 +244,7 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
         pollster::block_on(sensor.render(&gpu, viewed.map(), &poses[0].world_from_camera, 0))?;
         let mut ms = Vec::with_capacity(poses.len());
         let mut window_ms = Vec::new();
-        let mut stage_ms: Vec<(&'static str, Vec<f64>)> = Vec::new();
+        let mut gpu_stages = StageTimes::default();
         let started = std::time::Instant::now();
         for (i, p) in poses.iter().enumerate() {
             let t = std::time::Instant::now();
@@ -252,22 +254,18 @@ pub(crate) fn run(options: &GpuOptions, args: &SimulateArgs) -> anyhow::Result<(
             let frame = pollster::block_on(sensor.render(&gpu, viewed.map(), &p.world_from_camera, i as u32))?;
             ms.push(t.elapsed().as_secs_f64() * 1e3);
             for stage in frame.stages {
-                match stage_ms.iter_mut().find(|(name, _)| *name == stage.name) {
-                    Some((_, v)) => v.push(stage.gpu_ms),
-                    None => stage_ms.push((stage.name, vec![stage.gpu_ms])),
-                }
+                gpu_stages.record(stage.name, stage.gpu_ms);
             }
         }
         let total_s = started.elapsed().as_secs_f64();
         let mut sorted = ms.clone();
         sorted.sort_by(f64::total_cmp);
         println!("simulated {} frames in {total_s:.2} s: {:.1} frames/s; per frame median {:.1} ms, p95 {:.1} ms (render + readback, noise {:?})", poses.len(), poses.len() as f64 / total_s, percentile(&sorted, 0.5), percentile(&sorted, 0.95), args.noise);
-        if stage_ms.is_empty() {
+        if gpu_stages.is_empty() {
             println!("(no GPU stage times: the device has no timestamp queries)");
-        }
-        for (name, mut v) in stage_ms {
-            v.sort_by(f64::total_cmp);
-            println!("  {name:<16} GPU median {:6.1} ms, p95 {:6.1} ms", percentile(&v, 0.5), percentile(&v, 0.95));
+        } else {
+            println!("GPU time per stage:");
+            gpu_stages.print();
         }
         if viewed.window().is_some() {
             window_ms.sort_by(f64::total_cmp);

@@ -45,6 +45,11 @@ impl StageTimes {
         }
     }
 
+    /// Whether nothing was recorded.
+    pub(crate) fn is_empty(&self) -> bool {
+        self.stages.is_empty()
+    }
+
     pub(crate) fn print(&self) {
         println!("{:<40} {:>10} {:>10} {:>10} {:>10} {:>6}", "stage", "median ms", "p95 ms", "min ms", "max ms", "n");
         for (name, samples) in &self.stages {
