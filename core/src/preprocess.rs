@@ -314,7 +314,7 @@ impl DepthPreprocessor {
             // Without smoothing the gradient bindings are unread: the vertices stand in.
             let [grad_x, grad_y] = gradients.as_ref().map_or([&level.vertex_in_camera; 2], |[x, y]| [x, y]);
             let bg = vertex_normals::Bindings { params: &params, vertex_in_camera: &level.vertex_in_camera, grad_x, grad_y, normal_in_camera: &level.normal_in_camera }.bind_group(gpu);
-            push(GEOMETRY, format!("vertex_normals[{l}]"), |k| &k.vertex_normals, params, bg, vertex_normals::invocations(k.width_px, k.height_px));
+            push(GEOMETRY, format!("vertex_normals[{l}]"), |k| &k.vertex_normals, params, bg, inv);
         }
         let params = gpu.uniform_buffer("core.color_to_float.params", &ColorToFloatParams { width_px: w0, height_px: h0, ..Default::default() });
         let bg = color_to_float::Bindings { params: &params, rgb8: &rgb8, color: &color, intensity: &intensity }.bind_group(gpu);

@@ -4,7 +4,7 @@
 //! Components within 1e-5 of the CPU twin.
 
 use webfusion_core::cpu;
-use webfusion_core::kernels::{vertex_gradients::VertexGradientsParams, vertex_normals::{self, VertexNormalsParams}};
+use webfusion_core::kernels::{vertex_gradients::VertexGradientsParams, vertex_normals::VertexNormalsParams};
 use webfusion_core::preprocess::{DEFAULT_MIN_CROSS_NORM_SQ, GradientSmoothingConfig, MAX_GRADIENT_SMOOTH_RADIUS_PX, PreprocessConfig};
 use webfusion_core::{Error, cpu::preprocess::chain::CpuPyramidLevel};
 use webfusion_tests::{Tolerance, assert_negative_control_vec4, cast, compare_vec4, finish, gpu, run_kernel, sample_frame};
@@ -35,7 +35,7 @@ fn run(p: &VertexNormalsParams, vertex: &[[f32; 4]]) -> (Vec<[f32; 4]>, Vec<[f32
     };
     let gpu = gpu();
     let inputs: [&[u8]; 3] = [bytemuck::cast_slice(vertex), bytemuck::cast_slice(&gx), bytemuck::cast_slice(&gy)];
-    let out = run_kernel(&gpu, &gpu.kernels.vertex_normals, p, &inputs, &[16 * n], vertex_normals::invocations(p.width_px, p.height_px));
+    let out = run_kernel(&gpu, &gpu.kernels.vertex_normals, p, &inputs, &[16 * n], [p.width_px, p.height_px, 1]);
     let mut c = vec![[0.0; 4]; n];
     cpu::vertex_normals(p, vertex, &cx, &cy, &mut c);
     finish(&gpu);
@@ -125,8 +125,8 @@ fn real_frame_matches_cpu_at_every_level_and_radius() {
 
 #[test]
 fn odd_sizes_match_cpu() {
-    // Each invocation of `vertex_gradients` takes two pixels along x and `vertex_normals` two
-    // along y: an odd crop leaves the last of each one pixel.
+    // Each invocation of `vertex_gradients` takes two pixels along x: an odd width leaves the
+    // last of each row one pixel, whose smoothed gradients the normals read.
     let level = &real_cpu_chain().levels[0];
     let (w, h) = (77u32, 41u32);
     let crop: Vec<[f32; 4]> = (0..h).flat_map(|y| (0..w).map(move |x| ((y + 200) * level.intrinsics.width_px + x + 300) as usize)).map(|i| level.vertex_in_camera[i]).collect();
