@@ -9,7 +9,7 @@ use crate::kernels::raycast::{self, CameraPose, DEFAULT_MAX_STEPS, DEFAULT_STEP_
 use crate::kernels::raycast_hint_tiles::{self, RaycastHintTilesParams};
 use crate::kernels::raycast_range::{self, RaycastRangeParams};
 use crate::kernels::surface_normals::{self, SurfaceNormalsParams};
-use crate::kernels::GpuIntrinsics;
+use crate::kernels::{GpuIntrinsics, KernelPipeline};
 use crate::preprocess::DepthPreprocessor;
 use crate::tsdf::TsdfStore;
 use crate::{Error, Gpu, PinholeIntrinsics, Result, Se3};
@@ -84,6 +84,9 @@ pub struct RaycastTarget {
     owns_pose: bool,
     hint: Option<(f32, f32)>,
     bind_group: wgpu::BindGroup,
+    /// `raycast` compiled for the store's map kind, with the depth hint's window only when
+    /// there is a hint ([`DeferredPipeline::variant`](crate::kernels::DeferredPipeline::variant)).
+    raycast: KernelPipeline,
     /// Per tile, the depth interval surface bricks cover (`raycast_range`, cleared each render).
     depth_range_tiles: wgpu::Buffer,
     range_params: wgpu::Buffer,
@@ -124,6 +127,9 @@ impl RaycastTarget {
         let depth_range_tiles = gpu.storage_buffer::<[u32; 2]>(&name("depth_range_tiles"), (tiles[0] * tiles[1]) as usize);
         let range_params = gpu.uniform_buffer(&name("range_params"), &RaycastRangeParams::default());
         let range_bind_group = raycast_range::Bindings { params: &range_params, pose: &pose, surface_bricks: store.surface_bricks(), depth_range_tiles: &depth_range_tiles, block_coords: store.block_coords() }.bind_group(gpu);
+        // Specialised: lavapipe runs a branch's arithmetic even where no invocation takes it,
+        // so the other map kind's paths and an unused hint window cost every step of every ray.
+        let raycast = gpu.kernels.raycast.variant(&[("MAP_KIND", f64::from(store.desc().kind)), ("DEPTH_HINTS", if hint.is_some() { 1.0 } else { 0.0 })]);
         let placeholder;
         let depth_hint_raw = match &hint {
             Some(h) => h.depth_raw,
@@ -165,6 +171,7 @@ impl RaycastTarget {
             owns_pose,
             hint: hint.map(|h| (store.desc().truncation_m, h.metres_per_unit)),
             bind_group,
+            raycast,
             depth_range_tiles,
             range_params,
             range_bind_group,
@@ -252,7 +259,7 @@ impl RaycastTarget {
                 }
                 gpu.kernels.raycast_range.dispatch_in(pass, &self.range_bind_group, [self.bricks, 1, 1]);
             }
-            RaycastPart::Rays => gpu.kernels.raycast.dispatch_in(pass, &self.bind_group, size),
+            RaycastPart::Rays => self.raycast.dispatch_in(pass, &self.bind_group, size),
             RaycastPart::Normals => gpu.kernels.surface_normals.dispatch_in(pass, &self.normals_bind_group, size),
         }
     }

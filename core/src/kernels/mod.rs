@@ -52,10 +52,15 @@ fn compile_eager(device: &wgpu::Device, specs: &[KernelSpec]) -> Vec<Option<Kern
     }
 }
 
+/// Override constants as a cache key: each name with its value's bits.
+type OverrideKey = Vec<(String, u64)>;
+
 /// A kernel pipeline that may be compiled later (in the browser, see [`compile_eager`]): it
 /// derefs to its [`KernelPipeline`], compiling it on first use if that has not happened yet.
 pub struct DeferredPipeline {
     cell: std::sync::OnceLock<KernelPipeline>,
+    /// Pipelines compiled with override constants ([`Self::variant`]), by their constants.
+    variants: std::sync::Mutex<Vec<(OverrideKey, KernelPipeline)>>,
     device: wgpu::Device,
     spec: KernelSpec,
     /// Bind group 0's layout, made at once (cheap): bind groups need no compiled pipeline.
@@ -73,7 +78,7 @@ impl DeferredPipeline {
         if let Some(pipeline) = compiled {
             let _ = cell.set(pipeline);
         }
-        Self { cell, device: device.clone(), spec, layout }
+        Self { cell, variants: std::sync::Mutex::default(), device: device.clone(), spec, layout }
     }
 
     /// Whether the pipeline exists yet.
@@ -86,6 +91,21 @@ impl DeferredPipeline {
     /// is not compiled for it.
     pub fn specialised(&self, constants: &[(&str, f64)]) -> KernelPipeline {
         KernelPipeline::specialised(&self.device, self.spec.0, self.layout.clone(), constants)
+    }
+
+    /// [`Self::specialised`], compiled once per set of constants and shared: every stage that
+    /// asks for the same variant (each raycast target for its map kind) gets the same pipeline,
+    /// so a page that compiles its pipelines when they are first needed compiles each variant
+    /// once.
+    pub fn variant(&self, constants: &[(&str, f64)]) -> KernelPipeline {
+        let key: OverrideKey = constants.iter().map(|(name, value)| ((*name).to_owned(), value.to_bits())).collect();
+        let mut variants = self.variants.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, pipeline)) = variants.iter().find(|(k, _)| *k == key) {
+            return pipeline.clone();
+        }
+        let pipeline = self.specialised(constants);
+        variants.push((key, pipeline.clone()));
+        pipeline
     }
 
     /// A bind group of `entries`, without compiling the pipeline (a stage binds its deferred
@@ -108,8 +128,9 @@ impl std::fmt::Debug for DeferredPipeline {
     }
 }
 
-/// One compiled kernel: its reflected description, bind group layout and pipeline.
-#[derive(Debug)]
+/// One compiled kernel: its reflected description, bind group layout and pipeline (a clone
+/// shares them).
+#[derive(Clone, Debug)]
 pub struct KernelPipeline {
     /// Reflected kernel (source, workgroup size, bindings).
     pub kernel: &'static webfusion_shaders::Kernel,

@@ -88,6 +88,10 @@ struct RaycastParams {
 // A sparse map's hash table (map.wgsl); one placeholder word for a dense map.
 @group(0) @binding(9) var<storage, read> block_table: array<u32>;
 
+// False in a pipeline for renders without a depth hint (`use_depth_hint` is then 0): compiles
+// the hint's window out.
+override DEPTH_HINTS: bool = true;
+
 const OPAQUE: u32 = 0xff000000u;
 // Coarse-then-fine rounds per ray (a round ends in a hit, a miss, or marches on: a ray
 // grazing a surface within the margin without crossing it).
@@ -154,7 +158,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var t_end = min(min(min(t_far.x, t_far.y), t_far.z), params.max_depth_m / z_per_t);
     let max_step = params.step_factor * d.truncation_m;
     var hinted = false;
-    if params.use_depth_hint != 0u {
+    if DEPTH_HINTS && params.use_depth_hint != 0u {
         let hint = depth_hint_range(gid.xy);
         if is_valid_f32(hint.x) {
             // The search window: μ + 3σ either side of the measured surface(s).
@@ -201,7 +205,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             i++;
             let p = origin + dir * t;
             let slot = nearest_slot(d, p);
-            if slot == NO_SLOT && d.kind == MAP_SPARSE {
+            if slot == NO_SLOT && map_is_sparse(d) {
                 // A block a sparse map never allocated holds no surface: cross it in one step.
                 prev_positive = false;
                 prev_t = t;

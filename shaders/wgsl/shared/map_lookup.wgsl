@@ -53,7 +53,7 @@ fn find_slot(d: VolumeDesc, b: vec3<u32>, key: u32) -> u32 {
 // Index of voxel (x, y, z) in `tsdf_volume` (and the colour words), or NO_SLOT where a sparse
 // map has no block.
 fn voxel_slot(d: VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
-    if d.kind == MAP_DENSE {
+    if !map_is_sparse(d) {
         return voxel_index(d, x, y, z);
     }
     let block = find_block(d, vec3<u32>(x, y, z) >> vec3<u32>(BRICK_SHIFT));

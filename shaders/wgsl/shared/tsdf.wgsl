@@ -90,12 +90,26 @@ fn voxel_index(d: VolumeDesc, x: u32, y: u32, z: u32) -> u32 {
 const MAP_DENSE: u32 = 0u;
 const MAP_SPARSE: u32 = 1u;
 
+// The map kind a pipeline is compiled for (set when it is created, `DeferredPipeline::variant`):
+// MAP_DENSE or MAP_SPARSE compile the other kind's paths out of the shared map code (on a CPU
+// adapter a branch costs its arithmetic even where no invocation takes it); the default, 2,
+// reads the kind from the VolumeDesc.
+override MAP_KIND: u32 = 2u;
+
+// Whether `d` is a sparse map (constant in a pipeline compiled for one kind).
+fn map_is_sparse(d: VolumeDesc) -> bool {
+    if MAP_KIND == MAP_DENSE || MAP_KIND == MAP_SPARSE {
+        return MAP_KIND == MAP_SPARSE;
+    }
+    return d.kind == MAP_SPARSE;
+}
+
 // The voxel whose outer corner the origin gives: (0, 0, 0) for a dense box; the middle of a
 // sparse map's box (rounded down to a block: a sparse box spans 164 m at 1 cm, and its corner
 // that far away would cost f32 positions near the camera tens of micrometres), so positions are
 // computed from voxel offsets to it, small numbers near the first camera.
 fn voxel_anchor(d: VolumeDesc) -> vec3<u32> {
-    if d.kind == MAP_SPARSE {
+    if map_is_sparse(d) {
         return (vec3<u32>(d.dim_x, d.dim_y, d.dim_z) >> vec3<u32>(BRICK_SHIFT + 1u)) << vec3<u32>(BRICK_SHIFT);
     }
     return vec3<u32>(0u);

@@ -39,7 +39,7 @@ fn sample_tsdf(d: VolumeDesc, p_world: vec3<f32>) -> TsdfSample {
     var w101 = 0u;
     var w011 = 0u;
     var w111 = 0u;
-    if d.kind == MAP_DENSE {
+    if !map_is_sparse(d) {
         // The 8 words at fixed offsets from the first, along rows and slices of the box.
         let s = voxel_index(d, b.x, b.y, b.z);
         let row = d.dim_x;

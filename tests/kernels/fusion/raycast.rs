@@ -6,7 +6,9 @@
 //! Starting each ray at a measured depth (the prediction's depth hint) finds the same surface,
 //! and a disabled pose renders nothing. The same scene as a sparse map (band blocks only, so
 //! rays cross unallocated blocks and a third of the samples straddle blocks) renders as its
-//! twin does and as the dense box does, and a block taken out of it is seen.
+//! twin does and as the dense box does, and a block taken out of it is seen. The pipelines
+//! compiled for one map kind (and without the hint's window) render as the twin does, and the
+//! wrong kind's cannot.
 //!
 //! Tolerances: where both sides hit, vertex and depth within 1e-4 m, colour bytes within 1
 //! level. The march accumulates t in f32 and the
@@ -15,13 +17,14 @@
 
 use glam::{DQuat, DVec3};
 use webfusion_core::cpu::{self, shared::{pack_rgb8, pack_u16_pairs}};
-use webfusion_core::kernels::GpuIntrinsics;
+use webfusion_core::cpu::shared::{MAP_DENSE, MAP_SPARSE};
+use webfusion_core::kernels::{GpuIntrinsics, KernelPipeline};
 use webfusion_core::fusion::predictor::RANGE_TILE_PX;
 use webfusion_core::kernels::raycast::{CameraPose, DEFAULT_MAX_STEPS, DEFAULT_STEP_FACTOR, RaycastParams};
 use webfusion_core::kernels::raycast_range::RaycastRangeParams;
 use webfusion_core::mesh::tsdf_from_sdf;
 use webfusion_core::tsdf::{TsdfConfig, VolumeDesc};
-use webfusion_core::{PinholeIntrinsics, Se3};
+use webfusion_core::{Gpu, PinholeIntrinsics, Se3};
 use webfusion_tests::{SENTINEL_F32, cast, finish, gpu};
 
 use crate::synthetic::K_SMALL;
@@ -90,6 +93,12 @@ fn render(s: &Setup, voxels: &[u32], colors: &[u32]) -> (Images, Images) {
 /// word for a dense box).
 fn render_map(s: &Setup, voxels: &[u32], colors: &[u32], table: &[u32]) -> (Images, Images) {
     let gpu = gpu();
+    render_with(&gpu, &gpu.kernels.raycast, s, voxels, colors, table)
+}
+
+/// [`render_map`] with `kernel`, one of `gpu`'s: the raycast as compiled (a variant with
+/// override constants).
+fn render_with(gpu: &Gpu, kernel: &KernelPipeline, s: &Setup, voxels: &[u32], colors: &[u32], table: &[u32]) -> (Images, Images) {
     let p = &s.params;
     let n = (p.intrinsics.width_px * p.intrinsics.height_px) as usize;
     // The hint as the sensor gives it: raw units (0: no return), two per word.
@@ -106,8 +115,8 @@ fn render_map(s: &Setup, voxels: &[u32], colors: &[u32], table: &[u32]) -> (Imag
     let inputs: [&[u8]; 3] = [bytemuck::bytes_of(&s.pose), bytemuck::cast_slice(voxels), bytemuck::cast_slice(colors)];
     use webfusion_tests::Slot::{In, Out};
     let slots = [In(inputs[0]), In(inputs[1]), In(inputs[2]), Out(16 * n), Out(4 * n), Out(4 * n), In(bytemuck::cast_slice(hint)), In(bytemuck::cast_slice(tiles)), In(bytemuck::cast_slice(table))];
-    let out = webfusion_tests::run_kernel_slots(&gpu, &gpu.kernels.raycast, p, &slots, [p.intrinsics.width_px, p.intrinsics.height_px, 1]);
-    finish(&gpu);
+    let out = webfusion_tests::run_kernel_slots(gpu, kernel, p, &slots, [p.intrinsics.width_px, p.intrinsics.height_px, 1]);
+    finish(gpu);
     let g = Images { vertex: cast(&out[0]), depth: cast(&out[1]), color: cast(&out[2]) };
     let mut c = Images { vertex: vec![[0.0; 4]; n], depth: vec![0.0; n], color: vec![0; n] };
     cpu::raycast(p, &s.pose, voxels, colors, &mut c.vertex, &mut c.depth, &mut c.color, hint, tiles, table);
@@ -417,4 +426,57 @@ fn a_sparse_map_renders_like_the_twin_and_the_dense_box_and_a_missing_block_is_s
     let (g_holed, _) = render_map(&params(desc, k, &pose), &holed.voxels, &holed.colors, &holed.table);
     let n = disagreements(&g_holed, &c);
     assert!(n > (MAX_DISAGREEING_FRACTION * c.depth.len() as f64) as usize, "a missing block is seen: {n} pixels");
+}
+
+/// The raycast compiled for maps of `kind`, with or without the depth hint's window (what
+/// `RaycastTarget` dispatches).
+fn variant(gpu: &Gpu, kind: u32, hints: bool) -> KernelPipeline {
+    gpu.kernels.raycast.variant(&[("MAP_KIND", f64::from(kind)), ("DEPTH_HINTS", if hints { 1.0 } else { 0.0 })])
+}
+
+#[test]
+fn pipelines_compiled_for_one_map_kind_render_like_the_twin_and_the_wrong_kind_cannot() {
+    let pose = Se3::new(DQuat::from_axis_angle(DVec3::new(0.3, 1.0, -0.2).normalize(), 0.25), DVec3::new(0.2, -0.1, 0.1));
+    let k = PinholeIntrinsics { fx_px: 129.4, fy_px: 129.2, cx_px: 79.6, cy_px: 63.8, width_px: 160, height_px: 120 };
+    let allowed = (MAX_DISAGREEING_FRACTION * k.pixel_count() as f64) as usize;
+    let gpu = gpu();
+    let variant = |kind, hints| variant(&gpu, kind, hints);
+    let (sparse_desc, blocks) = sparse_scene();
+    let image = webfusion_core::map::PoolImage::from_blocks(sparse_desc, true, &blocks).expect("pool image");
+    let sparse = |kernel: &KernelPipeline, s: &Setup| render_with(&gpu, kernel, s, &image.voxels, &image.colors, &image.table);
+    let (dense_desc, voxels, colors) = scene();
+    let dense = |kernel: &KernelPipeline, s: &Setup| render_with(&gpu, kernel, s, &voxels, &colors, &[0]);
+    let (sparse_setup, dense_setup) = (params(sparse_desc, k, &pose), params(dense_desc, k, &pose));
+    let (g, c) = sparse(&variant(MAP_SPARSE, false), &sparse_setup);
+    assert!(c.depth.iter().filter(|d| !d.is_nan()).count() > 5000, "the sparse scene is in view");
+    assert_agree("sparse-only raycast", &g, &c);
+    let (g, c) = dense(&variant(MAP_DENSE, false), &dense_setup);
+    assert!(c.depth.iter().filter(|d| !d.is_nan()).count() > 5000, "the box is in view");
+    assert_agree("dense-only raycast", &g, &c);
+    // With the hint's window: the measured depth is the twin's render, a seventh of it missing.
+    let hint: Vec<f32> = c.depth.iter().enumerate().map(|(i, &d)| if i % 7 == 0 { f32::NAN } else { d }).collect();
+    let hinted = Setup { hint: Some(hint), ..params(dense_desc, k, &pose) };
+    let (g, c) = dense(&variant(MAP_DENSE, true), &hinted);
+    assert_agree("dense-only raycast with hints", &g, &c);
+    let sparse_hinted = Setup { hint: Some(c.depth.clone()), ..params(sparse_desc, k, &pose) };
+    let (g, c) = sparse(&variant(MAP_SPARSE, true), &sparse_hinted);
+    assert_agree("sparse-only raycast with hints", &g, &c);
+    // Negative controls: each kind's pipeline reads the other's map as its own and renders
+    // something else than the twin; a pipeline without the hint's window ignores a hint behind
+    // every surface (the twin then sees nothing) and renders the unhinted image.
+    let (g, c) = sparse(&variant(MAP_DENSE, false), &sparse_setup);
+    let n = disagreements(&g, &c);
+    assert!(n > allowed, "a dense-only raycast cannot read a sparse map: {n} pixels disagree");
+    let (g, c) = dense(&variant(MAP_SPARSE, false), &dense_setup);
+    let n = disagreements(&g, &c);
+    assert!(n > allowed, "a sparse-only raycast cannot read the dense box: {n} pixels disagree");
+    let behind = Setup { hint: Some(vec![4.5; k.pixel_count()]), ..params(dense_desc, k, &pose) };
+    let (g, c) = dense(&variant(MAP_DENSE, false), &behind);
+    assert!(c.depth.iter().all(|d| d.is_nan()), "the twin hinted behind every surface sees nothing");
+    assert!(disagreements(&g, &c) > allowed, "the pipeline without hints does not read them");
+    let (unhinted, _) = dense(&variant(MAP_DENSE, false), &dense_setup);
+    assert_agree("hint ignored", &g, &unhinted);
+    // One pipeline per set of constants.
+    assert!(variant(MAP_SPARSE, false).pipeline == variant(MAP_SPARSE, false).pipeline, "the same constants give the same pipeline");
+    assert!(variant(MAP_SPARSE, false).pipeline != variant(MAP_SPARSE, true).pipeline, "other constants another");
 }
