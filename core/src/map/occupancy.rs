@@ -17,11 +17,13 @@
 //!   crossed it. A view's pixels without a return carve nothing.
 //! - [`UNKNOWN`] (128): everything else: behind surfaces, outside every view, beyond range.
 //!
-//! Carving is conservative and hole-free: a cell is carved by projection (its bounding sphere's
-//! footprint in the view's depth image, whose minimum comes from a min-pyramid in at most 3x3
-//! texels), not by marching a finite set of rays, and whole 8³-cell bricks are settled at once
-//! where the footprint's minimum and maximum depths allow (wholly in front: free; wholly behind
-//! every surface: untouched).
+//! Carving is conservative: a cell is carved by projection (its bounding sphere's footprint in
+//! the view's depth image, whose minimum comes from a min-pyramid in at most 3x3 texels), and
+//! whole 8³-cell bricks are settled at once where the footprint's minimum and maximum depths
+//! allow (wholly in front: free; wholly behind every surface: untouched). A cell in the image
+//! the footprint cannot settle (near a surface seen at an angle, whose footprint's nearest
+//! depth is another ray's) is tested ray by ray: free when every pixel ray through it has a
+//! return beyond the point where it leaves the cell, by more than μ.
 
 use glam::DVec3;
 
@@ -310,6 +312,7 @@ fn apply_tsdf(header: &MapFileHeader, blocks: &[MapBlock], spec: &GridSpec, cell
 /// camera's inverse pose.
 struct ViewPyramid {
     camera_from_world: Se3,
+    world_from_camera: Se3,
     k: PinholeIntrinsics,
     /// Per level: (width, height, min depths, max depths); no return reads as 0 in both.
     levels: Vec<(u32, u32, Vec<f32>, Vec<f32>)>,
@@ -333,7 +336,7 @@ impl ViewPyramid {
             }
             levels.push((nw, nh, nmin, nmax));
         }
-        Self { camera_from_world: view.world_from_camera.inverse(), k, levels }
+        Self { camera_from_world: view.world_from_camera.inverse(), world_from_camera: view.world_from_camera, k, levels }
     }
 
     fn to_camera(&self, p_world: DVec3) -> DVec3 {
@@ -377,6 +380,64 @@ impl ViewPyramid {
             }
         }
         Footprint::Inside { nearest_m: f64::from(lo), farthest_m: f64::from(hi) }
+    }
+}
+
+impl ViewPyramid {
+    /// Whether every pixel ray through the world box [`lo_m`, `hi_m`] (a cell wholly in the
+    /// image) has a return beyond the box by more than `margin_m`, and at least one does: the
+    /// exact test behind the footprint's, for cells near a surface seen at an angle, where the
+    /// footprint's nearest depth is a different ray's. Pixel (x, y)'s ray is the camera centre
+    /// plus t·R·((x − cx)/fx, (y − cy)/fy, 1), so t is its camera depth; it meets the box over
+    /// [t_in, t_out] (slabs), and only pixels whose centres the box's projection covers can.
+    fn rays_clear_cell(&self, lo_m: DVec3, hi_m: DVec3, margin_m: f64) -> bool {
+        let k = &self.k;
+        let (fx, fy, cx, cy) = (f64::from(k.fx_px), f64::from(k.fy_px), f64::from(k.cx_px), f64::from(k.cy_px));
+        let (mut u0, mut u1, mut v0, mut v1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        for corner in 0..8 {
+            let c = DVec3::new(if corner & 1 == 0 { lo_m.x } else { hi_m.x }, if corner & 2 == 0 { lo_m.y } else { hi_m.y }, if corner & 4 == 0 { lo_m.z } else { hi_m.z });
+            let q = self.to_camera(c);
+            if q.z <= 1e-6 {
+                return false;
+            }
+            let (u, v) = (fx * q.x / q.z + cx, fy * q.y / q.z + cy);
+            (u0, u1, v0, v1) = (u0.min(u), u1.max(u), v0.min(v), v1.max(v));
+        }
+        let (x0, x1) = (u0.ceil().max(0.0), u1.floor().min(f64::from(k.width_px - 1)));
+        let (y0, y1) = (v0.ceil().max(0.0), v1.floor().min(f64::from(k.height_px - 1)));
+        if x0 > x1 || y0 > y1 {
+            return false;
+        }
+        let origin = self.world_from_camera.translation_m;
+        let (w, _, depth, _) = &self.levels[0];
+        let mut crossed = false;
+        for y in y0 as u32..=y1 as u32 {
+            for x in x0 as u32..=x1 as u32 {
+                let dir = self.world_from_camera.rotation * DVec3::new((f64::from(x) - cx) / fx, (f64::from(y) - cy) / fy, 1.0);
+                let (mut t_in, mut t_out) = (0.0_f64, f64::INFINITY);
+                for axis in 0..3 {
+                    let (o, d, lo, hi) = (origin[axis], dir[axis], lo_m[axis], hi_m[axis]);
+                    if d.abs() < 1e-12 {
+                        if o < lo || o > hi {
+                            t_out = -1.0;
+                        }
+                        continue;
+                    }
+                    let (ta, tb) = ((lo - o) / d, (hi - o) / d);
+                    t_in = t_in.max(ta.min(tb));
+                    t_out = t_out.min(ta.max(tb));
+                }
+                if t_in > t_out {
+                    continue;
+                }
+                crossed = true;
+                let d_m = f64::from(depth[(y * w + x) as usize]);
+                if d_m <= 0.0 || t_out >= d_m - margin_m {
+                    return false;
+                }
+            }
+        }
+        crossed
     }
 }
 
@@ -430,9 +491,17 @@ fn carve(spec: &GridSpec, view: &ViewPyramid, margin_m: f64, zs: std::ops::Range
                     for y in by..hi[1] {
                         for x in bx..hi[0] {
                             let p = view.to_camera(spec.cell_center(x, y, z));
-                            if let Footprint::Inside { nearest_m, .. } = view.footprint(p, cell_radius_m)
-                                && p.z + cell_radius_m < nearest_m - margin_m
-                            {
+                            let free = match view.footprint(p, cell_radius_m) {
+                                Footprint::Inside { nearest_m, .. } if p.z + cell_radius_m < nearest_m - margin_m => true,
+                                // Beyond every return over the footprint: nothing to carve.
+                                Footprint::Inside { farthest_m, .. } if p.z - cell_radius_m > farthest_m => false,
+                                Footprint::Inside { .. } => {
+                                    let lo_m = spec.corner_m() + spec.cell_m * DVec3::new(f64::from(x), f64::from(y), f64::from(z));
+                                    slab[slab_index(x, y, z)] == UNKNOWN && view.rays_clear_cell(lo_m, lo_m + DVec3::splat(spec.cell_m), margin_m)
+                                }
+                                Footprint::Outside | Footprint::Partial => false,
+                            };
+                            if free {
                                 slab[slab_index(x, y, z)] = FREE;
                             }
                         }
@@ -522,26 +591,33 @@ mod tests {
         let spec = GridSpec { dims: [40, 32, 80], cell_m: 0.05, center_m: [0.0, 0.0, 2.0] };
         let (k, depth) = wall_view(2.0, &[]);
         let view = CarveView { world_from_camera: Se3::IDENTITY, intrinsics: k, depth_m: &depth };
-        let margin_m = 0.1;
+        // A margin that puts the layer of cells centred at 1.825 m in front of the wall by it
+        // (back faces at 1.85 m) while their bounding spheres reach past it (to 1.868 m).
+        let margin_m = 0.14;
         let mut builder = OccupancyBuilder::new(&spec, 2).expect("grid");
         builder.carve(&[view], margin_m).expect("carve");
         let grid = OccupancyGrid { spec, cells: builder.cells };
         let r = 0.5 * 3_f64.sqrt() * spec.cell_m;
-        let (mut free, mut should) = (0, 0);
+        let (mut free, mut should, mut sphere_short) = (0, 0, 0);
         for z in 0..spec.dims[2] {
             for y in 0..spec.dims[1] {
                 for x in 0..spec.dims[0] {
                     let p = spec.cell_center(x, y, z);
                     let state = grid.at(x, y, z);
-                    // Sound: only cells wholly in view and wholly in front of the wall by the margin.
+                    // Sound: only cells wholly in view whose every ray leaves them in front of the
+                    // wall by the margin (the rays leave an axis-aligned cell by its back face, at
+                    // most half a cell behind its centre).
+                    let in_front = p.z + 0.5 * spec.cell_m < 2.0 - margin_m;
                     if state == FREE {
                         free += 1;
-                        assert!(in_view(&spec, &k, p) && p.z + r < 2.0 - margin_m, "cell {x},{y},{z} at {p} carved");
+                        assert!(in_view(&spec, &k, p) && in_front, "cell {x},{y},{z} at {p} carved");
                     } else {
                         assert_eq!(state, UNKNOWN, "only free or unknown without a map");
                     }
-                    // Complete: every such cell is carved (brick decisions lose none).
-                    if in_view(&spec, &k, p) && p.z + r < 2.0 - margin_m {
+                    // Complete: every such cell is carved (brick decisions lose none), also those
+                    // whose bounding sphere reaches past the margin (tested ray by ray).
+                    if in_view(&spec, &k, p) && in_front {
+                        sphere_short += usize::from(p.z + r >= 2.0 - margin_m);
                         should += 1;
                         assert_eq!(state, FREE, "cell {x},{y},{z} at {p} in view in front of the wall");
                     }
@@ -549,6 +625,7 @@ mod tests {
             }
         }
         assert!(free > 1000 && free == should, "{free} carved of {should}");
+        assert!(sphere_short > 100, "{sphere_short} cells carved by their rays alone");
 
         // One pixel without a return: the cells whose footprint covers it stay unknown.
         let (k, depth) = wall_view(2.0, &[(50, 40)]);
