@@ -381,9 +381,7 @@ impl ViewPyramid {
         }
         Footprint::Inside { nearest_m: f64::from(lo), farthest_m: f64::from(hi) }
     }
-}
 
-impl ViewPyramid {
     /// Whether every pixel ray through the world box [`lo_m`, `hi_m`] (a cell wholly in the
     /// image) has a return beyond the box by more than `margin_m`, and at least one does: the
     /// exact test behind the footprint's, for cells near a surface seen at an angle, where the
