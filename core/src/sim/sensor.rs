@@ -158,7 +158,8 @@ pub struct VirtualSensor {
     /// With [`SensorOptions::timed`] on a device with timestamps: the frame's stage timer, and
     /// the names of the stages it times (in the order their timestamps are read back).
     timer: Option<(StageTimer, Vec<&'static str>)>,
-    /// `depth_sensor` without its noise model, for a sensor of exact depth.
+    /// `depth_sensor` without its noise model, for a sensor of exact depth (one pipeline a device,
+    /// shared by every exact sensor: `DeferredPipeline::variant`).
     exact: Option<KernelPipeline>,
 }
 
@@ -199,7 +200,7 @@ impl VirtualSensor {
         let timer = options.timed.then(|| StageTimer::new(gpu, "core.sensor")).flatten().map(|t| (t, Vec::new()));
         let bytes = Self::readback_bytes(n, options.color, options.hits) + if timer.is_some() { StageTimer::BYTES } else { 0 };
         let readback = ReadbackRing::new(gpu, "core.sensor", bytes, IN_FLIGHT);
-        let exact = options.noise.is_none().then(|| gpu.kernels.depth_sensor.specialised(&[("NOISE_MODEL", 0.0)]));
+        let exact = options.noise.is_none().then(|| gpu.kernels.depth_sensor.variant(&[("NOISE_MODEL", 0.0)]));
         Ok(Self { target, params, params_buffer, depth_raw, bind_group, shadow, options, readback, timer, exact })
     }
 
